@@ -1,0 +1,537 @@
+//! Estimation: linear least squares over all runs (faer QR, streamed), standard errors from
+//! the residual variance, and identifiability checks by coefficient name.
+//!
+//! Each output channel of each sensor is its own linear problem `y = Φ θ + noise` (the
+//! channels share regressor columns). The design over all runs is accumulated into an R
+//! factor ([`QrAccumulator`]); each channel's problem is then solved from R (see
+//! [`qr`]), so the condition number is never squared. Standard errors are
+//! `σ √diag((R_sᵀR_s)⁻¹)` with `σ² = RSS/(n − q)`.
+//!
+//! Before solving, the column-scaled R of each channel is decomposed (SVD). A singular
+//! value below `rcond · s_max` is a lost combination of coefficients: the coefficient most
+//! likely to be the culprit (angular-acceleration terms first, then biases, then couplings,
+//! never a diagonal scale first) is held at its nominal value and reported by name, with the
+//! kind of run that would identify it; the rest of the fit proceeds.
+
+pub mod identify;
+pub mod qr;
+
+pub use identify::{Correlation, Unidentifiable};
+pub use qr::QrAccumulator;
+
+use crate::model::{Model, Role, SensorKind, State, TermStatus, AXES};
+use crate::motion::Track;
+use faer::Mat;
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+/// One run's data prepared for fitting: its true motion and the sensor outputs.
+#[derive(Debug, Clone, Copy)]
+pub struct FitRun<'a> {
+    /// Run name.
+    pub name: &'a str,
+    /// True motion in sensor axes.
+    pub track: &'a Track,
+    /// Gyro outputs (SI or raw).
+    pub gyro: &'a [[f64; 3]],
+    /// Accelerometer outputs (SI or raw).
+    pub accel: &'a [[f64; 3]],
+    /// Temperature per sample, °C.
+    pub temp_c: Option<&'a [f64]>,
+    /// Constant temperature, °C, when there is no per-sample temperature.
+    pub temp_const_c: Option<f64>,
+}
+
+impl FitRun<'_> {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.track
+            .t_s
+            .len()
+            .min(self.gyro.len())
+            .min(self.accel.len())
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The true state at sample k (t measured from the run's first sample).
+    #[inline]
+    pub fn state(&self, k: usize) -> State {
+        let tr = self.track;
+        State {
+            t_s: tr.t_s[k] - tr.t_s[0],
+            w: tr.w_rad_s[k],
+            e: tr.e_rad_s2[k],
+            a: tr.a_m_s2[k],
+            temp_c: self
+                .temp_c
+                .map(|t| t[k])
+                .or(self.temp_const_c)
+                .unwrap_or(f64::NAN),
+        }
+    }
+
+    /// The sensor output at sample k.
+    #[inline]
+    pub fn output(&self, sensor: SensorKind, k: usize) -> [f64; 3] {
+        match sensor {
+            SensorKind::Gyro => self.gyro[k],
+            SensorKind::Accel => self.accel[k],
+        }
+    }
+}
+
+/// Settings of the linear fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitOptions {
+    /// Rows per QR block.
+    pub chunk: usize,
+    /// Relative singular-value threshold below which a combination is unidentifiable.
+    pub rcond: f64,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            chunk: 4096,
+            rcond: 1e-9,
+        }
+    }
+}
+
+/// Fit errors.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum EstimateError {
+    /// Not enough samples for the number of coefficients.
+    #[error("{sensor} channel {axis}: {n} samples cannot determine {q} coefficients")]
+    TooFewSamples {
+        /// Sensor.
+        sensor: SensorKind,
+        /// Axis letter.
+        axis: char,
+        /// Samples.
+        n: u64,
+        /// Coefficients.
+        q: usize,
+    },
+    /// No runs.
+    #[error("no samples to fit")]
+    NoData,
+}
+
+/// How a coefficient's value was obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CoefStatus {
+    /// Estimated from the data.
+    Fitted,
+    /// Held at a value by the model.
+    Fixed,
+    /// The runs cannot determine it; held at its nominal value.
+    Unidentifiable,
+}
+
+/// One coefficient of a fitted model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Coefficient {
+    /// Name, e.g. `gyro.c_xy`.
+    pub name: String,
+    /// Effect id that defines it.
+    pub effect: String,
+    /// Output channel, 0..3.
+    pub channel: usize,
+    /// Unit (SI).
+    pub unit: String,
+    /// Value.
+    pub value: f64,
+    /// Standard error (fitted coefficients only).
+    pub std_error: Option<f64>,
+    /// How it was obtained.
+    pub status: CoefStatus,
+}
+
+/// Fit statistics of one output channel.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChannelFit {
+    /// Axis letter.
+    pub axis: char,
+    /// Samples used.
+    pub n: u64,
+    /// Coefficients fitted on this channel.
+    pub n_params: usize,
+    /// Residual RMS (SI).
+    pub residual_rms: f64,
+    /// Largest |residual| (SI).
+    pub residual_max: f64,
+    /// Residual standard deviation with the dof correction, √(RSS/(n − q)).
+    pub sigma: f64,
+    /// Condition number of the column-scaled design of this channel.
+    pub condition_number: f64,
+    /// Names of the fitted coefficients, in covariance order.
+    pub covariance_names: Vec<String>,
+    /// Covariance of the fitted coefficients (row-major).
+    pub covariance: Vec<Vec<f64>>,
+}
+
+/// The fit of one sensor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SensorFit {
+    /// Which sensor.
+    pub sensor: SensorKind,
+    /// All coefficients of the model for this sensor, in model order.
+    pub coefficients: Vec<Coefficient>,
+    /// Per-channel statistics.
+    pub channels: Vec<ChannelFit>,
+    /// Lost combinations, each with the coefficient held and the run that would fix it.
+    pub unidentifiable: Vec<Unidentifiable>,
+    /// Pairs of fitted coefficients whose estimates correlate above 0.95.
+    pub correlated: Vec<Correlation>,
+}
+
+impl SensorFit {
+    /// Value of a coefficient by name.
+    pub fn value(&self, name: &str) -> Option<f64> {
+        self.coefficients
+            .iter()
+            .find(|c| c.name == name)
+            .map(|c| c.value)
+    }
+
+    /// A coefficient by name.
+    pub fn get(&self, name: &str) -> Option<&Coefficient> {
+        self.coefficients.iter().find(|c| c.name == name)
+    }
+}
+
+/// Fit of both sensors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Fit {
+    /// Gyro.
+    pub gyro: SensorFit,
+    /// Accelerometer.
+    pub accel: SensorFit,
+}
+
+impl Fit {
+    /// The fit of one sensor.
+    pub fn sensor(&self, s: SensorKind) -> &SensorFit {
+        match s {
+            SensorKind::Gyro => &self.gyro,
+            SensorKind::Accel => &self.accel,
+        }
+    }
+
+    /// A coefficient of either sensor by name.
+    pub fn get(&self, name: &str) -> Option<&Coefficient> {
+        self.gyro.get(name).or_else(|| self.accel.get(name))
+    }
+}
+
+/// Fits both sensors of a model to runs.
+pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
+    if runs.iter().all(|r| r.is_empty()) {
+        return Err(EstimateError::NoData);
+    }
+    Ok(Fit {
+        gyro: fit_sensor(model, SensorKind::Gyro, runs, opts)?,
+        accel: fit_sensor(model, SensorKind::Accel, runs, opts)?,
+    })
+}
+
+/// Regressor columns of one sensor: unique keys, with the term that evaluates each.
+pub(crate) struct Columns {
+    /// Index (into the sensor's term list) of the term that evaluates column c.
+    pub source: Vec<usize>,
+    /// Column of each term.
+    pub of_term: Vec<usize>,
+}
+
+impl Columns {
+    pub(crate) fn new(terms: &[crate::model::TermRef<'_>]) -> Self {
+        let mut keys: Vec<&str> = Vec::new();
+        let mut source = Vec::new();
+        let mut of_term = Vec::with_capacity(terms.len());
+        for (ti, t) in terms.iter().enumerate() {
+            match keys.iter().position(|k| *k == t.term.key) {
+                Some(c) => of_term.push(c),
+                None => {
+                    keys.push(&t.term.key);
+                    source.push(ti);
+                    of_term.push(keys.len() - 1);
+                }
+            }
+        }
+        Self { source, of_term }
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.source.len()
+    }
+}
+
+fn fit_sensor(
+    model: &Model,
+    sensor: SensorKind,
+    runs: &[FitRun<'_>],
+    opts: &FitOptions,
+) -> Result<SensorFit, EstimateError> {
+    let terms = model.terms(sensor);
+    let cols = Columns::new(&terms);
+    let p = cols.len();
+    let width = p + 3;
+    let mut acc = QrAccumulator::new(width, opts.chunk);
+    let mut row = vec![0.0; width];
+    for run in runs {
+        for k in 0..run.len() {
+            let s = run.state(k);
+            for (c, &ti) in cols.source.iter().enumerate() {
+                row[c] = terms[ti].regressor(&s);
+            }
+            row[p..].copy_from_slice(&run.output(sensor, k));
+            acc.push(&row);
+        }
+    }
+    let n = acc.rows();
+    let r = acc.r();
+    let norms = acc.column_norms();
+    let max_norm = norms[..p].iter().copied().fold(0.0, f64::max);
+
+    let mut values: Vec<f64> = terms
+        .iter()
+        .map(|t| match t.status {
+            TermStatus::Fixed(v) => v,
+            TermStatus::Fitted => t.term.nominal,
+        })
+        .collect();
+    let mut std_errors: Vec<Option<f64>> = vec![None; terms.len()];
+    let mut status: Vec<CoefStatus> = terms
+        .iter()
+        .map(|t| match t.status {
+            TermStatus::Fixed(_) => CoefStatus::Fixed,
+            TermStatus::Fitted => CoefStatus::Fitted,
+        })
+        .collect();
+    let mut channels = Vec::with_capacity(3);
+    let mut unidentifiable = Vec::new();
+    let mut correlated = Vec::new();
+
+    for ch in 0..3 {
+        let mut fitted: Vec<usize> = (0..terms.len())
+            .filter(|&ti| terms[ti].term.channel == ch && status[ti] == CoefStatus::Fitted)
+            .collect();
+        // Columns nobody excites cannot be fitted at all.
+        fitted.retain(|&ti| {
+            let c = cols.of_term[ti];
+            if norms[c] <= 1e-12 * max_norm.max(f64::MIN_POSITIVE) {
+                unidentifiable.push(identify::zero_column(&terms[ti], ch));
+                status[ti] = CoefStatus::Unidentifiable;
+                false
+            } else {
+                true
+            }
+        });
+        let (rs, cond) = loop {
+            let q = fitted.len();
+            let rs = reduce(&r, &cols, &terms, &values, &status, &fitted, ch, p);
+            if q == 0 {
+                break (rs, 1.0);
+            }
+            let scaled = DMatrix::from_fn(q, q, |i, j| rs[(i, j)] / norms[cols.of_term[fitted[j]]]);
+            let svd = scaled.svd(false, true);
+            let (mut smin, mut smax, mut imin) = (f64::INFINITY, 0.0_f64, 0);
+            for (i, &s) in svd.singular_values.iter().enumerate() {
+                if s < smin {
+                    smin = s;
+                    imin = i;
+                }
+                smax = smax.max(s);
+            }
+            if smin > opts.rcond * smax {
+                break (rs, smax / smin);
+            }
+            let Some(vt) = svd.v_t.as_ref() else {
+                break (rs, f64::INFINITY);
+            };
+            let combo: Vec<f64> = (0..q).map(|j| vt[(imin, j)]).collect();
+            let (report, drop_at) = identify::lost_combination(&terms, &fitted, &combo, ch);
+            let ti = fitted.remove(drop_at);
+            status[ti] = CoefStatus::Unidentifiable;
+            values[ti] = terms[ti].term.nominal;
+            unidentifiable.push(report);
+        };
+        let q = fitted.len();
+        if n <= q as u64 {
+            return Err(EstimateError::TooFewSamples {
+                sensor,
+                axis: AXES[ch],
+                n,
+                q,
+            });
+        }
+        // Back substitution: R_s θ = z.
+        let mut theta = vec![0.0; q];
+        for i in (0..q).rev() {
+            let mut acc = rs[(i, q)];
+            for j in i + 1..q {
+                acc -= rs[(i, j)] * theta[j];
+            }
+            theta[i] = acc / rs[(i, i)];
+        }
+        let rss = rs[(q, q)] * rs[(q, q)];
+        let dof = (n - q as u64) as f64;
+        let sigma2 = rss / dof;
+        // R_s⁻¹ (upper triangular), then cov = σ² R⁻¹ R⁻ᵀ.
+        let mut rinv = vec![vec![0.0; q]; q];
+        for col in 0..q {
+            for i in (0..=col).rev() {
+                let mut acc = if i == col { 1.0 } else { 0.0 };
+                for j in i + 1..=col {
+                    acc -= rs[(i, j)] * rinv[j][col];
+                }
+                rinv[i][col] = acc / rs[(i, i)];
+            }
+        }
+        let mut cov = vec![vec![0.0; q]; q];
+        for i in 0..q {
+            for j in 0..q {
+                let mut acc = 0.0;
+                for k in i.max(j)..q {
+                    acc += rinv[i][k] * rinv[j][k];
+                }
+                cov[i][j] = sigma2 * acc;
+            }
+        }
+        for (a, &ti) in fitted.iter().enumerate() {
+            values[ti] = theta[a];
+            std_errors[ti] = Some(cov[a][a].sqrt());
+        }
+        for a in 0..q {
+            for b in a + 1..q {
+                let c = cov[a][b] / (cov[a][a] * cov[b][b]).sqrt();
+                if c.abs() > 0.95 {
+                    correlated.push(Correlation {
+                        a: terms[fitted[a]].term.name.clone(),
+                        b: terms[fitted[b]].term.name.clone(),
+                        correlation: c,
+                    });
+                }
+            }
+        }
+        channels.push(ChannelFit {
+            axis: AXES[ch],
+            n,
+            n_params: q,
+            residual_rms: (rss / n as f64).sqrt(),
+            residual_max: 0.0,
+            sigma: sigma2.sqrt(),
+            condition_number: cond,
+            covariance_names: fitted
+                .iter()
+                .map(|&ti| terms[ti].term.name.clone())
+                .collect(),
+            covariance: cov,
+        });
+    }
+
+    // Second pass: largest residual per channel.
+    let mut pred = [0.0; 3];
+    for run in runs {
+        for k in 0..run.len() {
+            let s = run.state(k);
+            pred.fill(0.0);
+            for (ti, t) in terms.iter().enumerate() {
+                if values[ti] != 0.0 {
+                    pred[t.term.channel] += values[ti] * t.regressor(&s);
+                }
+            }
+            let u = run.output(sensor, k);
+            for ch in 0..3 {
+                let e = (u[ch] - pred[ch]).abs();
+                if e > channels[ch].residual_max {
+                    channels[ch].residual_max = e;
+                }
+            }
+        }
+    }
+
+    let coefficients = terms
+        .iter()
+        .enumerate()
+        .map(|(ti, t)| Coefficient {
+            name: t.term.name.clone(),
+            effect: t.effect.id().to_string(),
+            channel: t.term.channel,
+            unit: t.term.unit.to_string(),
+            value: values[ti],
+            std_error: std_errors[ti],
+            status: status[ti],
+        })
+        .collect();
+    Ok(SensorFit {
+        sensor,
+        coefficients,
+        channels,
+        unidentifiable,
+        correlated,
+    })
+}
+
+/// The channel's reduced problem `[R_s | z; 0 | ρ]` ((q+1) × (q+1)) from the accumulated R:
+/// QR of the fitted columns of R beside the output column minus the held coefficients'
+/// contribution.
+#[allow(clippy::too_many_arguments)]
+fn reduce(
+    r: &Mat<f64>,
+    cols: &Columns,
+    terms: &[crate::model::TermRef<'_>],
+    values: &[f64],
+    status: &[CoefStatus],
+    fitted: &[usize],
+    ch: usize,
+    p: usize,
+) -> Mat<f64> {
+    let rows = r.nrows();
+    let q = fitted.len();
+    let mut m = Mat::<f64>::zeros(rows, q + 1);
+    for (a, &ti) in fitted.iter().enumerate() {
+        let c = cols.of_term[ti];
+        for i in 0..rows {
+            m[(i, a)] = r[(i, c)];
+        }
+    }
+    for i in 0..rows {
+        m[(i, q)] = r[(i, p + ch)];
+    }
+    for (ti, t) in terms.iter().enumerate() {
+        if t.term.channel == ch && status[ti] != CoefStatus::Fitted && values[ti] != 0.0 {
+            let c = cols.of_term[ti];
+            for i in 0..rows {
+                m[(i, q)] -= values[ti] * r[(i, c)];
+            }
+        }
+    }
+    let qr = m.as_ref().qr();
+    let mut out = Mat::<f64>::zeros(q + 1, q + 1);
+    let rr = qr.thin_R();
+    for i in 0..rr.nrows().min(q + 1) {
+        for j in i..q + 1 {
+            out[(i, j)] = rr[(i, j)];
+        }
+    }
+    // Keep the diagonal of R_s positive so that the residual norm sits in out[(q, q)].
+    out[(q, q)] = out[(q, q)].abs();
+    out
+}
+
+/// Convenience: the role of a coefficient, for correction.
+pub fn role_of(model: &Model, name: &str) -> Option<Role> {
+    SensorKind::BOTH
+        .iter()
+        .flat_map(|s| model.terms(*s))
+        .find(|t| t.term.name == name)
+        .map(|t| t.term.role)
+}

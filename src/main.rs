@@ -1,0 +1,2 @@
+//! crosscal command-line interface.
+fn main() {}

@@ -1,0 +1,386 @@
+//! The effects catalogue: each physical effect is one file that says which sensor it acts
+//! on, which coefficients it adds (per output channel), the regressor each coefficient
+//! multiplies, and a paragraph a user can read.
+//!
+//! # Forward model and conventions
+//! All quantities are in the **sensor frame** and SI units (rad/s, rad/s², m/s², s, °C).
+//! For each sensor (gyro, accelerometer) and output channel i ∈ {x, y, z}:
+//! ```text
+//! u_i = Σ_k θ_ik φ_ik(state)            (forward model, u = f(true))
+//! ```
+//! where φ are the regressors an effect defines from the true state (ω, ε, a, t, temp).
+//! The paper's model (eqs. 3–4) is the special case `u = b + C_ω ω + C_ε ε` (gyro) and
+//! `u = b + K a` (accelerometer); matrices are row-major: `C_ω[i][j]` (named `c_ij`) is the
+//! weight of true rate j in output i.
+//!
+//! # Adding an effect
+//! Write one file with a type implementing [`Effect`] and add it to [`catalog`].
+
+mod angular_accel;
+mod bias;
+mod coupling;
+
+pub use angular_accel::AngularAcceleration;
+pub use bias::Bias;
+pub use coupling::ScaleCoupling;
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::sync::Arc;
+
+/// Which sensor triad an effect or coefficient belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SensorKind {
+    /// Three-axis rate gyroscope.
+    Gyro,
+    /// Three-axis accelerometer.
+    Accel,
+}
+
+impl SensorKind {
+    /// Both sensors, gyro first.
+    pub const BOTH: [SensorKind; 2] = [SensorKind::Gyro, SensorKind::Accel];
+
+    /// Lower-case name used in coefficient names.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Gyro => "gyro",
+            Self::Accel => "accel",
+        }
+    }
+}
+
+impl fmt::Display for SensorKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Axis letters, index 0..3.
+pub const AXES: [char; 3] = ['x', 'y', 'z'];
+
+/// The true state a regressor may depend on (sensor frame, SI).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct State {
+    /// Time since the start of the run, s.
+    pub t_s: f64,
+    /// Angular rate, rad/s.
+    pub w: [f64; 3],
+    /// Angular acceleration, rad/s².
+    pub e: [f64; 3],
+    /// Specific force, m/s².
+    pub a: [f64; 3],
+    /// Temperature, °C (NaN when unknown).
+    pub temp_c: f64,
+}
+
+/// How a coefficient enters the correction (lets the shared corrector invert linear parts
+/// exactly and treat the rest by fixed-point iteration).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind", content = "input")]
+pub enum Role {
+    /// Constant offset of the channel.
+    Bias,
+    /// Entry (channel, input) of the sensor's scale/coupling matrix: multiplies the
+    /// sensor's own true quantity `input` (ω for the gyro, a for the accelerometer).
+    Scale(usize),
+    /// Entry (channel, input) of the gyro's angular-acceleration matrix C_ε (multiplies ε).
+    Epsilon(usize),
+    /// Any other regressor (handled by the effect's own regressor in the corrector).
+    Other,
+}
+
+/// One coefficient an effect adds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Term {
+    /// Unique coefficient name, e.g. `gyro.c_xy`.
+    pub name: String,
+    /// Output channel it acts on, 0..3.
+    pub channel: usize,
+    /// Identifier of its regressor (terms with equal keys share a design column), e.g. `w_y`.
+    pub key: String,
+    /// Unit of the coefficient (SI; "raw" sessions put the recorded unit in place of SI).
+    pub unit: &'static str,
+    /// Value assumed when the coefficient is not fitted (1 for diagonal scales, else 0).
+    pub nominal: f64,
+    /// Which coefficient to drop first when a combination is unidentifiable (higher first).
+    pub drop_priority: u8,
+    /// How it enters the correction.
+    pub role: Role,
+}
+
+/// A physical effect: a set of coefficients with their regressors.
+pub trait Effect: Send + Sync + fmt::Debug {
+    /// Identifier used on the command line and in profiles (e.g. `gyro-scale-coupling`).
+    fn id(&self) -> &'static str;
+    /// The sensor the effect acts on.
+    fn sensor(&self) -> SensorKind;
+    /// A paragraph explaining the physics, for users.
+    fn explain(&self) -> &'static str;
+    /// The coefficients, in a fixed order.
+    fn terms(&self) -> &[Term];
+    /// Regressor of term `k` at a true state.
+    fn regressor(&self, k: usize, s: &State) -> f64;
+}
+
+/// Every effect crosscal knows, in catalogue order.
+pub fn catalog() -> Vec<Arc<dyn Effect>> {
+    vec![
+        Arc::new(Bias::new(SensorKind::Gyro)),
+        Arc::new(ScaleCoupling::new(SensorKind::Gyro)),
+        Arc::new(AngularAcceleration::new()),
+        Arc::new(Bias::new(SensorKind::Accel)),
+        Arc::new(ScaleCoupling::new(SensorKind::Accel)),
+    ]
+}
+
+/// Finds a catalogue effect by id.
+pub fn find_effect(id: &str) -> Option<Arc<dyn Effect>> {
+    catalog().into_iter().find(|e| e.id() == id)
+}
+
+/// Whether a coefficient is estimated or held at a value.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "status", content = "value")]
+pub enum TermStatus {
+    /// Estimated from the data.
+    Fitted,
+    /// Held at this value.
+    Fixed(f64),
+}
+
+/// A model: effects plus, per coefficient, whether it is fitted.
+#[derive(Debug, Clone)]
+pub struct Model {
+    /// Name of the preset or description.
+    pub name: String,
+    effects: Vec<Arc<dyn Effect>>,
+    status: Vec<Vec<TermStatus>>,
+}
+
+/// Model construction errors.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum ModelError {
+    /// Unknown effect id.
+    #[error("unknown effect '{0}': known effects are {1}")]
+    UnknownEffect(String, String),
+    /// Unknown model preset.
+    #[error("unknown model '{0}': expected 'default' or 'paper'")]
+    UnknownPreset(String),
+    /// Unknown coefficient name.
+    #[error("unknown coefficient '{0}' in this model")]
+    UnknownCoefficient(String),
+}
+
+/// Paper eq. 3 coefficients (gyro) that the `paper` preset fits.
+const PAPER_GYRO: [&str; 9] = [
+    "gyro.c_xx",
+    "gyro.c_yy",
+    "gyro.c_zz",
+    "gyro.c_xy",
+    "gyro.c_yz",
+    "gyro.c_zx",
+    "gyro.e_xz",
+    "gyro.e_yx",
+    "gyro.e_zy",
+];
+
+impl Model {
+    /// A model of the given effects with every coefficient fitted.
+    pub fn from_effects(name: &str, effects: Vec<Arc<dyn Effect>>) -> Self {
+        let status = effects
+            .iter()
+            .map(|e| vec![TermStatus::Fitted; e.terms().len()])
+            .collect();
+        Self {
+            name: name.to_string(),
+            effects,
+            status,
+        }
+    }
+
+    /// The default model: biases, full C_ω, full C_ε (gyro); bias, full K (accelerometer).
+    pub fn default_model() -> Self {
+        let ids = [
+            "gyro-bias",
+            "gyro-scale-coupling",
+            "gyro-angular-acceleration",
+            "accel-bias",
+            "accel-scale-coupling",
+        ];
+        let effects = ids.iter().filter_map(|id| find_effect(id)).collect();
+        Self::from_effects("default", effects)
+    }
+
+    /// Exactly the paper's structure: eq. 3 (diagonal, c_xy, c_yz, c_zx, e_xz, e_yx, e_zy;
+    /// no bias) and eq. 4 (full K, no bias).
+    pub fn paper() -> Self {
+        let effects: Vec<Arc<dyn Effect>> = [
+            "gyro-scale-coupling",
+            "gyro-angular-acceleration",
+            "accel-scale-coupling",
+        ]
+        .iter()
+        .filter_map(|id| find_effect(id))
+        .collect();
+        let mut m = Self::from_effects("paper", effects);
+        for (ei, e) in m.effects.iter().enumerate() {
+            if e.sensor() == SensorKind::Gyro {
+                for (k, t) in e.terms().iter().enumerate() {
+                    if !PAPER_GYRO.contains(&t.name.as_str()) {
+                        m.status[ei][k] = TermStatus::Fixed(t.nominal);
+                    }
+                }
+            }
+        }
+        m
+    }
+
+    /// A preset by name (`default`, `paper`).
+    pub fn preset(name: &str) -> Result<Self, ModelError> {
+        match name {
+            "default" => Ok(Self::default_model()),
+            "paper" => Ok(Self::paper()),
+            other => Err(ModelError::UnknownPreset(other.to_string())),
+        }
+    }
+
+    /// Adds a catalogue effect (no-op when already present).
+    pub fn add_effect(&mut self, id: &str) -> Result<(), ModelError> {
+        if self.effects.iter().any(|e| e.id() == id) {
+            return Ok(());
+        }
+        let e = find_effect(id).ok_or_else(|| {
+            let known: Vec<&str> = catalog().iter().map(|e| e.id()).collect();
+            ModelError::UnknownEffect(id.to_string(), known.join(", "))
+        })?;
+        self.status.push(vec![TermStatus::Fitted; e.terms().len()]);
+        self.effects.push(e);
+        self.name = format!("{}+{id}", self.name);
+        Ok(())
+    }
+
+    /// Holds a coefficient at a value instead of fitting it.
+    pub fn fix(&mut self, name: &str, value: f64) -> Result<(), ModelError> {
+        let (ei, k) = self
+            .locate(name)
+            .ok_or_else(|| ModelError::UnknownCoefficient(name.to_string()))?;
+        self.status[ei][k] = TermStatus::Fixed(value);
+        Ok(())
+    }
+
+    /// Holds a coefficient at its nominal value (1 for diagonal scales, else 0).
+    pub fn disable(&mut self, name: &str) -> Result<(), ModelError> {
+        let (ei, k) = self
+            .locate(name)
+            .ok_or_else(|| ModelError::UnknownCoefficient(name.to_string()))?;
+        self.status[ei][k] = TermStatus::Fixed(self.effects[ei].terms()[k].nominal);
+        Ok(())
+    }
+
+    fn locate(&self, name: &str) -> Option<(usize, usize)> {
+        self.effects.iter().enumerate().find_map(|(ei, e)| {
+            e.terms()
+                .iter()
+                .position(|t| t.name == name)
+                .map(|k| (ei, k))
+        })
+    }
+
+    /// The effects in the model.
+    pub fn effects(&self) -> &[Arc<dyn Effect>] {
+        &self.effects
+    }
+
+    /// Every coefficient of one sensor, in model order.
+    pub fn terms(&self, sensor: SensorKind) -> Vec<TermRef<'_>> {
+        let mut out = Vec::new();
+        for (ei, e) in self.effects.iter().enumerate() {
+            if e.sensor() != sensor {
+                continue;
+            }
+            for (k, t) in e.terms().iter().enumerate() {
+                out.push(TermRef {
+                    effect: e.as_ref(),
+                    index: k,
+                    term: t,
+                    status: self.status[ei][k],
+                });
+            }
+        }
+        out
+    }
+}
+
+/// A coefficient of a model, with its effect.
+#[derive(Debug, Clone, Copy)]
+pub struct TermRef<'a> {
+    /// The effect that defines it.
+    pub effect: &'a dyn Effect,
+    /// Index within the effect's terms.
+    pub index: usize,
+    /// The definition.
+    pub term: &'a Term,
+    /// Fitted or fixed.
+    pub status: TermStatus,
+}
+
+impl TermRef<'_> {
+    /// Regressor value at a state.
+    #[inline]
+    pub fn regressor(&self, s: &State) -> f64 {
+        self.effect.regressor(self.index, s)
+    }
+}
+
+/// Name of a matrix coefficient, e.g. `matrix_name(Gyro, "c", 0, 1)` = `gyro.c_xy`.
+pub fn matrix_name(sensor: SensorKind, letter: &str, i: usize, j: usize) -> String {
+    format!("{}.{letter}_{}{}", sensor.as_str(), AXES[i], AXES[j])
+}
+
+/// Forward model of one sensor: `u_i = Σ_k θ_k φ_k(state)` over the terms of channel i.
+#[inline]
+pub fn forward(terms: &[TermRef<'_>], values: &[f64], s: &State) -> [f64; 3] {
+    let mut u = [0.0; 3];
+    for (t, &v) in terms.iter().zip(values) {
+        if v != 0.0 {
+            u[t.term.channel] += v * t.regressor(s);
+        }
+    }
+    u
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_are_unique_across_catalogue() {
+        let mut names: Vec<String> = catalog()
+            .iter()
+            .flat_map(|e| e.terms().iter().map(|t| t.name.clone()).collect::<Vec<_>>())
+            .collect();
+        let n = names.len();
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), n);
+    }
+
+    #[test]
+    fn paper_model_fits_exactly_eq3_and_eq4() {
+        let m = Model::paper();
+        let fitted: Vec<String> = m
+            .terms(SensorKind::Gyro)
+            .iter()
+            .filter(|t| t.status == TermStatus::Fitted)
+            .map(|t| t.term.name.clone())
+            .collect();
+        assert_eq!(fitted.len(), 9);
+        for n in PAPER_GYRO {
+            assert!(fitted.iter().any(|f| f == n), "{n}");
+        }
+        assert_eq!(m.terms(SensorKind::Accel).len(), 9);
+    }
+}

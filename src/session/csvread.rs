@@ -1,0 +1,434 @@
+//! Reading one recording CSV into SI arrays, without a `String` per field.
+
+use super::error::SessionError;
+use super::units::Units;
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+
+/// Stand-supplied reference columns (kind `reference`), converted to SI, stand frame.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReferenceColumns {
+    /// True angular rate, rad/s.
+    pub w_rad_s: Vec<[f64; 3]>,
+    /// True specific force, m/s².
+    pub a_m_s2: Vec<[f64; 3]>,
+    /// True angular acceleration, rad/s², when the CSV has `ex_ref..ez_ref`.
+    pub e_rad_s2: Option<Vec<[f64; 3]>>,
+}
+
+/// One run's samples, converted to SI (gyro rad/s, accel m/s²; `raw` kept as recorded).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Recording {
+    /// Time stamps, s, strictly increasing.
+    pub t_s: Vec<f64>,
+    /// Gyro outputs, sensor frame.
+    pub gyro: Vec<[f64; 3]>,
+    /// Accelerometer outputs, sensor frame.
+    pub accel: Vec<[f64; 3]>,
+    /// Temperature, °C, when the CSV has a `temp` column.
+    pub temp_c: Option<Vec<f64>>,
+    /// Reference columns, when requested and present.
+    pub reference: Option<ReferenceColumns>,
+    /// SHA-256 of the file's bytes, hex.
+    pub sha256: String,
+    /// Non-fatal findings (gaps in `t`), each naming its line.
+    pub warnings: Vec<String>,
+}
+
+impl Recording {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+}
+
+/// Which optional columns to read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ReadOptions {
+    /// Require `wx_ref..az_ref` (and read `ex_ref..ez_ref` if present).
+    pub reference: bool,
+}
+
+const REQUIRED: [&str; 7] = ["t", "gx", "gy", "gz", "ax", "ay", "az"];
+const REF_REQUIRED: [&str; 6] = ["wx_ref", "wy_ref", "wz_ref", "ax_ref", "ay_ref", "az_ref"];
+const REF_EPS: [&str; 3] = ["ex_ref", "ey_ref", "ez_ref"];
+
+/// Hex SHA-256 of bytes.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    let digest = Sha256::digest(bytes);
+    let mut s = String::with_capacity(64);
+    for b in digest {
+        s.push_str(&format!("{b:02x}"));
+    }
+    s
+}
+
+fn csv_err(
+    path: &Path,
+    line: u64,
+    column: impl Into<String>,
+    msg: impl Into<String>,
+) -> SessionError {
+    SessionError::Csv {
+        path: path.to_path_buf(),
+        line,
+        column: column.into(),
+        msg: msg.into(),
+    }
+}
+
+/// Reads a recording file. `g_m_s2` converts `g` to m/s².
+pub fn read_recording(
+    path: &Path,
+    units: &Units,
+    g_m_s2: f64,
+    opts: ReadOptions,
+) -> Result<Recording, SessionError> {
+    let bytes = std::fs::read(path).map_err(|source| SessionError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_recording(path, &bytes, units, g_m_s2, opts)
+}
+
+/// Parses recording bytes (the file name is used in messages only).
+pub fn parse_recording(
+    path: &Path,
+    bytes: &[u8],
+    units: &Units,
+    g_m_s2: f64,
+    opts: ReadOptions,
+) -> Result<Recording, SessionError> {
+    let path: PathBuf = path.to_path_buf();
+    if bytes.iter().all(|b| b.is_ascii_whitespace()) {
+        return Err(csv_err(
+            &path,
+            1,
+            "-",
+            "the file is empty: expected a header line 't,gx,gy,gz,ax,ay,az[,temp]' and samples",
+        ));
+    }
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .comment(Some(b'#'))
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .from_reader(bytes);
+    let mut rec = csv::ByteRecord::new();
+
+    // Header: the first record that is not empty/comment.
+    let header_line;
+    let mut names: Vec<String> = Vec::new();
+    loop {
+        match rdr.read_byte_record(&mut rec) {
+            Ok(false) => {
+                return Err(csv_err(
+                    &path,
+                    1,
+                    "-",
+                    "no header line found: expected 't,gx,gy,gz,ax,ay,az[,temp]'",
+                ));
+            }
+            Ok(true) => {
+                if rec.len() == 1 && rec.get(0).is_some_and(|f| f.is_empty()) {
+                    continue;
+                }
+                header_line = rec.position().map_or(1, |p| p.line());
+                for f in rec.iter() {
+                    names.push(String::from_utf8_lossy(f).trim().to_string());
+                }
+                break;
+            }
+            Err(e) => return Err(map_csv_error(&path, &e)),
+        }
+    }
+    let find = |name: &str| names.iter().position(|n| n == name);
+    let mut idx = [0usize; 7];
+    for (k, name) in REQUIRED.iter().enumerate() {
+        idx[k] = find(name).ok_or_else(|| {
+            let first_is_number = names.first().is_some_and(|n| n.parse::<f64>().is_ok());
+            let why = if first_is_number {
+                format!("the header line is missing (line {header_line} starts with a number); expected a first line 't,gx,gy,gz,ax,ay,az[,temp]'")
+            } else {
+                format!(
+                    "required column '{name}' is absent: the header has [{}]; expected t,gx,gy,gz,ax,ay,az (any order)",
+                    names.join(",")
+                )
+            };
+            csv_err(&path, header_line, "-", why)
+        })?;
+    }
+    let temp_idx = find("temp");
+    let mut ref_idx = [0usize; 6];
+    let mut eps_idx: Option<[usize; 3]> = None;
+    if opts.reference {
+        for (k, name) in REF_REQUIRED.iter().enumerate() {
+            ref_idx[k] = find(name).ok_or_else(|| {
+                csv_err(
+                    &path,
+                    header_line,
+                    "-",
+                    format!(
+                        "motion kind 'reference' needs column '{name}': the header has [{}]; expected wx_ref,wy_ref,wz_ref,ax_ref,ay_ref,az_ref",
+                        names.join(",")
+                    ),
+                )
+            })?;
+        }
+        let e: Vec<Option<usize>> = REF_EPS.iter().map(|n| find(n)).collect();
+        match (e[0], e[1], e[2]) {
+            (Some(a), Some(b), Some(c)) => eps_idx = Some([a, b, c]),
+            (None, None, None) => {}
+            _ => {
+                return Err(csv_err(
+                    &path,
+                    header_line,
+                    "-",
+                    "give all three of ex_ref,ey_ref,ez_ref or none of them",
+                ));
+            }
+        }
+    }
+    let width = names.len();
+
+    let kt = units.time.to_s();
+    let kg = units.gyro.to_rad_s();
+    let ka = units.accel.to_m_s2(g_m_s2);
+    // Reference columns of a raw session are read as deg/s and g.
+    let kwr = if units.gyro == super::units::GyroUnit::Raw {
+        std::f64::consts::PI / 180.0
+    } else {
+        kg
+    };
+    let kar = if units.accel == super::units::AccelUnit::Raw {
+        g_m_s2
+    } else {
+        ka
+    };
+
+    let cap = bytes.len() / 64;
+    let mut out = Recording {
+        t_s: Vec::with_capacity(cap),
+        gyro: Vec::with_capacity(cap),
+        accel: Vec::with_capacity(cap),
+        temp_c: temp_idx.map(|_| Vec::with_capacity(cap)),
+        ..Default::default()
+    };
+    let mut refc = if opts.reference {
+        Some(ReferenceColumns {
+            e_rad_s2: eps_idx.map(|_| Vec::new()),
+            ..Default::default()
+        })
+    } else {
+        None
+    };
+    let mut last_line = header_line;
+    let mut last_t = f64::NEG_INFINITY;
+    loop {
+        match rdr.read_byte_record(&mut rec) {
+            Ok(false) => break,
+            Ok(true) => {}
+            Err(e) => return Err(map_csv_error(&path, &e)),
+        }
+        let line = rec.position().map_or(last_line + 1, |p| p.line());
+        last_line = line;
+        if rec.len() == 1 && rec.get(0).is_some_and(|f| f.is_empty()) {
+            continue;
+        }
+        if rec.len() < width {
+            return Err(csv_err(
+                &path,
+                line,
+                format!("{} ({})", rec.len() + 1, names[rec.len()]),
+                format!(
+                    "the row has {} fields, the header has {}: a truncated or incomplete row",
+                    rec.len(),
+                    width
+                ),
+            ));
+        }
+        let get = |k: usize| -> Result<f64, SessionError> {
+            let field = rec.get(k).unwrap_or(b"");
+            let parsed = std::str::from_utf8(field)
+                .ok()
+                .and_then(|s| s.parse::<f64>().ok());
+            match parsed {
+                Some(v) if v.is_finite() => Ok(v),
+                Some(v) => Err(csv_err(
+                    &path,
+                    line,
+                    format!("{} ({})", k + 1, names[k]),
+                    format!("expected a finite number, found '{v}' (NaN or infinite values are not accepted)"),
+                )),
+                None => Err(csv_err(
+                    &path,
+                    line,
+                    format!("{} ({})", k + 1, names[k]),
+                    format!("expected a number, found '{}'", String::from_utf8_lossy(field)),
+                )),
+            }
+        };
+        let t = get(idx[0])? * kt;
+        if t <= last_t {
+            let what = if t >= last_t {
+                "duplicate"
+            } else {
+                "decreasing"
+            };
+            return Err(csv_err(
+                &path,
+                line,
+                format!("{} (t)", idx[0] + 1),
+                format!(
+                    "{what} time stamp {}: t must be strictly increasing (previous sample had {})",
+                    t / kt,
+                    last_t / kt
+                ),
+            ));
+        }
+        last_t = t;
+        out.t_s.push(t);
+        out.gyro
+            .push([get(idx[1])? * kg, get(idx[2])? * kg, get(idx[3])? * kg]);
+        out.accel
+            .push([get(idx[4])? * ka, get(idx[5])? * ka, get(idx[6])? * ka]);
+        if let (Some(k), Some(v)) = (temp_idx, out.temp_c.as_mut()) {
+            v.push(get(k)?);
+        }
+        if let Some(r) = refc.as_mut() {
+            r.w_rad_s.push([
+                get(ref_idx[0])? * kwr,
+                get(ref_idx[1])? * kwr,
+                get(ref_idx[2])? * kwr,
+            ]);
+            r.a_m_s2.push([
+                get(ref_idx[3])? * kar,
+                get(ref_idx[4])? * kar,
+                get(ref_idx[5])? * kar,
+            ]);
+            if let (Some(e), Some(ev)) = (eps_idx, r.e_rad_s2.as_mut()) {
+                ev.push([get(e[0])? * kwr, get(e[1])? * kwr, get(e[2])? * kwr]);
+            }
+        }
+    }
+    if out.t_s.is_empty() {
+        return Err(csv_err(
+            &path,
+            header_line,
+            "-",
+            "the file has a header but no samples",
+        ));
+    }
+    out.reference = refc;
+    out.sha256 = sha256_hex(bytes);
+    out.warnings = find_gaps(&out.t_s, kt, &path);
+    Ok(out)
+}
+
+/// Warns about gaps larger than 5 median sample periods.
+fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<String> {
+    if t.len() < 3 {
+        return Vec::new();
+    }
+    let mut dts: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let mid = dts.len() / 2;
+    let median = *dts.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let mut warnings = Vec::new();
+    for (i, w) in t.windows(2).enumerate() {
+        let dt = w[1] - w[0];
+        if dt > 5.0 * median {
+            warnings.push(format!(
+                "{}: gap in t of {} before sample {} (t = {}): {:.1} median sample periods",
+                path.display(),
+                dt / kt,
+                i + 2,
+                w[1] / kt,
+                dt / median
+            ));
+            if warnings.len() >= 20 {
+                warnings.push(format!("{}: further gaps not listed", path.display()));
+                break;
+            }
+        }
+    }
+    warnings
+}
+
+fn map_csv_error(path: &Path, e: &csv::Error) -> SessionError {
+    let line = e.position().map_or(0, |p| p.line());
+    csv_err(path, line, "-", format!("malformed CSV: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Recording, SessionError> {
+        parse_recording(
+            Path::new("run.csv"),
+            text.as_bytes(),
+            &Units::default(),
+            9.80665,
+            ReadOptions::default(),
+        )
+    }
+
+    #[test]
+    fn reads_any_column_order_comments_and_blank_lines() {
+        let r =
+            parse("# c\ngz,t,gx,gy,ax,ay,az,extra\n\n3,0,1,2,0,0,1,x\n# mid\n6,0.5,4,5,0,0,1,y\n")
+                .unwrap();
+        assert_eq!(r.len(), 2);
+        let k = std::f64::consts::PI / 180.0;
+        assert!((r.gyro[1][2] - 6.0 * k).abs() < 1e-15);
+        assert!((r.accel[0][2] - 9.80665).abs() < 1e-12);
+        assert!((r.t_s[1] - 0.5).abs() < 1e-15);
+    }
+
+    #[test]
+    fn errors_name_line_and_column() {
+        let e = parse("t,gx,gy,gz,ax,ay,az\n0,1,2,3,0,0,1\n0.1,1,abc,3,0,0,1\n").unwrap_err();
+        let m = e.to_string();
+        assert!(m.contains("run.csv:3:3 (gy)"), "{m}");
+        assert!(m.contains("'abc'"), "{m}");
+        let e = parse("t,gx,gy,gz,ax,ay,az\n0,1,2,3,0,0,1\n0.1,1,NaN,3,0,0,1\n").unwrap_err();
+        assert!(e.to_string().contains("finite"), "{e}");
+        let e = parse("t,gx,gy,gz,ax,ay,az\n0,1,2,3,0,0,1\n0,1,2,3,0,0,1\n").unwrap_err();
+        assert!(
+            e.to_string().contains(":3:1 (t)") && e.to_string().contains("duplicate"),
+            "{e}"
+        );
+        let e = parse("t,gx,gy,gz,ax,ay\n0,1,2,3,0,0\n").unwrap_err();
+        assert!(e.to_string().contains("'az' is absent"), "{e}");
+        let e = parse("t,gx,gy,gz,ax,ay,az\n0,1,2,3,0,0,1\n0.1,1,2,3\n").unwrap_err();
+        assert!(
+            e.to_string().contains(":3:5 (ax)") && e.to_string().contains("truncated"),
+            "{e}"
+        );
+        let e = parse("").unwrap_err();
+        assert!(e.to_string().contains("empty"), "{e}");
+        let e = parse("0,1,2,3,0,0,1\n").unwrap_err();
+        assert!(e.to_string().contains("header line is missing"), "{e}");
+    }
+
+    #[test]
+    fn gaps_are_warned() {
+        let mut s = String::from("t,gx,gy,gz,ax,ay,az\n");
+        for k in 0..20 {
+            let t = if k < 10 {
+                k as f64 * 0.01
+            } else {
+                k as f64 * 0.01 + 1.0
+            };
+            s.push_str(&format!("{t},0,0,0,0,0,1\n"));
+        }
+        let r = parse(&s).unwrap();
+        assert_eq!(r.warnings.len(), 1, "{:?}", r.warnings);
+        assert!(r.warnings[0].contains("sample 11"));
+    }
+}

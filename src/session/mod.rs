@@ -1,0 +1,500 @@
+//! Stand sessions: the manifest (JSON) and its recordings (CSV), as specified in
+//! `shared/spec/session-format.md` (format `crosscal-session/1`).
+//!
+//! Everything is converted on read to SI (rad/s, m/s², s). Sensor outputs stay in the
+//! sensor frame; the motion described by the manifest is in the stand frame and is moved to
+//! the sensor frame with the run's mount by [`crate::motion`].
+
+mod csvread;
+mod error;
+pub mod units;
+
+pub use csvread::{
+    parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns,
+};
+pub use error::SessionError;
+pub use units::{AccelUnit, GyroUnit, TimeUnit, Units};
+
+use crate::motion::Mount;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+/// The session format this reader understands.
+pub const SESSION_FORMAT: &str = "crosscal-session/1";
+
+/// What the stand did during a run, as declared in the manifest (stand frame).
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum MotionSpec {
+    /// Conic motion, paper eqs. 1–2.
+    Conic {
+        /// Cone half-angle α, degrees.
+        cone_angle_deg: f64,
+        /// Stand rate ω_s, deg/s; the sign gives the direction.
+        rate_deg_s: f64,
+        /// Phase φ at t = 0, degrees.
+        phase_deg: f64,
+    },
+    /// At rest.
+    Static {
+        /// Unit vector pointing up, stand axes (what an ideal accelerometer reads, in g).
+        up_stand: [f64; 3],
+        /// Earth rate in stand axes, rad/s (zero unless `earth_rate` was requested).
+        earth_rate_rad_s: [f64; 3],
+    },
+    /// True ω, a (and optionally ε) are given per sample in the CSV.
+    Reference,
+}
+
+/// One run as declared in the manifest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSpec {
+    /// Run name.
+    pub name: String,
+    /// CSV file, relative to the manifest's folder.
+    pub file: String,
+    /// The stand's motion.
+    pub motion: MotionSpec,
+    /// How the sensor sits on the stand.
+    pub mount: Mount,
+    /// Constant temperature, °C, when the CSV has no `temp` column.
+    pub temperature_c: Option<f64>,
+    /// Free text.
+    pub note: Option<String>,
+}
+
+/// A parsed manifest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Manifest {
+    /// Unit serial number.
+    pub serial: String,
+    /// Units of the recordings.
+    pub units: Units,
+    /// Local gravity, m/s².
+    pub g_m_s2: f64,
+    /// Runs, in manifest order.
+    pub runs: Vec<RunSpec>,
+}
+
+/// One run: its declaration and its samples.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Run {
+    /// The manifest's entry.
+    pub spec: RunSpec,
+    /// Full path of the CSV.
+    pub path: PathBuf,
+    /// The samples.
+    pub rec: Recording,
+}
+
+/// A whole session in memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Session {
+    /// Path of the manifest.
+    pub manifest_path: PathBuf,
+    /// The manifest.
+    pub manifest: Manifest,
+    /// The runs with their data.
+    pub runs: Vec<Run>,
+}
+
+impl Session {
+    /// Reads a manifest and all its recordings.
+    pub fn load(manifest_path: &Path) -> Result<Self, SessionError> {
+        let manifest = read_manifest(manifest_path)?;
+        let dir = manifest_path.parent().unwrap_or(Path::new("."));
+        let mut runs = Vec::with_capacity(manifest.runs.len());
+        for spec in &manifest.runs {
+            let path = dir.join(&spec.file);
+            if !path.is_file() {
+                let (line, column) = locate(
+                    &std::fs::read_to_string(manifest_path).unwrap_or_default(),
+                    &spec.file,
+                );
+                return Err(SessionError::Manifest {
+                    path: manifest_path.to_path_buf(),
+                    line,
+                    column,
+                    msg: format!(
+                        "run '{}': file '{}' does not exist (looked for {})",
+                        spec.name,
+                        spec.file,
+                        path.display()
+                    ),
+                });
+            }
+            let opts = ReadOptions {
+                reference: matches!(spec.motion, MotionSpec::Reference),
+            };
+            let rec = read_recording(&path, &manifest.units, manifest.g_m_s2, opts)?;
+            runs.push(Run {
+                spec: spec.clone(),
+                path,
+                rec,
+            });
+        }
+        Ok(Self {
+            manifest_path: manifest_path.to_path_buf(),
+            manifest,
+            runs,
+        })
+    }
+
+    /// Total number of samples over all runs.
+    pub fn n_samples(&self) -> usize {
+        self.runs.iter().map(|r| r.rec.len()).sum()
+    }
+
+    /// Non-fatal findings of all recordings.
+    pub fn warnings(&self) -> Vec<String> {
+        self.runs
+            .iter()
+            .flat_map(|r| r.rec.warnings.iter().cloned())
+            .collect()
+    }
+}
+
+/// Best-effort 1-based (line, column) of the first occurrence of `"needle"` in `text`.
+fn locate(text: &str, needle: &str) -> (usize, usize) {
+    let quoted = format!("\"{needle}\"");
+    let Some(pos) = text.find(&quoted).or_else(|| text.find(needle)) else {
+        return (0, 0);
+    };
+    let before = &text[..pos];
+    let line = before.matches('\n').count() + 1;
+    let column = pos - before.rfind('\n').map_or(0, |p| p + 1) + 1;
+    (line, column)
+}
+
+/// Reads and validates a manifest (without reading the recordings).
+pub fn read_manifest(path: &Path) -> Result<Manifest, SessionError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SessionError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_manifest(path, &text)
+}
+
+/// Parses manifest text (the path is used in messages only).
+pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError> {
+    let json: Value = serde_json::from_str(text).map_err(|e| SessionError::Json {
+        path: path.to_path_buf(),
+        line: e.line(),
+        column: e.column(),
+        msg: format!("the manifest is not valid JSON: {e}"),
+    })?;
+    let bad = |needle: &str, msg: String| {
+        let (line, column) = locate(text, needle);
+        SessionError::Manifest {
+            path: path.to_path_buf(),
+            line,
+            column,
+            msg,
+        }
+    };
+    let obj = json
+        .as_object()
+        .ok_or_else(|| bad("", "the manifest must be a JSON object".into()))?;
+    match obj.get("format") {
+        Some(Value::String(f)) if f == SESSION_FORMAT => {}
+        Some(Value::String(f)) => {
+            return Err(SessionError::UnknownFormat {
+                path: path.to_path_buf(),
+                found: f.clone(),
+            })
+        }
+        _ => {
+            return Err(bad(
+                "format",
+                format!("missing \"format\": expected \"format\": \"{SESSION_FORMAT}\""),
+            ))
+        }
+    }
+    let serial = match obj.get("serial") {
+        Some(Value::String(s)) if valid_serial(s) => s.clone(),
+        Some(Value::String(s)) => {
+            return Err(bad(
+                s,
+                format!("serial '{s}' cannot name a profile folder: use letters, digits, '-', '_' or '.' (not starting with '.')"),
+            ))
+        }
+        _ => return Err(bad("serial", "missing \"serial\": expected the unit's serial number as a string".into())),
+    };
+    let units_obj = obj.get("units").and_then(Value::as_object).ok_or_else(|| {
+        bad(
+            "units",
+            "missing \"units\": expected {\"gyro\": ..., \"accel\": ..., \"time\": ...}".into(),
+        )
+    })?;
+    let unit_str = |key: &str| -> Result<Option<&str>, SessionError> {
+        match units_obj.get(key) {
+            None => Ok(None),
+            Some(Value::String(s)) => Ok(Some(s.as_str())),
+            Some(_) => Err(bad(key, format!("units.{key} must be a string"))),
+        }
+    };
+    let gyro = match unit_str("gyro")? {
+        Some(s) => GyroUnit::parse(s).ok_or_else(|| {
+            bad(
+                s,
+                format!("units.gyro is '{s}': expected one of {}", GyroUnit::CHOICES),
+            )
+        })?,
+        None => {
+            return Err(bad(
+                "units",
+                format!("missing units.gyro: expected one of {}", GyroUnit::CHOICES),
+            ))
+        }
+    };
+    let accel = match unit_str("accel")? {
+        Some(s) => AccelUnit::parse(s).ok_or_else(|| {
+            bad(
+                s,
+                format!(
+                    "units.accel is '{s}': expected one of {}",
+                    AccelUnit::CHOICES
+                ),
+            )
+        })?,
+        None => {
+            return Err(bad(
+                "units",
+                format!(
+                    "missing units.accel: expected one of {}",
+                    AccelUnit::CHOICES
+                ),
+            ))
+        }
+    };
+    let time = match unit_str("time")? {
+        Some(s) => TimeUnit::parse(s).ok_or_else(|| {
+            bad(
+                s,
+                format!("units.time is '{s}': expected one of {}", TimeUnit::CHOICES),
+            )
+        })?,
+        None => TimeUnit::S,
+    };
+    let g_m_s2 = match obj.get("stand").and_then(|s| s.get("g")) {
+        None => 9.80665,
+        Some(v) => match v.as_f64() {
+            Some(g) if g.is_finite() && g > 0.0 => g,
+            _ => {
+                return Err(bad(
+                    "\"g\"",
+                    format!("stand.g is {v}: expected local gravity in m/s^2, a positive number"),
+                ))
+            }
+        },
+    };
+    let runs_json = obj
+        .get("runs")
+        .and_then(Value::as_array)
+        .ok_or_else(|| bad("runs", "missing \"runs\": expected a list of runs".into()))?;
+    if runs_json.is_empty() {
+        return Err(bad(
+            "runs",
+            "\"runs\" is empty: a session needs at least one run".into(),
+        ));
+    }
+    let mut runs = Vec::with_capacity(runs_json.len());
+    for (i, r) in runs_json.iter().enumerate() {
+        runs.push(parse_run(i, r, &bad)?);
+    }
+    let mut names: Vec<&str> = runs.iter().map(|r: &RunSpec| r.name.as_str()).collect();
+    names.sort_unstable();
+    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+        return Err(bad(
+            w[0],
+            format!("two runs are named '{}': run names must be unique", w[0]),
+        ));
+    }
+    Ok(Manifest {
+        serial,
+        units: Units { gyro, accel, time },
+        g_m_s2,
+        runs,
+    })
+}
+
+/// A serial usable as a folder name.
+pub fn valid_serial(s: &str) -> bool {
+    !s.is_empty()
+        && !s.starts_with('.')
+        && s.len() <= 128
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
+fn num(v: &Value, key: &str) -> Option<f64> {
+    v.get(key).and_then(Value::as_f64).filter(|x| x.is_finite())
+}
+
+fn parse_run<F>(i: usize, r: &Value, bad: &F) -> Result<RunSpec, SessionError>
+where
+    F: Fn(&str, String) -> SessionError,
+{
+    let name = r
+        .get("name")
+        .and_then(Value::as_str)
+        .map(str::to_string)
+        .unwrap_or_else(|| format!("run{}", i + 1));
+    let file = r
+        .get("file")
+        .and_then(Value::as_str)
+        .ok_or_else(|| bad(&name, format!("run '{name}' has no \"file\": expected the CSV's path relative to the manifest")))?
+        .to_string();
+    let m = r
+        .get("motion")
+        .ok_or_else(|| bad(&name, format!("run '{name}' has no \"motion\": expected {{\"kind\": \"conic\" | \"static\" | \"reference\", ...}}")))?;
+    let kind = m.get("kind").and_then(Value::as_str).unwrap_or("");
+    let motion = match kind {
+        "conic" => {
+            let need = |key: &str| {
+                num(m, key).ok_or_else(|| bad(&name, format!("run '{name}': conic motion needs a finite number \"{key}\"")))
+            };
+            let cone_angle_deg = need("cone_angle_deg")?;
+            let rate_deg_s = need("rate_deg_s")?;
+            let phase_deg = num(m, "phase_deg").unwrap_or(0.0);
+            if !(0.0..=90.0).contains(&cone_angle_deg) {
+                return Err(bad(&name, format!("run '{name}': cone_angle_deg is {cone_angle_deg}: expected 0..90 degrees")));
+            }
+            MotionSpec::Conic {
+                cone_angle_deg,
+                rate_deg_s,
+                phase_deg,
+            }
+        }
+        "static" => {
+            let up = m
+                .get("up_stand")
+                .and_then(Value::as_array)
+                .filter(|a| a.len() == 3)
+                .and_then(|a| {
+                    let v: Vec<f64> = a.iter().filter_map(Value::as_f64).collect();
+                    (v.len() == 3).then(|| [v[0], v[1], v[2]])
+                })
+                .ok_or_else(|| bad(&name, format!("run '{name}': static motion needs \"up_stand\": [x, y, z], the up unit vector in stand axes")))?;
+            let norm = (up[0] * up[0] + up[1] * up[1] + up[2] * up[2]).sqrt();
+            if (norm - 1.0).abs() > 1e-3 {
+                return Err(bad(&name, format!("run '{name}': up_stand has length {norm}: expected a unit vector")));
+            }
+            let up = [up[0] / norm, up[1] / norm, up[2] / norm];
+            let mut earth = [0.0; 3];
+            if m.get("earth_rate").and_then(Value::as_bool).unwrap_or(false) {
+                let lat = num(m, "latitude_deg")
+                    .ok_or_else(|| bad(&name, format!("run '{name}': earth_rate needs \"latitude_deg\"")))?
+                    .to_radians();
+                const OMEGA_E: f64 = 7.292_115e-5;
+                // Vertical component along up; horizontal along north when given.
+                for k in 0..3 {
+                    earth[k] = OMEGA_E * lat.sin() * up[k];
+                }
+                if let Some(n) = m.get("north_stand").and_then(Value::as_array) {
+                    let v: Vec<f64> = n.iter().filter_map(Value::as_f64).collect();
+                    if v.len() == 3 {
+                        for k in 0..3 {
+                            earth[k] += OMEGA_E * lat.cos() * v[k];
+                        }
+                    }
+                }
+            }
+            MotionSpec::Static {
+                up_stand: up,
+                earth_rate_rad_s: earth,
+            }
+        }
+        "reference" => MotionSpec::Reference,
+        other => {
+            return Err(bad(
+                if other.is_empty() { &name } else { other },
+                format!("run '{name}': motion kind '{other}' is unknown: expected conic, static or reference"),
+            ))
+        }
+    };
+    let mount = match r.get("mount") {
+        None => Mount::identity(),
+        Some(v) => {
+            let names: Option<Vec<&str>> = v
+                .as_array()
+                .map(|a| a.iter().filter_map(Value::as_str).collect());
+            let names = names.ok_or_else(|| {
+                bad(
+                    &name,
+                    format!("run '{name}': mount must be a list like [\"+x\", \"+y\", \"+z\"]"),
+                )
+            })?;
+            Mount::parse(&names).map_err(|e| {
+                bad(
+                    names.first().copied().unwrap_or(&name),
+                    format!("run '{name}': {e}"),
+                )
+            })?
+        }
+    };
+    Ok(RunSpec {
+        name,
+        file,
+        motion,
+        mount,
+        temperature_c: num(r, "temperature_c"),
+        note: r.get("note").and_then(Value::as_str).map(str::to_string),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"{
+  "format": "crosscal-session/1",
+  "serial": "I1426-0042",
+  "units": { "gyro": "deg/s", "accel": "g", "time": "s" },
+  "stand": { "g": 9.80665 },
+  "runs": [
+    { "name": "cone+10", "file": "cone+10.csv",
+      "motion": { "kind": "conic", "cone_angle_deg": 10.0, "rate_deg_s": 10.0, "phase_deg": 0.0 },
+      "mount": ["+x", "+y", "+z"] }
+  ]
+}"#;
+
+    #[test]
+    fn parses_the_spec_example() {
+        let m = parse_manifest(Path::new("s.json"), GOOD).unwrap();
+        assert_eq!(m.serial, "I1426-0042");
+        assert_eq!(m.runs.len(), 1);
+        assert!(
+            matches!(m.runs[0].motion, MotionSpec::Conic { cone_angle_deg, .. } if (cone_angle_deg - 10.0).abs() < 1e-12)
+        );
+    }
+
+    #[test]
+    fn rejects_unknown_format_and_units_with_position() {
+        let e = parse_manifest(
+            Path::new("s.json"),
+            &GOOD.replace("crosscal-session/1", "crosscal-session/2"),
+        )
+        .unwrap_err();
+        assert!(matches!(e, SessionError::UnknownFormat { .. }));
+        assert!(e.to_string().contains("crosscal-session/2"));
+        let e = parse_manifest(
+            Path::new("s.json"),
+            &GOOD.replace("\"deg/s\"", "\"deg/sec\""),
+        )
+        .unwrap_err();
+        let m = e.to_string();
+        assert!(
+            m.starts_with("s.json:4:") && m.contains("deg/sec") && m.contains("deg/s, rad/s, raw"),
+            "{m}"
+        );
+        let e = parse_manifest(
+            Path::new("s.json"),
+            &GOOD.replace("[\"+x\", \"+y\", \"+z\"]", "[\"+y\", \"+x\", \"+z\"]"),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("not a rotation"), "{e}");
+        let e = parse_manifest(Path::new("s.json"), "{ \"format\": ").unwrap_err();
+        assert!(matches!(e, SessionError::Json { line: 1, .. }), "{e}");
+    }
+}

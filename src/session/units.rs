@@ -1,0 +1,154 @@
+//! Units of a session's columns and their conversion to the SI units used inside crosscal
+//! (rad/s, rad/s², m/s², s). `raw` channels are kept as recorded: the fitted scale then
+//! carries the unit.
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// Unit of the gyro columns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum GyroUnit {
+    /// Degrees per second.
+    #[serde(rename = "deg/s")]
+    DegPerS,
+    /// Radians per second.
+    #[serde(rename = "rad/s")]
+    RadPerS,
+    /// Counts or volts; not converted.
+    #[serde(rename = "raw")]
+    Raw,
+}
+
+/// Unit of the accelerometer columns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum AccelUnit {
+    /// Standard gravities, converted with the stand's local `g`.
+    #[serde(rename = "g")]
+    G,
+    /// Metres per second squared.
+    #[serde(rename = "m/s^2")]
+    MPerS2,
+    /// Counts or volts; not converted.
+    #[serde(rename = "raw")]
+    Raw,
+}
+
+/// Unit of the time column.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum TimeUnit {
+    /// Seconds.
+    #[serde(rename = "s")]
+    S,
+    /// Milliseconds.
+    #[serde(rename = "ms")]
+    Ms,
+}
+
+/// The units a session (or a CSV to correct) is recorded in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Units {
+    /// Gyro columns.
+    pub gyro: GyroUnit,
+    /// Accelerometer columns.
+    pub accel: AccelUnit,
+    /// Time column.
+    pub time: TimeUnit,
+}
+
+impl Default for Units {
+    fn default() -> Self {
+        Self {
+            gyro: GyroUnit::DegPerS,
+            accel: AccelUnit::G,
+            time: TimeUnit::S,
+        }
+    }
+}
+
+impl GyroUnit {
+    /// Accepted spellings, for error messages.
+    pub const CHOICES: &'static str = "deg/s, rad/s, raw";
+
+    /// Parses a unit name.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.trim() {
+            "deg/s" => Some(Self::DegPerS),
+            "rad/s" => Some(Self::RadPerS),
+            "raw" => Some(Self::Raw),
+            _ => None,
+        }
+    }
+
+    /// Multiply a recorded value by this to get rad/s (1 for raw).
+    pub fn to_rad_s(self) -> f64 {
+        match self {
+            Self::DegPerS => std::f64::consts::PI / 180.0,
+            Self::RadPerS | Self::Raw => 1.0,
+        }
+    }
+}
+
+impl AccelUnit {
+    /// Accepted spellings, for error messages.
+    pub const CHOICES: &'static str = "g, m/s^2, raw";
+
+    /// Parses a unit name.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.trim() {
+            "g" => Some(Self::G),
+            "m/s^2" | "m/s2" => Some(Self::MPerS2),
+            "raw" => Some(Self::Raw),
+            _ => None,
+        }
+    }
+
+    /// Multiply a recorded value by this to get m/s² (1 for raw).
+    pub fn to_m_s2(self, g_m_s2: f64) -> f64 {
+        match self {
+            Self::G => g_m_s2,
+            Self::MPerS2 | Self::Raw => 1.0,
+        }
+    }
+}
+
+impl TimeUnit {
+    /// Accepted spellings, for error messages.
+    pub const CHOICES: &'static str = "s, ms";
+
+    /// Parses a unit name.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.trim() {
+            "s" => Some(Self::S),
+            "ms" => Some(Self::Ms),
+            _ => None,
+        }
+    }
+
+    /// Multiply a recorded value by this to get seconds.
+    pub fn to_s(self) -> f64 {
+        match self {
+            Self::S => 1.0,
+            Self::Ms => 1e-3,
+        }
+    }
+}
+
+impl fmt::Display for GyroUnit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::DegPerS => "deg/s",
+            Self::RadPerS => "rad/s",
+            Self::Raw => "raw",
+        })
+    }
+}
+
+impl fmt::Display for AccelUnit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::G => "g",
+            Self::MPerS2 => "m/s^2",
+            Self::Raw => "raw",
+        })
+    }
+}

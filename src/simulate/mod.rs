@@ -1,0 +1,336 @@
+//! Synthetic stand sessions with known truth: the paper's unit (spec values) on a
+//! multi-run conic session, with optional noise, biases and extra effects.
+//!
+//! The simulator evaluates the same effect regressors as the fit (model forward,
+//! `u = f(true)`), so any catalogue effect can be hidden in the data by giving it a value.
+
+use crate::atomic::write_new;
+use crate::model::{forward, Model, SensorKind, State};
+use crate::motion::{track_for, DerivativeConfig, Mount};
+use crate::session::{
+    AccelUnit, GyroUnit, Manifest, MotionSpec, Recording, Run, RunSpec, Session, TimeUnit, Units,
+};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// The true unit: a model and the value of each of its coefficients (by name).
+#[derive(Debug, Clone)]
+pub struct UnitTruth {
+    /// Forward model used to generate outputs.
+    pub model: Model,
+    /// Coefficient values by name (SI); missing coefficients take their nominal value.
+    pub values: BTreeMap<String, f64>,
+}
+
+impl UnitTruth {
+    /// The paper's unit (spec, eqs. 3–4): diagonal 1; c_xy = c_yz = c_zx = 0.01;
+    /// e_xz = e_yx = e_zy = 0.001 s; K off-diagonal 0.01; no bias.
+    pub fn paper() -> Self {
+        let mut values = BTreeMap::new();
+        for n in ["gyro.c_xy", "gyro.c_yz", "gyro.c_zx"] {
+            values.insert(n.to_string(), 0.01);
+        }
+        for n in ["gyro.e_xz", "gyro.e_yx", "gyro.e_zy"] {
+            values.insert(n.to_string(), 0.001);
+        }
+        for i in 0..3 {
+            for j in 0..3 {
+                if i != j {
+                    values.insert(
+                        crate::model::matrix_name(SensorKind::Accel, "k", i, j),
+                        0.01,
+                    );
+                }
+            }
+        }
+        Self {
+            model: Model::default_model(),
+            values,
+        }
+    }
+
+    /// Value of every term of a sensor, in model order.
+    pub fn term_values(&self, sensor: SensorKind) -> Vec<f64> {
+        self.model
+            .terms(sensor)
+            .iter()
+            .map(|t| {
+                self.values
+                    .get(&t.term.name)
+                    .copied()
+                    .unwrap_or(t.term.nominal)
+            })
+            .collect()
+    }
+}
+
+/// One run to simulate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunPlan {
+    /// Run name (also the CSV's stem).
+    pub name: String,
+    /// Motion (conic or static).
+    pub motion: MotionSpec,
+    /// Mount.
+    pub mount: Mount,
+    /// Duration, s.
+    pub duration_s: f64,
+}
+
+/// A simulation.
+#[derive(Debug, Clone)]
+pub struct SimConfig {
+    /// Serial number written to the manifest.
+    pub serial: String,
+    /// The true unit.
+    pub truth: UnitTruth,
+    /// Runs.
+    pub runs: Vec<RunPlan>,
+    /// Sample rate, Hz.
+    pub sample_rate_hz: f64,
+    /// Gyro white noise standard deviation per sample, deg/s.
+    pub gyro_noise_deg_s: f64,
+    /// Accelerometer white noise standard deviation per sample, g.
+    pub accel_noise_g: f64,
+    /// Local gravity, m/s².
+    pub g_m_s2: f64,
+    /// Random seed.
+    pub seed: u64,
+}
+
+/// The cyclic mounts used for re-mounted runs: nominal, then x→y→z→x twice.
+pub fn cyclic_mounts(count: usize) -> Vec<Mount> {
+    let all = [["+x", "+y", "+z"], ["+y", "+z", "+x"], ["+z", "+x", "+y"]];
+    all.iter()
+        .take(count.clamp(1, 3))
+        .filter_map(|m| Mount::parse(m).ok())
+        .collect()
+}
+
+/// Conic runs for every combination of mount, cone angle and rate; the first mount's runs
+/// are named `cone+10`, others are prefixed by the mount (`yzx-cone+10`), and cone angles
+/// after the first get a suffix (`cone+10-a20`).
+pub fn conic_plan(
+    rates_deg_s: &[f64],
+    cone_angles_deg: &[f64],
+    mounts: &[Mount],
+    duration_s: f64,
+) -> Vec<RunPlan> {
+    let mut runs = Vec::new();
+    for (mi, m) in mounts.iter().enumerate() {
+        let prefix = if mi == 0 {
+            String::new()
+        } else {
+            let letters: String = m
+                .names()
+                .iter()
+                .map(|n| n.trim_start_matches(['+', '-']))
+                .collect();
+            format!("{letters}-")
+        };
+        for (ai, &alpha) in cone_angles_deg.iter().enumerate() {
+            let suffix = if ai == 0 {
+                String::new()
+            } else {
+                format!("-a{alpha}")
+            };
+            for &rate in rates_deg_s {
+                runs.push(RunPlan {
+                    name: format!("{prefix}cone{rate:+}{suffix}"),
+                    motion: MotionSpec::Conic {
+                        cone_angle_deg: alpha,
+                        rate_deg_s: rate,
+                        phase_deg: 0.0,
+                    },
+                    mount: m.clone(),
+                    duration_s,
+                });
+            }
+        }
+    }
+    runs
+}
+
+impl SimConfig {
+    /// The paper's unit on the default calibration session: rates +10, −10, +20 °/s, cone
+    /// angles 10° and 20°, three cyclic mounts, 36 s each at 100 Hz, noiseless.
+    pub fn paper() -> Self {
+        Self {
+            serial: "I1426-0042".into(),
+            truth: UnitTruth::paper(),
+            runs: conic_plan(&[10.0, -10.0, 20.0], &[10.0, 20.0], &cyclic_mounts(3), 36.0),
+            sample_rate_hz: 100.0,
+            gyro_noise_deg_s: 0.0,
+            accel_noise_g: 0.0,
+            g_m_s2: 9.80665,
+            seed: 1,
+        }
+    }
+
+    /// Generates the session in memory, exactly as it would read back from disk (outputs
+    /// are generated in deg/s and g, then converted like the reader does).
+    pub fn generate(&self) -> Session {
+        let units = Units {
+            gyro: GyroUnit::DegPerS,
+            accel: AccelUnit::G,
+            time: TimeUnit::S,
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
+        let gn = Normal::new(0.0, self.gyro_noise_deg_s.max(0.0)).ok();
+        let an = Normal::new(0.0, self.accel_noise_g.max(0.0)).ok();
+        let deriv = DerivativeConfig::default();
+        let gterms = self.truth.model.terms(SensorKind::Gyro);
+        let aterms = self.truth.model.terms(SensorKind::Accel);
+        let gvals = self.truth.term_values(SensorKind::Gyro);
+        let avals = self.truth.term_values(SensorKind::Accel);
+        let to_deg = 180.0 / std::f64::consts::PI;
+        let kg = units.gyro.to_rad_s();
+        let ka = units.accel.to_m_s2(self.g_m_s2);
+        let mut runs = Vec::with_capacity(self.runs.len());
+        for plan in &self.runs {
+            let n = (plan.duration_s * self.sample_rate_hz).round().max(1.0) as usize;
+            let t_s: Vec<f64> = (0..n).map(|k| k as f64 / self.sample_rate_hz).collect();
+            let mut rec = Recording {
+                t_s,
+                ..Default::default()
+            };
+            let tr = track_for(&plan.motion, &plan.mount, &rec, self.g_m_s2, &deriv);
+            rec.gyro.reserve(n);
+            rec.accel.reserve(n);
+            for k in 0..n {
+                let s = State {
+                    t_s: tr.t_s[k] - tr.t_s[0],
+                    w: tr.w_rad_s[k],
+                    e: tr.e_rad_s2[k],
+                    a: tr.a_m_s2[k],
+                    temp_c: f64::NAN,
+                };
+                let ug = forward(&gterms, &gvals, &s);
+                let ua = forward(&aterms, &avals, &s);
+                let mut g = [0.0; 3];
+                let mut a = [0.0; 3];
+                for i in 0..3 {
+                    let ng = gn.map_or(0.0, |d| d.sample(&mut rng));
+                    let na = an.map_or(0.0, |d| d.sample(&mut rng));
+                    g[i] = (ug[i] * to_deg + ng) * kg;
+                    a[i] = (ua[i] / self.g_m_s2 + na) * ka;
+                }
+                rec.gyro.push(g);
+                rec.accel.push(a);
+            }
+            runs.push(Run {
+                spec: RunSpec {
+                    name: plan.name.clone(),
+                    file: format!("{}.csv", plan.name),
+                    motion: plan.motion.clone(),
+                    mount: plan.mount.clone(),
+                    temperature_c: None,
+                    note: None,
+                },
+                path: PathBuf::from(format!("{}.csv", plan.name)),
+                rec,
+            });
+        }
+        Session {
+            manifest_path: PathBuf::from("session.json"),
+            manifest: Manifest {
+                serial: self.serial.clone(),
+                units,
+                g_m_s2: self.g_m_s2,
+                runs: runs.iter().map(|r| r.spec.clone()).collect(),
+            },
+            runs,
+        }
+    }
+}
+
+/// Errors writing a simulated session.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimulateError {
+    /// File system error.
+    #[error("{path}: {source}")]
+    Io {
+        /// File or folder.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The output folder already holds a session.
+    #[error("{0}: already exists; choose another output folder or remove it (crosscal never overwrites data)")]
+    Exists(PathBuf),
+}
+
+/// Writes a session (deg/s, g, s) as `session.json` plus one CSV per run into `dir`.
+/// Refuses to overwrite an existing manifest or recording. Returns the manifest path.
+pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| SimulateError::Io { path, source }
+    };
+    std::fs::create_dir_all(dir).map_err(io(dir))?;
+    let manifest_path = dir.join("session.json");
+    let mut targets = vec![manifest_path.clone()];
+    targets.extend(session.runs.iter().map(|r| dir.join(&r.spec.file)));
+    if let Some(existing) = targets.iter().find(|p| p.exists()) {
+        return Err(SimulateError::Exists(existing.clone()));
+    }
+    let kg = 1.0 / session.manifest.units.gyro.to_rad_s();
+    let ka = 1.0
+        / session
+            .manifest
+            .units
+            .accel
+            .to_m_s2(session.manifest.g_m_s2);
+    for run in &session.runs {
+        let path = dir.join(&run.spec.file);
+        let mut text = String::with_capacity(run.rec.len() * 120);
+        text.push_str("t,gx,gy,gz,ax,ay,az\n");
+        for k in 0..run.rec.len() {
+            let g = run.rec.gyro[k];
+            let a = run.rec.accel[k];
+            use std::fmt::Write as _;
+            let _ = writeln!(
+                text,
+                "{},{},{},{},{},{},{}",
+                run.rec.t_s[k],
+                g[0] * kg,
+                g[1] * kg,
+                g[2] * kg,
+                a[0] * ka,
+                a[1] * ka,
+                a[2] * ka
+            );
+        }
+        write_new(&path, text.as_bytes()).map_err(io(&path))?;
+    }
+    let runs: Vec<serde_json::Value> = session
+        .runs
+        .iter()
+        .map(|r| {
+            let motion = match &r.spec.motion {
+                MotionSpec::Conic {
+                    cone_angle_deg,
+                    rate_deg_s,
+                    phase_deg,
+                } => serde_json::json!({"kind": "conic", "cone_angle_deg": cone_angle_deg, "rate_deg_s": rate_deg_s, "phase_deg": phase_deg}),
+                MotionSpec::Static { up_stand, .. } => serde_json::json!({"kind": "static", "up_stand": up_stand}),
+                MotionSpec::Reference => serde_json::json!({"kind": "reference"}),
+            };
+            serde_json::json!({"name": r.spec.name, "file": r.spec.file, "motion": motion, "mount": r.spec.mount.names()})
+        })
+        .collect();
+    let manifest = serde_json::json!({
+        "format": crate::session::SESSION_FORMAT,
+        "serial": session.manifest.serial,
+        "units": {"gyro": session.manifest.units.gyro.to_string(), "accel": session.manifest.units.accel.to_string(), "time": "s"},
+        "stand": {"g": session.manifest.g_m_s2},
+        "runs": runs,
+    });
+    let text = serde_json::to_string_pretty(&manifest).unwrap_or_default() + "\n";
+    write_new(&manifest_path, text.as_bytes()).map_err(io(&manifest_path))?;
+    Ok(manifest_path)
+}
