@@ -1,25 +1,49 @@
-//! Writing files so that nothing is ever half-written or overwritten.
+//! Writing files so that nothing is ever half-written or silently overwritten.
 
-use std::io::Write;
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::Path;
 
-/// Writes bytes to a new file atomically: a temporary file in the same folder, fsync, then a
-/// no-clobber rename (a hard link, so an existing target is never replaced). Fails with
-/// `AlreadyExists` if the target exists; on any failure no target file is left behind.
-pub fn write_new(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+/// Writes a file atomically: the content goes to a temporary file in the same folder, is
+/// flushed and fsynced, then renamed into place. With `replace = false` the rename is a
+/// no-clobber link and fails with `AlreadyExists` if the target exists. On any failure no
+/// target file is created or changed (the temporary file is removed).
+pub fn write_atomic<F>(path: &Path, replace: bool, fill: F) -> std::io::Result<()>
+where
+    F: FnOnce(&mut BufWriter<&File>) -> std::io::Result<()>,
+{
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let mut tmp = tempfile::Builder::new()
+    if !replace && path.exists() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::AlreadyExists,
+            format!("{} already exists", path.display()),
+        ));
+    }
+    let tmp = tempfile::Builder::new()
         .prefix(".crosscal-")
         .suffix(".tmp")
         .tempfile_in(dir)?;
-    tmp.write_all(bytes)?;
+    {
+        let mut w = BufWriter::with_capacity(1 << 16, tmp.as_file());
+        fill(&mut w)?;
+        w.flush()?;
+    }
     tmp.as_file().sync_all()?;
-    tmp.persist_noclobber(path).map_err(|e| e.error)?;
-    if let Ok(d) = std::fs::File::open(dir) {
+    if replace {
+        tmp.persist(path).map_err(|e| e.error)?;
+    } else {
+        tmp.persist_noclobber(path).map_err(|e| e.error)?;
+    }
+    if let Ok(d) = File::open(dir) {
         let _ = d.sync_all();
     }
     Ok(())
+}
+
+/// Writes bytes to a new file atomically; fails with `AlreadyExists` if the target exists.
+pub fn write_new(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_atomic(path, false, |w| w.write_all(bytes))
 }

@@ -10,9 +10,12 @@
 //! `u = f(true)`; matrices row-major (`C[i][j]` is the weight of input j in output i).
 
 pub mod atomic;
+pub mod check;
+pub mod correct;
 pub mod estimate;
 pub mod model;
 pub mod motion;
 pub mod pipeline;
+pub mod profile;
 pub mod session;
 pub mod simulate;

@@ -121,9 +121,17 @@ mod tests {
     fn cyclic_mount_maps_axes() {
         let m = Mount::parse(&["+y", "+z", "+x"]).unwrap();
         let s = m.to_sensor(V3::new([1.0, 2.0, 3.0]));
-        assert!(s.xyz.iter().zip([2.0, 3.0, 1.0]).all(|(a, b)| (a - b).abs() < 1e-15));
+        assert!(s
+            .xyz
+            .iter()
+            .zip([2.0, 3.0, 1.0])
+            .all(|(a, b)| (a - b).abs() < 1e-15));
         let back = m.to_stand(s);
-        assert!(back.xyz.iter().zip([1.0, 2.0, 3.0]).all(|(a, b)| (a - b).abs() < 1e-15));
+        assert!(back
+            .xyz
+            .iter()
+            .zip([1.0, 2.0, 3.0])
+            .all(|(a, b)| (a - b).abs() < 1e-15));
     }
 
     #[test]

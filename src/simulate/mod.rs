@@ -52,6 +52,16 @@ impl UnitTruth {
         }
     }
 
+    /// True value of a coefficient by name (its nominal value when not set), or None when
+    /// the truth model has no such coefficient.
+    pub fn value(&self, name: &str) -> Option<f64> {
+        SensorKind::BOTH
+            .iter()
+            .flat_map(|s| self.model.terms(*s))
+            .find(|t| t.term.name == name)
+            .map(|t| self.values.get(name).copied().unwrap_or(t.term.nominal))
+    }
+
     /// Value of every term of a sensor, in model order.
     pub fn term_values(&self, sensor: SensorKind) -> Vec<f64> {
         self.model

@@ -1,0 +1,181 @@
+//! `crosscal correct`.
+
+use super::Outcome;
+use anyhow::Context;
+use crosscal::correct::Calibration;
+use crosscal::pipeline::{correct_run, Mode};
+use crosscal::profile::Profile;
+use crosscal::session::{
+    parse_recording, AccelUnit, GyroUnit, MotionSpec, ReadOptions, Run, RunSpec, Units,
+};
+use std::io::Write;
+use std::path::PathBuf;
+
+/// Correction mode on the command line.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum ModeArg {
+    /// Whole record, centred ε derivative, iterated to convergence.
+    Offline,
+    /// Causal, sample by sample (what runs on the unit).
+    Streaming,
+}
+
+impl From<ModeArg> for Mode {
+    fn from(m: ModeArg) -> Self {
+        match m {
+            ModeArg::Offline => Mode::Offline,
+            ModeArg::Streaming => Mode::Streaming,
+        }
+    }
+}
+
+/// Options of `correct`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Calibration profile (JSON).
+    #[arg(long)]
+    profile: PathBuf,
+    /// Recording to correct (CSV with t,gx,gy,gz,ax,ay,az[,temp]).
+    input: PathBuf,
+    /// Output CSV (same columns and units as the input).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Offline (default) or streaming correction.
+    #[arg(long, value_enum, default_value = "offline")]
+    mode: ModeArg,
+    /// Gyro unit of the input when it differs from the profile's sessions: deg/s, rad/s, raw.
+    #[arg(long)]
+    gyro_unit: Option<String>,
+    /// Accelerometer unit of the input: g, m/s^2, raw.
+    #[arg(long)]
+    accel_unit: Option<String>,
+    /// Replace the output file if it exists (atomically).
+    #[arg(long)]
+    force: bool,
+}
+
+pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    let profile = Profile::read(&a.profile)?;
+    let cal = Calibration::from_profile(&profile)
+        .with_context(|| format!("using profile {}", a.profile.display()))?;
+    let mut units: Units = profile.input_units;
+    if let Some(u) = &a.gyro_unit {
+        units.gyro = GyroUnit::parse(u).ok_or_else(|| {
+            anyhow::anyhow!("--gyro-unit '{u}': expected one of {}", GyroUnit::CHOICES)
+        })?;
+    }
+    if let Some(u) = &a.accel_unit {
+        units.accel = AccelUnit::parse(u).ok_or_else(|| {
+            anyhow::anyhow!("--accel-unit '{u}': expected one of {}", AccelUnit::CHOICES)
+        })?;
+    }
+    if a.output.exists() && !a.force {
+        anyhow::bail!(
+            "{} already exists: choose another output or pass --force to replace it",
+            a.output.display()
+        );
+    }
+    if a.output
+        .canonicalize()
+        .ok()
+        .is_some_and(|o| a.input.canonicalize().ok().is_some_and(|i| i == o))
+    {
+        anyhow::bail!(
+            "the output {} is the input: crosscal never modifies the data it is given",
+            a.output.display()
+        );
+    }
+    let bytes =
+        std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
+    let rec = parse_recording(
+        &a.input,
+        &bytes,
+        &units,
+        profile.g_m_s2,
+        ReadOptions::default(),
+    )?;
+    for w in &rec.warnings {
+        eprintln!("warning: {w}");
+    }
+    let run = Run {
+        spec: RunSpec {
+            name: a.input.display().to_string(),
+            file: a.input.display().to_string(),
+            motion: MotionSpec::Reference,
+            mount: crosscal::motion::Mount::identity(),
+            temperature_c: None,
+            note: None,
+        },
+        path: a.input.clone(),
+        rec,
+    };
+    let corrected = correct_run(&cal, &run, a.mode.into())?;
+    // Output in the input's units (raw inputs come out in deg/s and g: the calibration
+    // supplies the physical unit).
+    let out_units = Units {
+        gyro: if units.gyro == GyroUnit::Raw {
+            GyroUnit::DegPerS
+        } else {
+            units.gyro
+        },
+        accel: if units.accel == AccelUnit::Raw {
+            AccelUnit::G
+        } else {
+            units.accel
+        },
+        time: units.time,
+    };
+    let kg = 1.0 / out_units.gyro.to_rad_s();
+    let ka = 1.0 / out_units.accel.to_m_s2(profile.g_m_s2);
+    let kt = 1.0 / units.time.to_s();
+    let has_temp = run.rec.temp_c.is_some();
+    crosscal::atomic::write_atomic(&a.output, a.force, |w| {
+        writeln!(
+            w,
+            "t,gx,gy,gz,ax,ay,az{}",
+            if has_temp { ",temp" } else { "" }
+        )?;
+        for k in 0..run.rec.len() {
+            let g = corrected.w_rad_s[k];
+            let ac = corrected.a_m_s2[k];
+            write!(
+                w,
+                "{},{},{},{},{},{},{}",
+                run.rec.t_s[k] * kt,
+                g[0] * kg,
+                g[1] * kg,
+                g[2] * kg,
+                ac[0] * ka,
+                ac[1] * ka,
+                ac[2] * ka
+            )?;
+            match &run.rec.temp_c {
+                Some(t) => writeln!(w, ",{}", t[k])?,
+                None => writeln!(w)?,
+            }
+        }
+        Ok(())
+    })
+    .with_context(|| format!("writing {}", a.output.display()))?;
+    eprintln!(
+        "corrected {} samples ({} mode{}) with profile of unit {} -> {} (gyro {}, accel {})",
+        run.rec.len(),
+        match a.mode {
+            ModeArg::Offline => "offline",
+            ModeArg::Streaming => "streaming",
+        },
+        if corrected.warmup > 0 {
+            format!(
+                ", first {} samples are derivative warm-up",
+                corrected.warmup
+            )
+        } else {
+            String::new()
+        },
+        profile.serial,
+        a.output.display(),
+        out_units.gyro,
+        out_units.accel
+    );
+    Ok(Outcome::Ok)
+}

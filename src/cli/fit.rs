@@ -1,0 +1,103 @@
+//! `crosscal fit`.
+
+use super::{format, Outcome};
+use anyhow::Context;
+use crosscal::estimate::FitOptions;
+use crosscal::model::Model;
+use crosscal::motion::DerivativeConfig;
+use crosscal::pipeline::{fit_runs, tracks};
+use crosscal::profile::{save, Profile};
+use crosscal::session::Session;
+use std::path::PathBuf;
+
+/// Options of `fit`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The session manifest (session.json).
+    session: PathBuf,
+    /// Profile store; the profile goes to <out>/<serial>/<UTC time>.json.
+    #[arg(long, default_value = "calib-profiles")]
+    out: PathBuf,
+    /// Model preset: `default` (biases, full C_ω, C_ε, K) or `paper` (exactly eqs. 3–4).
+    #[arg(long, default_value = "default")]
+    model: String,
+    /// Add a catalogue effect to the model (repeatable).
+    #[arg(long = "effect")]
+    effects: Vec<String>,
+    /// Hold a coefficient at its nominal value instead of fitting it (repeatable), e.g. gyro.e_xx.
+    #[arg(long = "disable")]
+    disable: Vec<String>,
+    /// Print the profile as JSON on stdout instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// Fit and report but do not write a profile.
+    #[arg(long)]
+    dry_run: bool,
+}
+
+/// Builds the model from the command line.
+pub fn build_model(preset: &str, effects: &[String], disable: &[String]) -> anyhow::Result<Model> {
+    let mut m = Model::preset(preset)?;
+    for e in effects {
+        m.add_effect(e)?;
+    }
+    for d in disable {
+        m.disable(d)?;
+    }
+    Ok(m)
+}
+
+pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    let model = build_model(&a.model, &a.effects, &a.disable)?;
+    let session = Session::load(&a.session)
+        .with_context(|| format!("reading session {}", a.session.display()))?;
+    let deriv = DerivativeConfig::default();
+    let tr = tracks(&session, &deriv);
+    let fit = crosscal::estimate::fit(&model, &fit_runs(&session, &tr), &FitOptions::default())
+        .with_context(|| format!("fitting {}", a.session.display()))?;
+    let mut notes = session.warnings();
+    for (run, t) in session.runs.iter().zip(&tr) {
+        notes.push(format!(
+            "run {}: ε reference {}",
+            run.spec.name, t.epsilon_source
+        ));
+    }
+    for u in fit
+        .gyro
+        .unidentifiable
+        .iter()
+        .chain(&fit.accel.unidentifiable)
+    {
+        notes.push(format!(
+            "{} unidentifiable, held at {}: {}; remedy: {}",
+            u.held, u.held_at, u.reason, u.remedy
+        ));
+    }
+    let profile = Profile::from_fit(&session, &model, fit, notes);
+    if a.json {
+        print!("{}", profile.to_json());
+    } else {
+        println!(
+            "unit {}: {} runs, {} samples, model '{}'",
+            profile.serial,
+            session.runs.len(),
+            session.n_samples(),
+            profile.model
+        );
+        for w in session.warnings() {
+            println!("warning: {w}");
+        }
+        print!("{}", format::sensor_fit(&profile.gyro));
+        print!("{}", format::sensor_fit(&profile.accel));
+    }
+    if !a.dry_run {
+        let path = save(&profile, &a.out)
+            .with_context(|| format!("saving the profile under {}", a.out.display()))?;
+        if a.json {
+            eprintln!("profile written to {}", path.display());
+        } else {
+            println!("profile written to {}", path.display());
+        }
+    }
+    Ok(Outcome::Ok)
+}

@@ -1,0 +1,137 @@
+//! Text rendering of library results (no numerics beyond unit display).
+
+use crosscal::check::CheckReport;
+use crosscal::estimate::{CoefStatus, SensorFit};
+use crosscal::model::SensorKind;
+use std::fmt::Write;
+
+const RAD2DEG: f64 = 180.0 / std::f64::consts::PI;
+
+/// A coefficient value in the unit users read: gyro biases and residuals in deg/s,
+/// accelerometer ones in m/s² (as stored) — scale and coupling dimensionless.
+fn display_unit(unit: &str) -> (&'static str, f64) {
+    match unit {
+        "rad/s" => ("deg/s", RAD2DEG),
+        "m/s^2" => ("m/s^2", 1.0),
+        "s" => ("s", 1.0),
+        _ => ("", 1.0),
+    }
+}
+
+/// Formats a number with a sensible number of significant digits.
+pub fn num(x: f64) -> String {
+    if x == 0.0 {
+        "0".into()
+    } else if x.abs() >= 1e-3 && x.abs() < 1e5 {
+        format!("{x:.6}")
+    } else {
+        format!("{x:.4e}")
+    }
+}
+
+/// Formats a percentage.
+pub fn pct(x: Option<f64>) -> String {
+    match x {
+        None => "-".into(),
+        Some(0.0) => "0 %".into(),
+        Some(v) if v.abs() >= 0.01 => format!("{v:.3} %"),
+        Some(v) => format!("{v:.2e} %"),
+    }
+}
+
+/// Formats a ratio.
+pub fn ratio(x: Option<f64>) -> String {
+    match x {
+        None => "-".into(),
+        Some(v) if v.is_infinite() => "inf".into(),
+        Some(v) if v < 1e5 => format!("{v:.1}x"),
+        Some(v) => format!("{v:.2e}x"),
+    }
+}
+
+/// The coefficient table of one sensor: value ± 2σ.
+pub fn sensor_fit(f: &SensorFit) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "{} coefficients (value ± 2σ):", f.sensor);
+    for c in &f.coefficients {
+        let (u, k) = display_unit(&c.unit);
+        let v = match (c.status, c.std_error) {
+            (CoefStatus::Fitted, Some(se)) => {
+                format!("{:>14} ± {:<11}", num(c.value * k), num(2.0 * se * k))
+            }
+            (CoefStatus::Fixed, _) => format!("{:>14}   {:<11}", num(c.value * k), "(fixed)"),
+            _ => format!(
+                "{:>14}   {:<11}",
+                num(c.value * k),
+                "(UNIDENTIFIABLE, held)"
+            ),
+        };
+        let _ = writeln!(s, "  {:<12} {v} {u}", c.name);
+    }
+    let (ru, rk) = match f.sensor {
+        SensorKind::Gyro => ("deg/s", RAD2DEG),
+        SensorKind::Accel => ("m/s^2", 1.0),
+    };
+    for ch in &f.channels {
+        let _ = writeln!(
+            s,
+            "  residual {}: rms {} max {} {ru} (σ {}; {} samples, {} coefficients, condition {:.3})",
+            ch.axis,
+            num(ch.residual_rms * rk),
+            num(ch.residual_max * rk),
+            num(ch.sigma * rk),
+            ch.n,
+            ch.n_params,
+            ch.condition_number
+        );
+    }
+    for u in &f.unidentifiable {
+        let _ = writeln!(
+            s,
+            "  UNIDENTIFIABLE {} (held at {}): {}.\n    remedy: {}",
+            u.held, u.held_at, u.reason, u.remedy
+        );
+    }
+    for c in &f.correlated {
+        let _ = writeln!(
+            s,
+            "  correlated: {} and {} (ρ = {:.3})",
+            c.a, c.b, c.correlation
+        );
+    }
+    s
+}
+
+/// The check summary table.
+pub fn check_summary(r: &CheckReport) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{:<6} {:<4} {:>13} {:>13} {:>12} {:>13} {:>12} {:>9}  pass",
+        "sensor",
+        "axis",
+        "before max",
+        "after max",
+        "reduction",
+        "after (sys)",
+        "red. (sys)",
+        "needed"
+    );
+    for a in &r.summary {
+        let _ = writeln!(
+            s,
+            "{:<6} {:<4} {:>13} {:>13} {:>12} {:>13} {:>12} {:>9}  {}",
+            a.sensor.as_str(),
+            a.axis,
+            pct(a.before_pct),
+            pct(a.after_pct),
+            ratio(a.reduction),
+            pct(a.after_sys_pct),
+            ratio(a.reduction_sys),
+            ratio(Some(a.threshold)),
+            if a.pass { "yes" } else { "NO" }
+        );
+    }
+    let _ = writeln!(s, "(errors: max |error| over all runs as % of each run's reference amplitude of the axis; sys = systematic part, cone-phase harmonics; pass uses the systematic reduction)");
+    s
+}

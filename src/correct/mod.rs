@@ -1,0 +1,440 @@
+//! The shared correction module: inverts a fitted forward model, offline or streaming.
+//!
+//! For each sensor the profile's coefficients split into a bias b, the scale/coupling
+//! matrix A (C_ω or K), the gyro's angular-acceleration matrix E (C_ε) and any further
+//! effect terms g(state). The forward model is `u = b + A x + E ε + g(state)`, so
+//! ```text
+//! x = A⁻¹ (u − b − E ε̂ − g(state))          (paper eqs. 5–8, generalised)
+//! ```
+//! where ε̂ is estimated from the corrected rate itself with a band-limited derivative
+//! ([`crate::motion::derivative`]).
+//!
+//! * **Offline** ([`correct_offline`]): whole record, centred derivative window, iterated
+//!   to a fixed point (each pass re-estimates ε̂ and g from the previous pass).
+//! * **Streaming** ([`Streaming`]): causal, one sample at a time, fixed memory, no
+//!   allocation per sample. ε̂ at the newest sample is the slope of a local polynomial
+//!   through the last N corrected samples *including the current one*; since that slope is
+//!   `w₀ x_k + p` (p from past samples), the current sample solves the 3×3 system
+//!   `(A + w₀ E) x_k = u − b − E p − g` exactly. On uniform sampling w₀ and the inverse are
+//!   computed once. The causal slope lags the centred one by a bias of order (ω·N·dt)²,
+//!   which is why offline correction is more accurate on fast motion.
+
+use crate::model::{Effect, Model, Role, SensorKind, State};
+use crate::motion::{derivative_offline, DerivativeConfig, SlopeWeights};
+use crate::profile::{CorrectionSettings, Profile};
+use nalgebra::{Matrix3, Vector3};
+use std::sync::Arc;
+
+/// Correction errors.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum CorrectError {
+    /// The scale/coupling matrix cannot be inverted.
+    #[error("the {0} scale/coupling matrix of the profile is singular: it cannot be inverted")]
+    Singular(SensorKind),
+    /// The profile cannot be turned into a model.
+    #[error("{0}")]
+    Model(String),
+    /// Input arrays disagree in length.
+    #[error("input lengths differ: t has {t}, gyro {g}, accel {a}")]
+    Length {
+        /// Time stamps.
+        t: usize,
+        /// Gyro samples.
+        g: usize,
+        /// Accel samples.
+        a: usize,
+    },
+}
+
+#[derive(Debug, Clone)]
+struct OtherTerm {
+    effect: Arc<dyn Effect>,
+    index: usize,
+    channel: usize,
+    value: f64,
+}
+
+/// The inverse of one sensor's model.
+#[derive(Debug, Clone)]
+pub struct SensorInverse {
+    /// Bias b (SI).
+    pub bias: [f64; 3],
+    /// Scale/coupling matrix A (row-major).
+    pub scale: Matrix3<f64>,
+    /// A⁻¹.
+    pub scale_inv: Matrix3<f64>,
+    /// Angular-acceleration matrix E (gyro; zero for the accelerometer), s.
+    pub eps: Matrix3<f64>,
+    others: Vec<OtherTerm>,
+}
+
+impl SensorInverse {
+    fn build(model: &Model, sensor: SensorKind) -> Result<Self, CorrectError> {
+        let mut bias = [0.0; 3];
+        let mut scale = Matrix3::zeros();
+        let mut eps = Matrix3::zeros();
+        let mut others = Vec::new();
+        for e in model.effects() {
+            if e.sensor() != sensor {
+                continue;
+            }
+            for t in model
+                .terms(sensor)
+                .iter()
+                .filter(|t| std::ptr::addr_eq(t.effect, e.as_ref()))
+            {
+                let value = match t.status {
+                    crate::model::TermStatus::Fixed(v) => v,
+                    crate::model::TermStatus::Fitted => t.term.nominal,
+                };
+                let i = t.term.channel;
+                match t.term.role {
+                    Role::Bias => bias[i] += value,
+                    Role::Scale(j) => scale[(i, j)] += value,
+                    Role::Epsilon(j) => eps[(i, j)] += value,
+                    Role::Other => {
+                        if value != 0.0 {
+                            others.push(OtherTerm {
+                                effect: Arc::clone(e),
+                                index: t.index,
+                                channel: i,
+                                value,
+                            })
+                        }
+                    }
+                }
+            }
+        }
+        let scale_inv = scale.try_inverse().ok_or(CorrectError::Singular(sensor))?;
+        Ok(Self {
+            bias,
+            scale,
+            scale_inv,
+            eps,
+            others,
+        })
+    }
+
+    /// Contribution of the non-linear-block terms at a state.
+    #[inline]
+    fn other(&self, s: &State) -> [f64; 3] {
+        let mut g = [0.0; 3];
+        for o in &self.others {
+            g[o.channel] += o.value * o.effect.regressor(o.index, s);
+        }
+        g
+    }
+
+    /// True when the model has terms beyond b, A and E.
+    pub fn has_other_terms(&self) -> bool {
+        !self.others.is_empty()
+    }
+}
+
+/// Everything needed to correct a unit.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// Gyro inverse.
+    pub gyro: SensorInverse,
+    /// Accelerometer inverse.
+    pub accel: SensorInverse,
+    /// Derivative settings.
+    pub settings: CorrectionSettings,
+}
+
+impl Calibration {
+    /// From a model whose coefficients are all fixed at their calibrated values.
+    pub fn from_model(model: &Model, settings: CorrectionSettings) -> Result<Self, CorrectError> {
+        Ok(Self {
+            gyro: SensorInverse::build(model, SensorKind::Gyro)?,
+            accel: SensorInverse::build(model, SensorKind::Accel)?,
+            settings,
+        })
+    }
+
+    /// From a profile.
+    pub fn from_profile(p: &Profile) -> Result<Self, CorrectError> {
+        let model = p.model().map_err(|e| CorrectError::Model(e.to_string()))?;
+        Self::from_model(&model, p.correction)
+    }
+}
+
+/// Corrected record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Corrected {
+    /// Angular rate, rad/s, sensor frame.
+    pub w_rad_s: Vec<[f64; 3]>,
+    /// Specific force, m/s², sensor frame.
+    pub a_m_s2: Vec<[f64; 3]>,
+    /// Fixed-point passes made.
+    pub iterations: usize,
+    /// Whether the last pass changed nothing beyond 1e-14 relative.
+    pub converged: bool,
+    /// Leading samples corrected before the causal derivative window was full (streaming
+    /// warm-up: their ε̂ rests on fewer samples; the first has none). 0 offline.
+    pub warmup: usize,
+}
+
+#[inline]
+fn mv(m: &Matrix3<f64>, v: [f64; 3]) -> [f64; 3] {
+    let r = m * Vector3::from(v);
+    [r[0], r[1], r[2]]
+}
+
+/// Offline correction of a whole record (SI inputs; temperature optional).
+pub fn correct_offline(
+    cal: &Calibration,
+    t_s: &[f64],
+    gyro: &[[f64; 3]],
+    accel: &[[f64; 3]],
+    temp_c: Option<&[f64]>,
+) -> Result<Corrected, CorrectError> {
+    let n = t_s.len();
+    if gyro.len() != n || accel.len() != n {
+        return Err(CorrectError::Length {
+            t: n,
+            g: gyro.len(),
+            a: accel.len(),
+        });
+    }
+    let g = &cal.gyro;
+    let a = &cal.accel;
+    let sub = |u: [f64; 3], b: [f64; 3]| [u[0] - b[0], u[1] - b[1], u[2] - b[2]];
+    let mut w: Vec<[f64; 3]> = gyro
+        .iter()
+        .map(|u| mv(&g.scale_inv, sub(*u, g.bias)))
+        .collect();
+    let mut acc: Vec<[f64; 3]> = accel
+        .iter()
+        .map(|u| mv(&a.scale_inv, sub(*u, a.bias)))
+        .collect();
+    let needs_eps = g.eps.iter().any(|v| *v != 0.0) || g.has_other_terms() || a.has_other_terms();
+    let deriv = DerivativeConfig {
+        half_window: cal.settings.derivative_half_window,
+        degree: cal.settings.derivative_degree,
+    };
+    let mut e = vec![[0.0; 3]; n];
+    let mut iterations = 0;
+    let mut converged = !needs_eps;
+    let t0 = t_s.first().copied().unwrap_or(0.0);
+    while needs_eps && iterations < 50 {
+        iterations += 1;
+        derivative_offline(t_s, &w, &deriv, &mut e);
+        let (mut change_w, mut size_w, mut change_a, mut size_a) =
+            (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
+        for k in 0..n {
+            let s = State {
+                t_s: t_s[k] - t0,
+                w: w[k],
+                e: e[k],
+                a: acc[k],
+                temp_c: temp_c.map_or(f64::NAN, |t| t[k]),
+            };
+            let ee = mv(&g.eps, e[k]);
+            let og = g.other(&s);
+            let oa = a.other(&s);
+            let u = gyro[k];
+            let wn = mv(
+                &g.scale_inv,
+                [
+                    u[0] - g.bias[0] - ee[0] - og[0],
+                    u[1] - g.bias[1] - ee[1] - og[1],
+                    u[2] - g.bias[2] - ee[2] - og[2],
+                ],
+            );
+            let u = accel[k];
+            let an = mv(
+                &a.scale_inv,
+                [
+                    u[0] - a.bias[0] - oa[0],
+                    u[1] - a.bias[1] - oa[1],
+                    u[2] - a.bias[2] - oa[2],
+                ],
+            );
+            for i in 0..3 {
+                change_w = change_w.max((wn[i] - w[k][i]).abs());
+                size_w = size_w.max(wn[i].abs());
+                change_a = change_a.max((an[i] - acc[k][i]).abs());
+                size_a = size_a.max(an[i].abs());
+            }
+            w[k] = wn;
+            acc[k] = an;
+        }
+        if change_w <= 1e-14 * size_w.max(f64::MIN_POSITIVE)
+            && change_a <= 1e-14 * size_a.max(f64::MIN_POSITIVE)
+        {
+            converged = true;
+            break;
+        }
+    }
+    Ok(Corrected {
+        w_rad_s: w,
+        a_m_s2: acc,
+        iterations,
+        converged,
+        warmup: 0,
+    })
+}
+
+/// Causal sample-by-sample corrector with fixed memory.
+#[derive(Debug, Clone)]
+pub struct Streaming {
+    cal: Calibration,
+    window: usize,
+    times: Vec<f64>,
+    past_w: Vec<[f64; 3]>,
+    filled: usize,
+    weights: SlopeWeights,
+    cached_w0: f64,
+    cached_inv: Matrix3<f64>,
+    t_first: Option<f64>,
+}
+
+impl Streaming {
+    /// A corrector for a calibration (allocates its buffers once).
+    pub fn new(cal: Calibration) -> Self {
+        let window = cal.settings.streaming_window.max(2);
+        let degree = cal.settings.streaming_degree;
+        let inv = cal.gyro.scale_inv;
+        Self {
+            cal,
+            window,
+            times: vec![0.0; window],
+            past_w: vec![[0.0; 3]; window],
+            filled: 0,
+            weights: SlopeWeights::new(degree, window),
+            cached_w0: 0.0,
+            cached_inv: inv,
+            t_first: None,
+        }
+    }
+
+    /// Samples after a reset before the derivative window is full.
+    pub fn warmup_samples(&self) -> usize {
+        self.window - 1
+    }
+
+    /// Forgets the history (start of a new record).
+    pub fn reset(&mut self) {
+        self.filled = 0;
+        self.t_first = None;
+    }
+
+    /// Corrects one sample (SI in, SI out): returns (ω rad/s, a m/s²).
+    #[inline]
+    pub fn push(
+        &mut self,
+        t_s: f64,
+        gyro: [f64; 3],
+        accel: [f64; 3],
+        temp_c: f64,
+    ) -> ([f64; 3], [f64; 3]) {
+        let t0 = *self.t_first.get_or_insert(t_s);
+        // Shift the window left by one when full; the current sample goes last.
+        if self.filled == self.window {
+            self.times.copy_within(1.., 0);
+            self.past_w.copy_within(1.., 0);
+            self.filled -= 1;
+        }
+        let len = self.filled + 1;
+        self.times[len - 1] = t_s;
+        let g = &self.cal.gyro;
+        let a = &self.cal.accel;
+        let weights = self.weights.compute(&self.times[..len], t_s);
+        let (w0, p) = if weights.len() == len {
+            let mut p = [0.0; 3];
+            for (wj, x) in weights[..len - 1].iter().zip(&self.past_w[..len - 1]) {
+                p[0] += wj * x[0];
+                p[1] += wj * x[1];
+                p[2] += wj * x[2];
+            }
+            (weights[len - 1], p)
+        } else {
+            (0.0, [0.0; 3])
+        };
+        #[allow(clippy::float_cmp)]
+        if w0 != self.cached_w0 {
+            self.cached_w0 = w0;
+            self.cached_inv = (g.scale + g.eps * w0).try_inverse().unwrap_or(g.scale_inv);
+        }
+        let ep = mv(&g.eps, p);
+        let mut rhs = [
+            gyro[0] - g.bias[0] - ep[0],
+            gyro[1] - g.bias[1] - ep[1],
+            gyro[2] - g.bias[2] - ep[2],
+        ];
+        let mut w = mv(&self.cached_inv, rhs);
+        let mut acc = mv(
+            &a.scale_inv,
+            [
+                accel[0] - a.bias[0],
+                accel[1] - a.bias[1],
+                accel[2] - a.bias[2],
+            ],
+        );
+        if g.has_other_terms() || a.has_other_terms() {
+            // Fixed-point passes for the remaining effects, from the linear solution.
+            for _ in 0..4 {
+                let s = State {
+                    t_s: t_s - t0,
+                    w,
+                    e: [p[0] + w0 * w[0], p[1] + w0 * w[1], p[2] + w0 * w[2]],
+                    a: acc,
+                    temp_c,
+                };
+                let og = g.other(&s);
+                let oa = a.other(&s);
+                rhs = [
+                    gyro[0] - g.bias[0] - ep[0] - og[0],
+                    gyro[1] - g.bias[1] - ep[1] - og[1],
+                    gyro[2] - g.bias[2] - ep[2] - og[2],
+                ];
+                w = mv(&self.cached_inv, rhs);
+                acc = mv(
+                    &a.scale_inv,
+                    [
+                        accel[0] - a.bias[0] - oa[0],
+                        accel[1] - a.bias[1] - oa[1],
+                        accel[2] - a.bias[2] - oa[2],
+                    ],
+                );
+            }
+        }
+        self.past_w[len - 1] = w;
+        self.filled = len;
+        (w, acc)
+    }
+}
+
+/// Streaming correction of a whole record (convenience; same results as pushing samples).
+pub fn correct_streaming(
+    cal: &Calibration,
+    t_s: &[f64],
+    gyro: &[[f64; 3]],
+    accel: &[[f64; 3]],
+    temp_c: Option<&[f64]>,
+) -> Result<Corrected, CorrectError> {
+    let n = t_s.len();
+    if gyro.len() != n || accel.len() != n {
+        return Err(CorrectError::Length {
+            t: n,
+            g: gyro.len(),
+            a: accel.len(),
+        });
+    }
+    let mut s = Streaming::new(cal.clone());
+    let mut out = Corrected {
+        w_rad_s: Vec::with_capacity(n),
+        a_m_s2: Vec::with_capacity(n),
+        iterations: 1,
+        converged: true,
+        warmup: s.warmup_samples().min(n),
+    };
+    for k in 0..n {
+        let (w, a) = s.push(t_s[k], gyro[k], accel[k], temp_c.map_or(f64::NAN, |t| t[k]));
+        out.w_rad_s.push(w);
+        out.a_m_s2.push(a);
+    }
+    Ok(out)
+}

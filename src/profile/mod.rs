@@ -1,0 +1,314 @@
+//! Calibration profiles: one versioned JSON file per unit and calibration, stored as
+//! `calib-profiles/<serial>/<UTC timestamp>.json`, written atomically and never overwritten.
+//!
+//! A profile carries everything needed to correct the unit and to judge the calibration:
+//! the model (effects and which coefficients were fitted), every coefficient with its
+//! standard error, the covariance of the fitted ones, residual statistics, the runs used
+//! (file name and SHA-256) and the conventions of the numbers.
+
+use crate::estimate::{CoefStatus, Fit, SensorFit};
+use crate::model::{find_effect, Model, ModelError, SensorKind};
+use crate::session::{Session, Units};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The profile format this version writes and reads.
+pub const PROFILE_FORMAT: &str = "crosscal-profile/1";
+
+/// Conventions of the numbers in a profile (written out so that a reader needs no docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Conventions {
+    /// Frame of inputs and outputs.
+    pub frame: String,
+    /// Direction of the model.
+    pub forward_model: String,
+    /// Matrix layout.
+    pub matrices: String,
+    /// Units of the coefficients.
+    pub coefficient_units: String,
+}
+
+impl Default for Conventions {
+    fn default() -> Self {
+        Self {
+            frame: "sensor axes (the unit's own x, y, z), after the mount is applied".into(),
+            forward_model: "u = f(true): gyro u = b + C_w w + C_e e [+ effects], accel u = b + K a [+ effects]; correction inverts it".into(),
+            matrices: "row-major: coefficient c_ij (k_ij, e_ij) multiplies true input j in output i".into(),
+            coefficient_units: "SI: rad/s, rad/s^2, m/s^2, s; scale and coupling dimensionless (recorded unit per SI unit for raw sessions)".into(),
+        }
+    }
+}
+
+/// A run used to fit (or validate) the profile.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunUsed {
+    /// Run name.
+    pub name: String,
+    /// CSV file as named in the manifest.
+    pub file: String,
+    /// SHA-256 of the CSV's bytes.
+    pub sha256: String,
+    /// Number of samples.
+    pub samples: usize,
+}
+
+/// Settings the correction needs besides coefficients.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CorrectionSettings {
+    /// Half-window of the offline (centred) ε derivative, samples.
+    pub derivative_half_window: usize,
+    /// Polynomial degree of the offline ε derivative.
+    pub derivative_degree: usize,
+    /// Window length of the streaming (causal) ε derivative, samples.
+    pub streaming_window: usize,
+    /// Polynomial degree of the streaming ε derivative.
+    pub streaming_degree: usize,
+}
+
+impl Default for CorrectionSettings {
+    fn default() -> Self {
+        Self {
+            derivative_half_window: 5,
+            derivative_degree: 3,
+            streaming_window: 11,
+            streaming_degree: 2,
+        }
+    }
+}
+
+/// A calibration profile (`crosscal-profile/1`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Profile {
+    /// Always [`PROFILE_FORMAT`].
+    pub format: String,
+    /// Unit serial number.
+    pub serial: String,
+    /// Creation time, RFC 3339 UTC.
+    pub created_utc: String,
+    /// Tool name and version that wrote it.
+    pub tool: String,
+    /// Units of the recordings the profile was fitted on (and that `correct` expects).
+    pub input_units: Units,
+    /// Local gravity used to convert `g`, m/s².
+    pub g_m_s2: f64,
+    /// How to read the numbers.
+    pub conventions: Conventions,
+    /// Model name.
+    pub model: String,
+    /// Effect ids in the model, in order.
+    pub effects: Vec<String>,
+    /// Gyro coefficients, covariance and residuals.
+    pub gyro: SensorFit,
+    /// Accelerometer coefficients, covariance and residuals.
+    pub accel: SensorFit,
+    /// Runs used to fit.
+    pub runs: Vec<RunUsed>,
+    /// Correction settings.
+    pub correction: CorrectionSettings,
+    /// Findings recorded at fit time (unidentifiable terms, gaps, ε source).
+    #[serde(default)]
+    pub notes: Vec<String>,
+}
+
+/// Profile errors.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ProfileError {
+    /// File system error.
+    #[error("{path}: {source}")]
+    Io {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Not JSON or not a profile.
+    #[error("{path}:{line}:{column}: not a valid crosscal profile: {msg}")]
+    Parse {
+        /// File.
+        path: PathBuf,
+        /// Line.
+        line: usize,
+        /// Column.
+        column: usize,
+        /// Cause.
+        msg: String,
+    },
+    /// A format this version does not know.
+    #[error("{path}: profile format '{found}' is not supported: this crosscal reads '{PROFILE_FORMAT}'; upgrade crosscal to read newer profiles")]
+    UnknownFormat {
+        /// File.
+        path: PathBuf,
+        /// Format found.
+        found: String,
+    },
+    /// The profile names an effect this version does not know.
+    #[error("{path}: {source}")]
+    Model {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: ModelError,
+    },
+    /// Serial cannot be used as a folder name.
+    #[error("serial '{0}' cannot name a profile folder")]
+    BadSerial(String),
+}
+
+impl Profile {
+    /// Builds a profile from a fit of a session.
+    pub fn from_fit(session: &Session, model: &Model, fit: Fit, notes: Vec<String>) -> Self {
+        Self {
+            format: PROFILE_FORMAT.into(),
+            serial: session.manifest.serial.clone(),
+            created_utc: jiff::Timestamp::now()
+                .round(jiff::Unit::Millisecond)
+                .unwrap_or_else(|_| jiff::Timestamp::now())
+                .to_string(),
+            tool: format!("crosscal {}", env!("CARGO_PKG_VERSION")),
+            input_units: session.manifest.units,
+            g_m_s2: session.manifest.g_m_s2,
+            conventions: Conventions::default(),
+            model: model.name.clone(),
+            effects: model.effects().iter().map(|e| e.id().to_string()).collect(),
+            gyro: fit.gyro,
+            accel: fit.accel,
+            runs: session
+                .runs
+                .iter()
+                .map(|r| RunUsed {
+                    name: r.spec.name.clone(),
+                    file: r.spec.file.clone(),
+                    sha256: r.rec.sha256.clone(),
+                    samples: r.rec.len(),
+                })
+                .collect(),
+            correction: CorrectionSettings::default(),
+            notes,
+        }
+    }
+
+    /// The fit of one sensor.
+    pub fn sensor(&self, s: SensorKind) -> &SensorFit {
+        match s {
+            SensorKind::Gyro => &self.gyro,
+            SensorKind::Accel => &self.accel,
+        }
+    }
+
+    /// Rebuilds the model with every coefficient held at its stored value (for correction).
+    pub fn model(&self) -> Result<Model, ModelError> {
+        let mut effects = Vec::with_capacity(self.effects.len());
+        for id in &self.effects {
+            effects.push(find_effect(id).ok_or_else(|| {
+                ModelError::UnknownEffect(id.clone(), "(this crosscal's catalogue)".into())
+            })?);
+        }
+        let mut m = Model::from_effects(&self.model, effects);
+        for c in self
+            .gyro
+            .coefficients
+            .iter()
+            .chain(&self.accel.coefficients)
+        {
+            m.fix(&c.name, c.value)?;
+        }
+        Ok(m)
+    }
+
+    /// Names of coefficients the fit could not identify.
+    pub fn unidentifiable(&self) -> Vec<&str> {
+        self.gyro
+            .coefficients
+            .iter()
+            .chain(&self.accel.coefficients)
+            .filter(|c| c.status == CoefStatus::Unidentifiable)
+            .map(|c| c.name.as_str())
+            .collect()
+    }
+
+    /// Serialises to pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_default() + "\n"
+    }
+
+    /// Parses a profile, refusing unknown formats with a clear message.
+    pub fn from_json(path: &Path, text: &str) -> Result<Self, ProfileError> {
+        let parse_err = |e: serde_json::Error| ProfileError::Parse {
+            path: path.to_path_buf(),
+            line: e.line(),
+            column: e.column(),
+            msg: e.to_string(),
+        };
+        let v: serde_json::Value = serde_json::from_str(text).map_err(parse_err)?;
+        match v.get("format").and_then(|f| f.as_str()) {
+            Some(PROFILE_FORMAT) => {}
+            Some(other) => {
+                return Err(ProfileError::UnknownFormat {
+                    path: path.to_path_buf(),
+                    found: other.to_string(),
+                })
+            }
+            None => {
+                return Err(ProfileError::Parse {
+                    path: path.to_path_buf(),
+                    line: 1,
+                    column: 1,
+                    msg: format!("no \"format\" field: expected \"format\": \"{PROFILE_FORMAT}\""),
+                })
+            }
+        }
+        let p: Profile = serde_json::from_str(text).map_err(parse_err)?;
+        p.model().map_err(|source| ProfileError::Model {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Ok(p)
+    }
+
+    /// Reads a profile file.
+    pub fn read(path: &Path) -> Result<Self, ProfileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_json(path, &text)
+    }
+
+    /// File name for this profile: the creation time with `:` replaced by `-`.
+    pub fn file_stem(&self) -> String {
+        self.created_utc.replace(':', "-")
+    }
+}
+
+/// Saves a profile under `root/<serial>/<timestamp>.json` atomically, never overwriting:
+/// if the name is taken, `-1`, `-2`, … are appended. Returns the path written.
+pub fn save(profile: &Profile, root: &Path) -> Result<PathBuf, ProfileError> {
+    if !crate::session::valid_serial(&profile.serial) {
+        return Err(ProfileError::BadSerial(profile.serial.clone()));
+    }
+    let dir = root.join(&profile.serial);
+    std::fs::create_dir_all(&dir).map_err(|source| ProfileError::Io {
+        path: dir.clone(),
+        source,
+    })?;
+    let json = profile.to_json();
+    let stem = profile.file_stem();
+    for k in 0..1000 {
+        let name = if k == 0 {
+            format!("{stem}.json")
+        } else {
+            format!("{stem}-{k}.json")
+        };
+        let path = dir.join(name);
+        match crate::atomic::write_new(&path, json.as_bytes()) {
+            Ok(()) => return Ok(path),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(source) => return Err(ProfileError::Io { path, source }),
+        }
+    }
+    Err(ProfileError::Io {
+        path: dir,
+        source: std::io::Error::other("more than 1000 profiles with the same time stamp"),
+    })
+}
