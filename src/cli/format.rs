@@ -129,9 +129,13 @@ pub fn check_summary(r: &CheckReport) -> String {
             pct(a.after_sys_pct),
             ratio(a.reduction_sys),
             ratio(Some(a.threshold)),
-            if a.pass { "yes" } else { "NO" }
+            match (a.pass, a.noise_limited) {
+                (true, true) => "yes (noise-limited)",
+                (true, false) => "yes",
+                (false, _) => "NO",
+            }
         );
     }
-    let _ = writeln!(s, "(errors: max |error| over all runs as % of each run's reference amplitude of the axis; sys = systematic part, cone-phase harmonics; pass uses the systematic reduction)");
+    let _ = writeln!(s, "(errors: max |error| over all runs as % of each run's reference amplitude of the axis; sys = systematic part, cone-phase harmonics; pass uses the systematic reduction; noise-limited = no remaining systematic error is distinguishable from noise)");
     s
 }

@@ -104,7 +104,7 @@ pub fn lost_combination(
                 "{}: within a conic run ε is a fixed multiple of ω (ε_x = ω_s·ω_y, ε_y = −ω_s·ω_x)",
                 names.join(", ")
             ),
-            "add runs at a second stand rate |ω_s| (and the opposite direction)".to_string(),
+            "add runs at another stand rate or in the opposite direction".to_string(),
         )
     } else {
         (

@@ -1,0 +1,35 @@
+//! Shared helpers.
+
+use crosscal::correct::Calibration;
+use crosscal::estimate::{Fit, FitOptions};
+use crosscal::model::Model;
+use crosscal::pipeline::fit_session;
+use crosscal::profile::Profile;
+use crosscal::session::Session;
+
+/// Fits the default model and builds the calibration (through a profile, like the CLI).
+pub fn fit_and_calibrate(session: &Session, model: &Model) -> (Fit, Profile, Calibration) {
+    let fit = fit_session(session, model, &FitOptions::default()).expect("fit");
+    let profile = Profile::from_fit(session, model, fit.clone(), vec![]);
+    let cal = Calibration::from_profile(&profile).expect("calibration");
+    (fit, profile, cal)
+}
+
+/// Path of the built binary.
+pub fn bin() -> std::path::PathBuf {
+    std::path::PathBuf::from(env!("CARGO_BIN_EXE_crosscal"))
+}
+
+/// Runs the binary in a folder; returns (exit code, stdout, stderr).
+pub fn run_in(dir: &std::path::Path, args: &[&str]) -> (i32, String, String) {
+    let out = std::process::Command::new(bin())
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("run crosscal");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}

@@ -1,0 +1,9 @@
+//! crosscal's integration tests: one test binary (links once), modules mirror the product.
+
+mod cli;
+mod common;
+mod fixtures;
+mod identify;
+mod noise;
+mod paper;
+mod profile_store;
