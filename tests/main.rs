@@ -7,3 +7,4 @@ mod identify;
 mod noise;
 mod paper;
 mod profile_store;
+mod reference;
