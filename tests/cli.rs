@@ -182,7 +182,7 @@ fn fit_names_unidentifiable_terms_and_still_writes_a_profile() {
 }
 
 #[test]
-fn bad_input_gives_file_line_column_and_exit_2() {
+fn bad_input_gives_file_line_column_and_its_exit_code() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
     simulate(
@@ -198,7 +198,7 @@ fn bad_input_gives_file_line_column_and_exit_2() {
     text = text.replacen(lines[5], &bad, 1);
     std::fs::write(&csv, text).unwrap();
     let (code, out, err) = run_in(dir, &["fit", "demo/session.json"]);
-    assert_eq!(code, 2, "{out}{err}");
+    assert_eq!(code, 6, "{out}{err}");
     assert!(
         err.contains("cone+10.csv:6:4 (gz)") && err.contains("'oops'"),
         "{err}"
@@ -209,7 +209,7 @@ fn bad_input_gives_file_line_column_and_exit_2() {
     );
 
     let (code, _, err) = run_in(dir, &["fit", "missing.json"]);
-    assert_eq!(code, 2);
+    assert_eq!(code, 3);
     assert!(err.contains("missing.json"), "{err}");
     let (code, _, _) = run_in(dir, &["fit"]);
     assert_eq!(code, 2);

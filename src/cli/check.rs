@@ -33,20 +33,19 @@ pub struct Args {
     /// Allow a profile whose serial differs from the session's.
     #[arg(long)]
     allow_other_unit: bool,
+    /// Gaps in t are errors instead of warnings.
+    #[arg(long)]
+    strict: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let profile = Profile::read(&a.profile)?;
-    let session = Session::load(&a.session)
+    let session = Session::load_with(&a.session, a.strict)
         .with_context(|| format!("reading session {}", a.session.display()))?;
-    if profile.serial != session.manifest.serial && !a.allow_other_unit {
-        anyhow::bail!(
-            "{}: the profile is for unit '{}' but the session {} is of unit '{}' (pass --allow-other-unit to check anyway)",
-            a.profile.display(),
-            profile.serial,
-            a.session.display(),
-            session.manifest.serial
-        );
+    if !a.allow_other_unit {
+        profile
+            .ensure_unit(&a.profile, &session.manifest.serial)
+            .context("checking a unit against another unit's profile (pass --allow-other-unit to do it anyway)")?;
     }
     if profile.input_units != session.manifest.units {
         eprintln!("note: the session's units differ from those the profile was fitted on; values are converted on read");

@@ -52,6 +52,9 @@ pub struct Args {
     /// Replace the output file if it exists (atomically).
     #[arg(long)]
     force: bool,
+    /// Gaps in t are errors instead of warnings.
+    #[arg(long)]
+    strict: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {

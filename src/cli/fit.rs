@@ -33,6 +33,12 @@ pub struct Args {
     /// Fit and report but do not write a profile.
     #[arg(long)]
     dry_run: bool,
+    /// Robust fit (Huber IRLS): spikes and outliers lose weight.
+    #[arg(long)]
+    robust: bool,
+    /// Gaps in t and unidentifiable coefficients are errors instead of warnings.
+    #[arg(long)]
+    strict: bool,
 }
 
 /// Builds the model from the command line.
@@ -49,12 +55,18 @@ pub fn build_model(preset: &str, effects: &[String], disable: &[String]) -> anyh
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let model = build_model(&a.model, &a.effects, &a.disable)?;
-    let session = Session::load(&a.session)
+    let session = Session::load_with(&a.session, a.strict)
         .with_context(|| format!("reading session {}", a.session.display()))?;
     let deriv = DerivativeConfig::default();
     let tr = tracks(&session, &deriv);
-    let fit = crosscal::estimate::fit(&model, &fit_runs(&session, &tr), &FitOptions::default())
-        .with_context(|| format!("fitting {}", a.session.display()))?;
+    let opts = FitOptions {
+        robust: a.robust,
+        ..FitOptions::default()
+    };
+    let fit = crosscal::estimate::fit(&model, &fit_runs(&session, &tr), &opts).with_context(|| format!("fitting {}", a.session.display()))?;
+    if a.strict {
+        fit.ensure_identifiable().with_context(|| format!("fitting {} (--strict)", a.session.display()))?;
+    }
     let mut notes = session.warnings();
     for (run, t) in session.runs.iter().zip(&tr) {
         notes.push(format!(

@@ -12,8 +12,50 @@ use std::process::ExitCode;
 
 /// Exit code: a check or acceptance rule failed.
 pub const EXIT_CHECK_FAILED: u8 = 1;
-/// Exit code: bad input, bad usage, or an error while processing.
+/// Exit code: bad usage or an error not listed below.
 pub const EXIT_INPUT: u8 = 2;
+
+/// Exit code of an error: one code per kind of bad input (documented in the README).
+pub fn exit_code(e: &anyhow::Error) -> u8 {
+    use crosscal::estimate::EstimateError;
+    use crosscal::profile::ProfileError;
+    use crosscal::session::{Problem, SessionError};
+    for cause in e.chain() {
+        if let Some(s) = cause.downcast_ref::<SessionError>() {
+            return match s.problem() {
+                Problem::Io => 3,
+                Problem::Empty => 4,
+                Problem::Header => 5,
+                Problem::Value => 6,
+                Problem::Truncated => 7,
+                Problem::Time => 8,
+                Problem::Gap => 9,
+                Problem::Units => 10,
+                Problem::Json => 11,
+                Problem::Format => 12,
+                Problem::MissingFile => 13,
+                Problem::Mount => 14,
+                Problem::Malformed => 19,
+                _ => 18,
+            };
+        }
+        if let Some(p) = cause.downcast_ref::<ProfileError>() {
+            return match p {
+                ProfileError::Io { .. } => 3,
+                ProfileError::UnknownFormat { .. } => 15,
+                ProfileError::WrongUnit { .. } => 16,
+                _ => 18,
+            };
+        }
+        if let Some(EstimateError::Unidentifiable(_)) = cause.downcast_ref::<EstimateError>() {
+            return 17;
+        }
+        if cause.downcast_ref::<std::io::Error>().is_some() {
+            return 3;
+        }
+    }
+    EXIT_INPUT
+}
 
 /// Cross-coupling calibration of gyro and accelerometer triads on a conic-motion stand.
 #[derive(Debug, Parser)]
@@ -70,7 +112,7 @@ pub fn main() -> ExitCode {
         Ok(Outcome::CheckFailed) => ExitCode::from(EXIT_CHECK_FAILED),
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::from(EXIT_INPUT)
+            ExitCode::from(exit_code(&e))
         }
     }
 }

@@ -91,6 +91,8 @@ pub struct FitOptions {
     pub chunk: usize,
     /// Relative singular-value threshold below which a combination is unidentifiable.
     pub rcond: f64,
+    /// Huber IRLS instead of plain least squares (outliers and spikes lose weight).
+    pub robust: bool,
 }
 
 impl Default for FitOptions {
@@ -98,6 +100,7 @@ impl Default for FitOptions {
         Self {
             chunk: 4096,
             rcond: 1e-9,
+            robust: false,
         }
     }
 }
@@ -121,6 +124,9 @@ pub enum EstimateError {
     /// No runs.
     #[error("no samples to fit")]
     NoData,
+    /// The runs cannot identify the requested model (strict mode).
+    #[error("the runs cannot identify the requested model: {0}")]
+    Unidentifiable(String),
 }
 
 /// How a coefficient's value was obtained.
@@ -175,6 +181,9 @@ pub struct ChannelFit {
     pub covariance_names: Vec<String>,
     /// Covariance of the fitted coefficients (row-major).
     pub covariance: Vec<Vec<f64>>,
+    /// Samples the robust (Huber) fit gave less than full weight (0 without `--robust`).
+    #[serde(default)]
+    pub downweighted: u64,
 }
 
 /// The fit of one sensor.
@@ -222,6 +231,22 @@ impl Fit {
         match s {
             SensorKind::Gyro => &self.gyro,
             SensorKind::Accel => &self.accel,
+        }
+    }
+
+    /// Fails, naming every lost coefficient and its remedy, when something was unidentifiable.
+    pub fn ensure_identifiable(&self) -> Result<(), EstimateError> {
+        let lost: Vec<String> = self
+            .gyro
+            .unidentifiable
+            .iter()
+            .chain(&self.accel.unidentifiable)
+            .map(|u| format!("{} ({}; remedy: {})", u.held, u.reason, u.remedy))
+            .collect();
+        if lost.is_empty() {
+            Ok(())
+        } else {
+            Err(EstimateError::Unidentifiable(lost.join("; ")))
         }
     }
 
@@ -318,6 +343,7 @@ fn fit_sensor(
     let mut channels = Vec::with_capacity(3);
     let mut unidentifiable = Vec::new();
     let mut correlated = Vec::new();
+    let mut fitted_sets: Vec<Vec<usize>> = Vec::with_capacity(3);
 
     for ch in 0..3 {
         let mut fitted: Vec<usize> = (0..terms.len())
@@ -372,39 +398,7 @@ fn fit_sensor(
                 q,
             });
         }
-        // Back substitution: R_s θ = z.
-        let mut theta = vec![0.0; q];
-        for i in (0..q).rev() {
-            let mut acc = rs[(i, q)];
-            for j in i + 1..q {
-                acc -= rs[(i, j)] * theta[j];
-            }
-            theta[i] = acc / rs[(i, i)];
-        }
-        let rss = rs[(q, q)] * rs[(q, q)];
-        let dof = (n - q as u64) as f64;
-        let sigma2 = rss / dof;
-        // R_s⁻¹ (upper triangular), then cov = σ² R⁻¹ R⁻ᵀ.
-        let mut rinv = vec![vec![0.0; q]; q];
-        for col in 0..q {
-            for i in (0..=col).rev() {
-                let mut acc = if i == col { 1.0 } else { 0.0 };
-                for j in i + 1..=col {
-                    acc -= rs[(i, j)] * rinv[j][col];
-                }
-                rinv[i][col] = acc / rs[(i, i)];
-            }
-        }
-        let mut cov = vec![vec![0.0; q]; q];
-        for i in 0..q {
-            for j in 0..q {
-                let mut acc = 0.0;
-                for k in i.max(j)..q {
-                    acc += rinv[i][k] * rinv[j][k];
-                }
-                cov[i][j] = sigma2 * acc;
-            }
-        }
+        let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n);
         for (a, &ti) in fitted.iter().enumerate() {
             values[ti] = theta[a];
             std_errors[ti] = Some(cov[a][a].sqrt());
@@ -421,6 +415,7 @@ fn fit_sensor(
                 }
             }
         }
+        fitted_sets.push(fitted.clone());
         channels.push(ChannelFit {
             axis: AXES[ch],
             n,
@@ -434,7 +429,12 @@ fn fit_sensor(
                 .map(|&ti| terms[ti].term.name.clone())
                 .collect(),
             covariance: cov,
+            downweighted: 0,
         });
+    }
+
+    if opts.robust {
+        robust_refit(&terms, &cols, runs, sensor, opts, &fitted_sets, &status, &mut values, &mut std_errors, &mut channels);
     }
 
     // Second pass: largest residual per channel.
@@ -534,4 +534,137 @@ pub fn role_of(model: &Model, name: &str) -> Option<Role> {
         .flat_map(|s| model.terms(*s))
         .find(|t| t.term.name == name)
         .map(|t| t.term.role)
+}
+
+/// Solves the reduced problem `[R_s | z; 0 | ρ]`: θ by back substitution, the covariance
+/// `σ² R_s⁻¹ R_s⁻ᵀ` with `σ² = ρ²/(n − q)`. Returns (θ, covariance, RSS, σ²).
+fn solve_reduced(rs: &Mat<f64>, q: usize, n: u64) -> (Vec<f64>, Vec<Vec<f64>>, f64, f64) {
+    let mut theta = vec![0.0; q];
+    for i in (0..q).rev() {
+        let mut acc = rs[(i, q)];
+        for j in i + 1..q {
+            acc -= rs[(i, j)] * theta[j];
+        }
+        theta[i] = acc / rs[(i, i)];
+    }
+    let rss = rs[(q, q)] * rs[(q, q)];
+    let sigma2 = rss / (n.saturating_sub(q as u64).max(1)) as f64;
+    let mut rinv = vec![vec![0.0; q]; q];
+    for col in 0..q {
+        for i in (0..=col).rev() {
+            let mut acc = if i == col { 1.0 } else { 0.0 };
+            for j in i + 1..=col {
+                acc -= rs[(i, j)] * rinv[j][col];
+            }
+            rinv[i][col] = acc / rs[(i, i)];
+        }
+    }
+    let mut cov = vec![vec![0.0; q]; q];
+    for i in 0..q {
+        for j in 0..q {
+            let mut acc = 0.0;
+            for k in i.max(j)..q {
+                acc += rinv[i][k] * rinv[j][k];
+            }
+            cov[i][j] = sigma2 * acc;
+        }
+    }
+    (theta, cov, rss, sigma2)
+}
+
+/// Huber tuning constant (95 % efficiency under Gaussian noise).
+const HUBER_K: f64 = 1.345;
+
+/// Iteratively reweighted least squares with Huber weights `w = min(1, k·s/|r|)`, the
+/// scale s = 1.4826·median|r| re-estimated each pass. Starts from the ordinary fit, keeps
+/// its identifiability decisions, stops when no coefficient moves by more than 1e-10 of
+/// its standard error (at most 30 passes). Standard errors are those of the final weighted
+/// problem.
+#[allow(clippy::too_many_arguments)]
+fn robust_refit(
+    terms: &[crate::model::TermRef<'_>],
+    cols: &Columns,
+    runs: &[FitRun<'_>],
+    sensor: SensorKind,
+    opts: &FitOptions,
+    fitted_sets: &[Vec<usize>],
+    status: &[CoefStatus],
+    values: &mut [f64],
+    std_errors: &mut [Option<f64>],
+    channels: &mut [ChannelFit],
+) {
+    let p = cols.len();
+    let n: usize = runs.iter().map(|r| r.len()).sum();
+    let mut resid: Vec<[f64; 3]> = Vec::with_capacity(n);
+    let mut abs_r: Vec<f64> = Vec::with_capacity(n);
+    let mut row = vec![0.0; p + 3];
+    let mut weighted = vec![0.0; p + 3];
+    for _pass in 0..30 {
+        resid.clear();
+        for run in runs {
+            for k in 0..run.len() {
+                let u = crate::model::forward(terms, values, &run.state(k));
+                let y = run.output(sensor, k);
+                resid.push([y[0] - u[0], y[1] - u[1], y[2] - u[2]]);
+            }
+        }
+        let mut scale = [0.0; 3];
+        for ch in 0..3 {
+            abs_r.clear();
+            abs_r.extend(resid.iter().map(|r| r[ch].abs()));
+            let mid = abs_r.len() / 2;
+            let med = if abs_r.is_empty() { 0.0 } else { *abs_r.select_nth_unstable_by(mid, f64::total_cmp).1 };
+            scale[ch] = 1.4826 * med;
+        }
+        let mut accs: Vec<QrAccumulator> = (0..3).map(|_| QrAccumulator::new(p + 3, opts.chunk)).collect();
+        let mut down = [0u64; 3];
+        let mut idx = 0;
+        for run in runs {
+            for k in 0..run.len() {
+                let s = run.state(k);
+                for (c, &ti) in cols.source.iter().enumerate() {
+                    row[c] = terms[ti].regressor(&s);
+                }
+                row[p..].copy_from_slice(&run.output(sensor, k));
+                for ch in 0..3 {
+                    let r = resid[idx][ch].abs();
+                    let cut = HUBER_K * scale[ch];
+                    let w = if r > cut && r > 0.0 { cut / r } else { 1.0 };
+                    if w < 1.0 {
+                        down[ch] += 1;
+                    }
+                    let sw = w.sqrt();
+                    for (o, v) in weighted.iter_mut().zip(&row) {
+                        *o = v * sw;
+                    }
+                    accs[ch].push(&weighted);
+                }
+                idx += 1;
+            }
+        }
+        let mut moved = 0.0_f64;
+        for ch in 0..3 {
+            let fitted = &fitted_sets[ch];
+            let q = fitted.len();
+            let r = accs[ch].r();
+            let rs = reduce(&r, cols, terms, values, status, fitted, ch, p);
+            let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n as u64);
+            for (a, &ti) in fitted.iter().enumerate() {
+                let se = cov[a][a].sqrt();
+                if se > 0.0 {
+                    moved = moved.max((theta[a] - values[ti]).abs() / se);
+                }
+                values[ti] = theta[a];
+                std_errors[ti] = Some(se);
+            }
+            let c = &mut channels[ch];
+            c.residual_rms = (rss / n.max(1) as f64).sqrt();
+            c.sigma = sigma2.sqrt();
+            c.covariance = cov;
+            c.downweighted = down[ch];
+        }
+        if moved < 1e-10 {
+            break;
+        }
+    }
 }

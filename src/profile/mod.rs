@@ -153,6 +153,16 @@ pub enum ProfileError {
     /// Serial cannot be used as a folder name.
     #[error("serial '{0}' cannot name a profile folder")]
     BadSerial(String),
+    /// The profile belongs to another unit.
+    #[error("{path}: the profile is for unit '{profile_serial}' but the data are of unit '{data_serial}'; use that unit's profile")]
+    WrongUnit {
+        /// Profile file.
+        path: PathBuf,
+        /// Serial in the profile.
+        profile_serial: String,
+        /// Serial of the data.
+        data_serial: String,
+    },
 }
 
 impl Profile {
@@ -214,6 +224,19 @@ impl Profile {
             m.fix(&c.name, c.value)?;
         }
         Ok(m)
+    }
+
+    /// Refuses a profile that belongs to another unit.
+    pub fn ensure_unit(&self, path: &Path, serial: &str) -> Result<(), ProfileError> {
+        if self.serial == serial {
+            Ok(())
+        } else {
+            Err(ProfileError::WrongUnit {
+                path: path.to_path_buf(),
+                profile_serial: self.serial.clone(),
+                data_serial: serial.to_string(),
+            })
+        }
     }
 
     /// Names of coefficients the fit could not identify.

@@ -1,6 +1,6 @@
 //! Reading one recording CSV into SI arrays, without a `String` per field.
 
-use super::error::SessionError;
+use super::error::{Problem, SessionError};
 use super::units::Units;
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
@@ -52,6 +52,8 @@ impl Recording {
 pub struct ReadOptions {
     /// Require `wx_ref..az_ref` (and read `ex_ref..ez_ref` if present).
     pub reference: bool,
+    /// Treat gaps in `t` (more than 5 median sample periods) as errors, not warnings.
+    pub strict: bool,
 }
 
 const REQUIRED: [&str; 7] = ["t", "gx", "gy", "gz", "ax", "ay", "az"];
@@ -68,13 +70,9 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     s
 }
 
-fn csv_err(
-    path: &Path,
-    line: u64,
-    column: impl Into<String>,
-    msg: impl Into<String>,
-) -> SessionError {
+fn csv_err(problem: Problem, path: &Path, line: u64, column: impl Into<String>, msg: impl Into<String>) -> SessionError {
     SessionError::Csv {
+        problem,
         path: path.to_path_buf(),
         line,
         column: column.into(),
@@ -106,7 +104,7 @@ pub fn parse_recording(
 ) -> Result<Recording, SessionError> {
     let path: PathBuf = path.to_path_buf();
     if bytes.iter().all(|b| b.is_ascii_whitespace()) {
-        return Err(csv_err(
+        return Err(csv_err(Problem::Empty, 
             &path,
             1,
             "-",
@@ -127,7 +125,7 @@ pub fn parse_recording(
     loop {
         match rdr.read_byte_record(&mut rec) {
             Ok(false) => {
-                return Err(csv_err(
+                return Err(csv_err(Problem::Header, 
                     &path,
                     1,
                     "-",
@@ -160,7 +158,7 @@ pub fn parse_recording(
                     names.join(",")
                 )
             };
-            csv_err(&path, header_line, "-", why)
+            csv_err(Problem::Header, &path, header_line, "-", why)
         })?;
     }
     let temp_idx = find("temp");
@@ -169,7 +167,7 @@ pub fn parse_recording(
     if opts.reference {
         for (k, name) in REF_REQUIRED.iter().enumerate() {
             ref_idx[k] = find(name).ok_or_else(|| {
-                csv_err(
+                csv_err(Problem::Header, 
                     &path,
                     header_line,
                     "-",
@@ -185,7 +183,7 @@ pub fn parse_recording(
             (Some(a), Some(b), Some(c)) => eps_idx = Some([a, b, c]),
             (None, None, None) => {}
             _ => {
-                return Err(csv_err(
+                return Err(csv_err(Problem::Header, 
                     &path,
                     header_line,
                     "-",
@@ -241,7 +239,7 @@ pub fn parse_recording(
             continue;
         }
         if rec.len() < width {
-            return Err(csv_err(
+            return Err(csv_err(Problem::Truncated, 
                 &path,
                 line,
                 format!("{} ({})", rec.len() + 1, names[rec.len()]),
@@ -259,13 +257,13 @@ pub fn parse_recording(
                 .and_then(|s| s.parse::<f64>().ok());
             match parsed {
                 Some(v) if v.is_finite() => Ok(v),
-                Some(v) => Err(csv_err(
+                Some(v) => Err(csv_err(Problem::Value, 
                     &path,
                     line,
                     format!("{} ({})", k + 1, names[k]),
                     format!("expected a finite number, found '{v}' (NaN or infinite values are not accepted)"),
                 )),
-                None => Err(csv_err(
+                None => Err(csv_err(Problem::Value, 
                     &path,
                     line,
                     format!("{} ({})", k + 1, names[k]),
@@ -280,7 +278,7 @@ pub fn parse_recording(
             } else {
                 "decreasing"
             };
-            return Err(csv_err(
+            return Err(csv_err(Problem::Time, 
                 &path,
                 line,
                 format!("{} (t)", idx[0] + 1),
@@ -317,7 +315,7 @@ pub fn parse_recording(
         }
     }
     if out.t_s.is_empty() {
-        return Err(csv_err(
+        return Err(csv_err(Problem::Empty, 
             &path,
             header_line,
             "-",
@@ -326,12 +324,53 @@ pub fn parse_recording(
     }
     out.reference = refc;
     out.sha256 = sha256_hex(bytes);
-    out.warnings = find_gaps(&out.t_s, kt, &path);
+    let gaps = find_gaps(&out.t_s, kt, &path);
+    if opts.strict {
+        if let Some((k, first)) = gaps.first() {
+            let line = line_of_sample(bytes, *k).unwrap_or(header_line);
+            return Err(csv_err(
+                Problem::Gap,
+                &path,
+                line,
+                format!("{} (t)", idx[0] + 1),
+                format!("{first}; expected a gap of at most 5 sample periods (strict mode; without --strict gaps are warnings)"),
+            ));
+        }
+    }
+    out.warnings = gaps.into_iter().map(|(_, w)| w).collect();
+    let findings = super::sanity::scan(&out.gyro, &out.accel);
+    out.warnings.extend(super::sanity::describe(&findings, &out.t_s, &path.display().to_string()));
     Ok(out)
 }
 
-/// Warns about gaps larger than 5 median sample periods.
-fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<String> {
+/// 1-based line of the k-th sample (0-based), by re-reading the bytes (used on errors only).
+fn line_of_sample(bytes: &[u8], k: usize) -> Option<u64> {
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .comment(Some(b'#'))
+        .flexible(true)
+        .from_reader(bytes);
+    let mut rec = csv::ByteRecord::new();
+    let mut seen = 0usize;
+    let mut header = true;
+    while rdr.read_byte_record(&mut rec).ok()? {
+        if rec.len() == 1 && rec.get(0).is_some_and(|f| f.is_empty()) {
+            continue;
+        }
+        if header {
+            header = false;
+            continue;
+        }
+        if seen == k {
+            return rec.position().map(|p| p.line());
+        }
+        seen += 1;
+    }
+    None
+}
+
+/// Gaps larger than 5 median sample periods: (index of the sample after the gap, message).
+fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<(usize, String)> {
     if t.len() < 3 {
         return Vec::new();
     }
@@ -342,16 +381,19 @@ fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<String> {
     for (i, w) in t.windows(2).enumerate() {
         let dt = w[1] - w[0];
         if dt > 5.0 * median {
-            warnings.push(format!(
-                "{}: gap in t of {} before sample {} (t = {}): {:.1} median sample periods",
-                path.display(),
-                dt / kt,
-                i + 2,
-                w[1] / kt,
-                dt / median
+            warnings.push((
+                i + 1,
+                format!(
+                    "{}: gap in t of {} before sample {} (t = {}): {:.1} median sample periods",
+                    path.display(),
+                    dt / kt,
+                    i + 2,
+                    w[1] / kt,
+                    dt / median
+                ),
             ));
             if warnings.len() >= 20 {
-                warnings.push(format!("{}: further gaps not listed", path.display()));
+                warnings.push((i + 1, format!("{}: further gaps not listed", path.display())));
                 break;
             }
         }
@@ -361,7 +403,7 @@ fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<String> {
 
 fn map_csv_error(path: &Path, e: &csv::Error) -> SessionError {
     let line = e.position().map_or(0, |p| p.line());
-    csv_err(path, line, "-", format!("malformed CSV: {e}"))
+    csv_err(Problem::Malformed, path, line, "-", format!("malformed CSV: {e}"))
 }
 
 #[cfg(test)]

@@ -3,6 +3,40 @@
 
 use std::path::PathBuf;
 
+/// The kind of problem, one per distinct exit code of the command-line tool.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Problem {
+    /// The file is empty or has no samples.
+    Empty,
+    /// The header line is missing or lacks a required column.
+    Header,
+    /// A value is not a number, or is NaN or infinite.
+    Value,
+    /// A row has fewer fields than the header (truncated row).
+    Truncated,
+    /// Time stamps repeat or decrease.
+    Time,
+    /// A gap in time larger than allowed (with `strict`).
+    Gap,
+    /// The CSV itself is malformed (quoting, encoding).
+    Malformed,
+    /// A unit is unknown or misspelled.
+    Units,
+    /// A mount is not a rotation.
+    Mount,
+    /// A run's file does not exist.
+    MissingFile,
+    /// The manifest is not JSON.
+    Json,
+    /// The manifest's format version is unknown.
+    Format,
+    /// Any other invalid manifest value.
+    Invalid,
+    /// The file cannot be read.
+    Io,
+}
+
 /// A session or recording could not be read.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
@@ -38,6 +72,8 @@ pub enum SessionError {
     /// A manifest value is invalid (unknown unit, bad mount, ...).
     #[error("{path}:{line}:{column}: {msg}")]
     Manifest {
+        /// Kind of problem.
+        problem: Problem,
         /// The manifest.
         path: PathBuf,
         /// 1-based line of the offending value (best effort; 0 if unknown).
@@ -50,6 +86,8 @@ pub enum SessionError {
     /// A CSV recording has a problem at a position.
     #[error("{path}:{line}:{column}: {msg}")]
     Csv {
+        /// Kind of problem.
+        problem: Problem,
         /// The recording.
         path: PathBuf,
         /// 1-based line.
@@ -62,14 +100,13 @@ pub enum SessionError {
 }
 
 impl SessionError {
-    /// A short word for the kind of problem (used for exit codes and tests).
-    pub fn kind(&self) -> &'static str {
+    /// The kind of problem.
+    pub fn problem(&self) -> Problem {
         match self {
-            Self::Io { .. } => "io",
-            Self::Json { .. } => "json",
-            Self::UnknownFormat { .. } => "format",
-            Self::Manifest { .. } => "manifest",
-            Self::Csv { .. } => "csv",
+            Self::Io { .. } => Problem::Io,
+            Self::Json { .. } => Problem::Json,
+            Self::UnknownFormat { .. } => Problem::Format,
+            Self::Manifest { problem, .. } | Self::Csv { problem, .. } => *problem,
         }
     }
 }

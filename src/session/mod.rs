@@ -7,12 +7,13 @@
 
 mod csvread;
 mod error;
+pub mod sanity;
 pub mod units;
 
 pub use csvread::{
     parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns,
 };
-pub use error::SessionError;
+pub use error::{Problem, SessionError};
 pub use units::{AccelUnit, GyroUnit, TimeUnit, Units};
 
 use crate::motion::Mount;
@@ -99,8 +100,13 @@ pub struct Session {
 }
 
 impl Session {
-    /// Reads a manifest and all its recordings.
+    /// Reads a manifest and all its recordings (gaps in `t` are warnings).
     pub fn load(manifest_path: &Path) -> Result<Self, SessionError> {
+        Self::load_with(manifest_path, false)
+    }
+
+    /// Reads a manifest and all its recordings; with `strict`, gaps in `t` are errors.
+    pub fn load_with(manifest_path: &Path, strict: bool) -> Result<Self, SessionError> {
         let manifest = read_manifest(manifest_path)?;
         let dir = manifest_path.parent().unwrap_or(Path::new("."));
         let mut runs = Vec::with_capacity(manifest.runs.len());
@@ -112,6 +118,7 @@ impl Session {
                     &spec.file,
                 );
                 return Err(SessionError::Manifest {
+                    problem: Problem::MissingFile,
                     path: manifest_path.to_path_buf(),
                     line,
                     column,
@@ -125,6 +132,7 @@ impl Session {
             }
             let opts = ReadOptions {
                 reference: matches!(spec.motion, MotionSpec::Reference),
+                strict,
             };
             let rec = read_recording(&path, &manifest.units, manifest.g_m_s2, opts)?;
             runs.push(Run {
@@ -183,15 +191,18 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
         column: e.column(),
         msg: format!("the manifest is not valid JSON: {e}"),
     })?;
-    let bad = |needle: &str, msg: String| {
+    let bad_kind = |problem: Problem, needle: &str, msg: String| {
         let (line, column) = locate(text, needle);
         SessionError::Manifest {
+            problem,
             path: path.to_path_buf(),
             line,
             column,
             msg,
         }
     };
+    let bad = |needle: &str, msg: String| bad_kind(Problem::Invalid, needle, msg);
+    let units_err = |needle: &str, msg: String| bad_kind(Problem::Units, needle, msg);
     let obj = json
         .as_object()
         .ok_or_else(|| bad("", "the manifest must be a JSON object".into()))?;
@@ -230,18 +241,18 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
         match units_obj.get(key) {
             None => Ok(None),
             Some(Value::String(s)) => Ok(Some(s.as_str())),
-            Some(_) => Err(bad(key, format!("units.{key} must be a string"))),
+            Some(_) => Err(units_err(key, format!("units.{key} must be a string"))),
         }
     };
     let gyro = match unit_str("gyro")? {
         Some(s) => GyroUnit::parse(s).ok_or_else(|| {
-            bad(
+            units_err(
                 s,
                 format!("units.gyro is '{s}': expected one of {}", GyroUnit::CHOICES),
             )
         })?,
         None => {
-            return Err(bad(
+            return Err(units_err(
                 "units",
                 format!("missing units.gyro: expected one of {}", GyroUnit::CHOICES),
             ))
@@ -249,7 +260,7 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
     };
     let accel = match unit_str("accel")? {
         Some(s) => AccelUnit::parse(s).ok_or_else(|| {
-            bad(
+            units_err(
                 s,
                 format!(
                     "units.accel is '{s}': expected one of {}",
@@ -258,7 +269,7 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
             )
         })?,
         None => {
-            return Err(bad(
+            return Err(units_err(
                 "units",
                 format!(
                     "missing units.accel: expected one of {}",
@@ -269,7 +280,7 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
     };
     let time = match unit_str("time")? {
         Some(s) => TimeUnit::parse(s).ok_or_else(|| {
-            bad(
+            units_err(
                 s,
                 format!("units.time is '{s}': expected one of {}", TimeUnit::CHOICES),
             )
@@ -300,7 +311,7 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
     }
     let mut runs = Vec::with_capacity(runs_json.len());
     for (i, r) in runs_json.iter().enumerate() {
-        runs.push(parse_run(i, r, &bad)?);
+        runs.push(parse_run(i, r, &bad_kind)?);
     }
     let mut names: Vec<&str> = runs.iter().map(|r: &RunSpec| r.name.as_str()).collect();
     names.sort_unstable();
@@ -331,10 +342,11 @@ fn num(v: &Value, key: &str) -> Option<f64> {
     v.get(key).and_then(Value::as_f64).filter(|x| x.is_finite())
 }
 
-fn parse_run<F>(i: usize, r: &Value, bad: &F) -> Result<RunSpec, SessionError>
+fn parse_run<F>(i: usize, r: &Value, bad_kind: &F) -> Result<RunSpec, SessionError>
 where
-    F: Fn(&str, String) -> SessionError,
+    F: Fn(Problem, &str, String) -> SessionError,
 {
+    let bad = |needle: &str, msg: String| bad_kind(Problem::Invalid, needle, msg);
     let name = r
         .get("name")
         .and_then(Value::as_str)
@@ -420,13 +432,13 @@ where
                 .as_array()
                 .map(|a| a.iter().filter_map(Value::as_str).collect());
             let names = names.ok_or_else(|| {
-                bad(
+                bad_kind(Problem::Mount, 
                     &name,
                     format!("run '{name}': mount must be a list like [\"+x\", \"+y\", \"+z\"]"),
                 )
             })?;
             Mount::parse(&names).map_err(|e| {
-                bad(
+                bad_kind(Problem::Mount, 
                     names.first().copied().unwrap_or(&name),
                     format!("run '{name}': {e}"),
                 )
