@@ -138,6 +138,8 @@ fn simulate_fit_correct_check() {
     );
     assert_eq!(code, 1, "{out}");
     assert!(out.contains("FAIL") && out.contains("NO"), "{out}");
+    // Nothing the user gave was modified.
+    assert!(before == snapshot(), "an input file changed");
 }
 
 #[test]

@@ -63,9 +63,11 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         robust: a.robust,
         ..FitOptions::default()
     };
-    let fit = crosscal::estimate::fit(&model, &fit_runs(&session, &tr), &opts).with_context(|| format!("fitting {}", a.session.display()))?;
+    let fit = crosscal::estimate::fit(&model, &fit_runs(&session, &tr), &opts)
+        .with_context(|| format!("fitting {}", a.session.display()))?;
     if a.strict {
-        fit.ensure_identifiable().with_context(|| format!("fitting {} (--strict)", a.session.display()))?;
+        fit.ensure_identifiable()
+            .with_context(|| format!("fitting {} (--strict)", a.session.display()))?;
     }
     let mut notes = session.warnings();
     for (run, t) in session.runs.iter().zip(&tr) {

@@ -434,7 +434,18 @@ fn fit_sensor(
     }
 
     if opts.robust {
-        robust_refit(&terms, &cols, runs, sensor, opts, &fitted_sets, &status, &mut values, &mut std_errors, &mut channels);
+        robust_refit(
+            &terms,
+            &cols,
+            runs,
+            sensor,
+            opts,
+            &fitted_sets,
+            &status,
+            &mut values,
+            &mut std_errors,
+            &mut channels,
+        );
     }
 
     // Second pass: largest residual per channel.
@@ -613,10 +624,16 @@ fn robust_refit(
             abs_r.clear();
             abs_r.extend(resid.iter().map(|r| r[ch].abs()));
             let mid = abs_r.len() / 2;
-            let med = if abs_r.is_empty() { 0.0 } else { *abs_r.select_nth_unstable_by(mid, f64::total_cmp).1 };
+            let med = if abs_r.is_empty() {
+                0.0
+            } else {
+                *abs_r.select_nth_unstable_by(mid, f64::total_cmp).1
+            };
             scale[ch] = 1.4826 * med;
         }
-        let mut accs: Vec<QrAccumulator> = (0..3).map(|_| QrAccumulator::new(p + 3, opts.chunk)).collect();
+        let mut accs: Vec<QrAccumulator> = (0..3)
+            .map(|_| QrAccumulator::new(p + 3, opts.chunk))
+            .collect();
         let mut down = [0u64; 3];
         let mut idx = 0;
         for run in runs {

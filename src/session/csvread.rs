@@ -70,7 +70,13 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
     s
 }
 
-fn csv_err(problem: Problem, path: &Path, line: u64, column: impl Into<String>, msg: impl Into<String>) -> SessionError {
+fn csv_err(
+    problem: Problem,
+    path: &Path,
+    line: u64,
+    column: impl Into<String>,
+    msg: impl Into<String>,
+) -> SessionError {
     SessionError::Csv {
         problem,
         path: path.to_path_buf(),
@@ -104,7 +110,8 @@ pub fn parse_recording(
 ) -> Result<Recording, SessionError> {
     let path: PathBuf = path.to_path_buf();
     if bytes.iter().all(|b| b.is_ascii_whitespace()) {
-        return Err(csv_err(Problem::Empty, 
+        return Err(csv_err(
+            Problem::Empty,
             &path,
             1,
             "-",
@@ -125,7 +132,8 @@ pub fn parse_recording(
     loop {
         match rdr.read_byte_record(&mut rec) {
             Ok(false) => {
-                return Err(csv_err(Problem::Header, 
+                return Err(csv_err(
+                    Problem::Header,
                     &path,
                     1,
                     "-",
@@ -167,7 +175,7 @@ pub fn parse_recording(
     if opts.reference {
         for (k, name) in REF_REQUIRED.iter().enumerate() {
             ref_idx[k] = find(name).ok_or_else(|| {
-                csv_err(Problem::Header, 
+                csv_err(Problem::Header,
                     &path,
                     header_line,
                     "-",
@@ -183,7 +191,8 @@ pub fn parse_recording(
             (Some(a), Some(b), Some(c)) => eps_idx = Some([a, b, c]),
             (None, None, None) => {}
             _ => {
-                return Err(csv_err(Problem::Header, 
+                return Err(csv_err(
+                    Problem::Header,
                     &path,
                     header_line,
                     "-",
@@ -239,7 +248,8 @@ pub fn parse_recording(
             continue;
         }
         if rec.len() < width {
-            return Err(csv_err(Problem::Truncated, 
+            return Err(csv_err(
+                Problem::Truncated,
                 &path,
                 line,
                 format!("{} ({})", rec.len() + 1, names[rec.len()]),
@@ -257,13 +267,13 @@ pub fn parse_recording(
                 .and_then(|s| s.parse::<f64>().ok());
             match parsed {
                 Some(v) if v.is_finite() => Ok(v),
-                Some(v) => Err(csv_err(Problem::Value, 
+                Some(v) => Err(csv_err(Problem::Value,
                     &path,
                     line,
                     format!("{} ({})", k + 1, names[k]),
                     format!("expected a finite number, found '{v}' (NaN or infinite values are not accepted)"),
                 )),
-                None => Err(csv_err(Problem::Value, 
+                None => Err(csv_err(Problem::Value,
                     &path,
                     line,
                     format!("{} ({})", k + 1, names[k]),
@@ -278,7 +288,8 @@ pub fn parse_recording(
             } else {
                 "decreasing"
             };
-            return Err(csv_err(Problem::Time, 
+            return Err(csv_err(
+                Problem::Time,
                 &path,
                 line,
                 format!("{} (t)", idx[0] + 1),
@@ -315,7 +326,8 @@ pub fn parse_recording(
         }
     }
     if out.t_s.is_empty() {
-        return Err(csv_err(Problem::Empty, 
+        return Err(csv_err(
+            Problem::Empty,
             &path,
             header_line,
             "-",
@@ -339,7 +351,11 @@ pub fn parse_recording(
     }
     out.warnings = gaps.into_iter().map(|(_, w)| w).collect();
     let findings = super::sanity::scan(&out.gyro, &out.accel);
-    out.warnings.extend(super::sanity::describe(&findings, &out.t_s, &path.display().to_string()));
+    out.warnings.extend(super::sanity::describe(
+        &findings,
+        &out.t_s,
+        &path.display().to_string(),
+    ));
     Ok(out)
 }
 
@@ -393,7 +409,10 @@ fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<(usize, String)> {
                 ),
             ));
             if warnings.len() >= 20 {
-                warnings.push((i + 1, format!("{}: further gaps not listed", path.display())));
+                warnings.push((
+                    i + 1,
+                    format!("{}: further gaps not listed", path.display()),
+                ));
                 break;
             }
         }
@@ -403,7 +422,13 @@ fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<(usize, String)> {
 
 fn map_csv_error(path: &Path, e: &csv::Error) -> SessionError {
     let line = e.position().map_or(0, |p| p.line());
-    csv_err(Problem::Malformed, path, line, "-", format!("malformed CSV: {e}"))
+    csv_err(
+        Problem::Malformed,
+        path,
+        line,
+        "-",
+        format!("malformed CSV: {e}"),
+    )
 }
 
 #[cfg(test)]

@@ -432,13 +432,15 @@ where
                 .as_array()
                 .map(|a| a.iter().filter_map(Value::as_str).collect());
             let names = names.ok_or_else(|| {
-                bad_kind(Problem::Mount, 
+                bad_kind(
+                    Problem::Mount,
                     &name,
                     format!("run '{name}': mount must be a list like [\"+x\", \"+y\", \"+z\"]"),
                 )
             })?;
             Mount::parse(&names).map_err(|e| {
-                bad_kind(Problem::Mount, 
+                bad_kind(
+                    Problem::Mount,
                     names.first().copied().unwrap_or(&name),
                     format!("run '{name}': {e}"),
                 )
