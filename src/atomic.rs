@@ -12,20 +12,14 @@ pub fn write_atomic<F>(path: &Path, replace: bool, fill: F) -> std::io::Result<(
 where
     F: FnOnce(&mut BufWriter<&File>) -> std::io::Result<()>,
 {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !replace && path.exists() {
         return Err(std::io::Error::new(
             std::io::ErrorKind::AlreadyExists,
             format!("{} already exists", path.display()),
         ));
     }
-    let tmp = tempfile::Builder::new()
-        .prefix(".crosscal-")
-        .suffix(".tmp")
-        .tempfile_in(dir)?;
+    let tmp = tempfile::Builder::new().prefix(".crosscal-").suffix(".tmp").tempfile_in(dir)?;
     {
         let mut w = BufWriter::with_capacity(1 << 16, tmp.as_file());
         fill(&mut w)?;

@@ -9,11 +9,7 @@ use crate::session::{AccelUnit, GyroUnit, Run, Session};
 
 /// The true motion of every run of a session, in sensor axes.
 pub fn tracks(session: &Session, deriv: &DerivativeConfig) -> Vec<Track> {
-    session
-        .runs
-        .iter()
-        .map(|r| track(r, session.manifest.g_m_s2, deriv))
-        .collect()
+    session.runs.iter().map(|r| track(r, session.manifest.g_m_s2, deriv)).collect()
 }
 
 /// Pairs each run's outputs with its track, for the estimator.
@@ -34,11 +30,7 @@ pub fn fit_runs<'a>(session: &'a Session, tracks: &'a [Track]) -> Vec<FitRun<'a>
 }
 
 /// Fits a model to all runs of a session.
-pub fn fit_session(
-    session: &Session,
-    model: &Model,
-    opts: &FitOptions,
-) -> Result<Fit, EstimateError> {
+pub fn fit_session(session: &Session, model: &Model, opts: &FitOptions) -> Result<Fit, EstimateError> {
     let tr = tracks(session, &DerivativeConfig::default());
     fit(model, &fit_runs(session, &tr), opts)
 }
@@ -58,9 +50,7 @@ pub fn correct_run(cal: &Calibration, run: &Run, mode: Mode) -> Result<Corrected
     let temp = run.rec.temp_c.as_deref();
     match mode {
         Mode::Offline => correct_offline(cal, &run.rec.t_s, &run.rec.gyro, &run.rec.accel, temp),
-        Mode::Streaming => {
-            correct_streaming(cal, &run.rec.t_s, &run.rec.gyro, &run.rec.accel, temp)
-        }
+        Mode::Streaming => correct_streaming(cal, &run.rec.t_s, &run.rec.gyro, &run.rec.accel, temp),
     }
 }
 
@@ -72,10 +62,7 @@ pub fn check_session(
     thresholds: Thresholds,
 ) -> Result<CheckReport, CorrectError> {
     let tr = tracks(session, &DerivativeConfig::default());
-    let raw = [
-        session.manifest.units.gyro == GyroUnit::Raw,
-        session.manifest.units.accel == AccelUnit::Raw,
-    ];
+    let raw = [session.manifest.units.gyro == GyroUnit::Raw, session.manifest.units.accel == AccelUnit::Raw];
     let mut runs = Vec::with_capacity(session.runs.len());
     for (run, track) in session.runs.iter().zip(&tr) {
         let corrected = correct_run(cal, run, mode)?;

@@ -63,10 +63,7 @@ fn expect_fit_error(dir: &Path, extra: &[&str], code: i32, words: &[&str]) {
     for w in words {
         assert!(err.contains(w), "missing '{w}' in: {err}");
     }
-    assert!(
-        !dir.join("calib-profiles").exists(),
-        "a failed fit wrote a profile"
-    );
+    assert!(!dir.join("calib-profiles").exists(), "a failed fit wrote a profile");
 }
 
 macro_rules! bad_csv_case {
@@ -82,12 +79,7 @@ macro_rules! bad_csv_case {
     };
 }
 
-bad_csv_case!(
-    empty_file,
-    |d| edit_csv(d, |_| String::new()),
-    4,
-    ["cone+10.csv:1", "empty"]
-);
+bad_csv_case!(empty_file, |d| edit_csv(d, |_| String::new()), 4, ["cone+10.csv:1", "empty"]);
 bad_csv_case!(
     header_missing,
     |d| edit_csv(d, |t| t.lines().skip(1).collect::<Vec<_>>().join("\n")),
@@ -96,11 +88,7 @@ bad_csv_case!(
 );
 bad_csv_case!(
     column_absent,
-    |d| edit_csv(d, |t| t.replacen(
-        "t,gx,gy,gz,ax,ay,az",
-        "t,gx,gy,gz,ax,ay,ac",
-        1
-    )),
+    |d| edit_csv(d, |t| t.replacen("t,gx,gy,gz,ax,ay,az", "t,gx,gy,gz,ax,ay,ac", 1)),
     5,
     ["cone+10.csv:1", "'az' is absent"]
 );
@@ -110,18 +98,8 @@ bad_csv_case!(
     6,
     ["cone+10.csv:8:3 (gy)", "expected a number", "'1.2.3'"]
 );
-bad_csv_case!(
-    nan_value,
-    |d| set_field(d, 9, 5, "NaN"),
-    6,
-    ["cone+10.csv:11:6 (ay)", "finite"]
-);
-bad_csv_case!(
-    infinite_value,
-    |d| set_field(d, 3, 6, "inf"),
-    6,
-    ["cone+10.csv:5:7 (az)", "finite"]
-);
+bad_csv_case!(nan_value, |d| set_field(d, 9, 5, "NaN"), 6, ["cone+10.csv:11:6 (ay)", "finite"]);
+bad_csv_case!(infinite_value, |d| set_field(d, 3, 6, "inf"), 6, ["cone+10.csv:5:7 (az)", "finite"]);
 bad_csv_case!(
     truncated_last_row,
     |d| edit_csv(d, |t| {
@@ -133,18 +111,8 @@ bad_csv_case!(
     7,
     ["cone+10.csv:41", "truncated"]
 );
-bad_csv_case!(
-    duplicate_t,
-    |d| set_field(d, 12, 0, "0.55"),
-    8,
-    ["cone+10.csv:14:1 (t)", "duplicate"]
-);
-bad_csv_case!(
-    decreasing_t,
-    |d| set_field(d, 12, 0, "0.3"),
-    8,
-    ["cone+10.csv:14:1 (t)", "decreasing"]
-);
+bad_csv_case!(duplicate_t, |d| set_field(d, 12, 0, "0.55"), 8, ["cone+10.csv:14:1 (t)", "duplicate"]);
+bad_csv_case!(decreasing_t, |d| set_field(d, 12, 0, "0.3"), 8, ["cone+10.csv:14:1 (t)", "decreasing"]);
 
 #[test]
 fn gap_is_a_warning_or_with_strict_an_error() {
@@ -162,10 +130,7 @@ fn gap_is_a_warning_or_with_strict_an_error() {
     });
     let (c, out, _) = run_in(d.path(), &["fit", "s/session.json", "--dry-run"]);
     assert_eq!(c, 0, "{out}");
-    assert!(
-        out.contains("warning") && out.contains("gap in t") && out.contains("sample 21"),
-        "{out}"
-    );
+    assert!(out.contains("warning") && out.contains("gap in t") && out.contains("sample 21"), "{out}");
     expect_fit_error(d.path(), &["--strict"], 9, &["cone+10.csv:22:1 (t)", "gap"]);
 }
 
@@ -174,12 +139,7 @@ fn unknown_unit() {
     let d = tempfile::tempdir().unwrap();
     session(d.path());
     edit_manifest(d.path(), |t| t.replace("\"deg/s\"", "\"dps\""));
-    expect_fit_error(
-        d.path(),
-        &[],
-        10,
-        &["session.json:", "'dps'", "deg/s, rad/s, raw"],
-    );
+    expect_fit_error(d.path(), &[], 10, &["session.json:", "'dps'", "deg/s, rad/s, raw"]);
 }
 
 #[test]
@@ -194,19 +154,8 @@ fn manifest_not_json() {
 fn unknown_session_format() {
     let d = tempfile::tempdir().unwrap();
     session(d.path());
-    edit_manifest(d.path(), |t| {
-        t.replace("crosscal-session/1", "crosscal-session/7")
-    });
-    expect_fit_error(
-        d.path(),
-        &[],
-        12,
-        &[
-            "session.json",
-            "crosscal-session/7",
-            "unknown session format",
-        ],
-    );
+    edit_manifest(d.path(), |t| t.replace("crosscal-session/1", "crosscal-session/7"));
+    expect_fit_error(d.path(), &[], 12, &["session.json", "crosscal-session/7", "unknown session format"]);
 }
 
 #[test]
@@ -214,12 +163,7 @@ fn missing_run_file() {
     let d = tempfile::tempdir().unwrap();
     session(d.path());
     std::fs::remove_file(csv_path(d.path())).unwrap();
-    expect_fit_error(
-        d.path(),
-        &[],
-        13,
-        &["session.json:", "cone+10.csv", "does not exist"],
-    );
+    expect_fit_error(d.path(), &[], 13, &["session.json:", "cone+10.csv", "does not exist"]);
 }
 
 #[test]
@@ -227,24 +171,14 @@ fn mount_not_a_rotation() {
     let d = tempfile::tempdir().unwrap();
     session(d.path());
     edit_manifest(d.path(), |t| t.replacen("\"+y\"", "\"-y\"", 1));
-    expect_fit_error(
-        d.path(),
-        &[],
-        14,
-        &["session.json:", "not a rotation", "mirror"],
-    );
+    expect_fit_error(d.path(), &[], 14, &["session.json:", "not a rotation", "mirror"]);
 }
 
 #[test]
 fn unidentifiable_model_with_strict() {
     let d = tempfile::tempdir().unwrap();
     session(d.path());
-    expect_fit_error(
-        d.path(),
-        &["--strict"],
-        17,
-        &["cannot identify", "gyro.e_xz", "re-mount"],
-    );
+    expect_fit_error(d.path(), &["--strict"], 17, &["cannot identify", "gyro.e_xz", "re-mount"]);
 }
 
 #[test]
@@ -253,56 +187,23 @@ fn profile_of_unknown_version_or_other_unit() {
     session(d.path());
     let (c, out, err) = run_in(d.path(), &["fit", "s/session.json", "--out", "p"]);
     assert_eq!(c, 0, "{out}{err}");
-    let prof = std::fs::read_dir(d.path().join("p/I1426-0042"))
-        .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path();
+    let prof = std::fs::read_dir(d.path().join("p/I1426-0042")).unwrap().next().unwrap().unwrap().path();
     let text = std::fs::read_to_string(&prof).unwrap();
-    std::fs::write(
-        d.path().join("future.json"),
-        text.replace("crosscal-profile/1", "crosscal-profile/2"),
-    )
-    .unwrap();
-    let (c, _, err) = run_in(
-        d.path(),
-        &["check", "--profile", "future.json", "s/session.json"],
-    );
+    std::fs::write(d.path().join("future.json"), text.replace("crosscal-profile/1", "crosscal-profile/2")).unwrap();
+    let (c, _, err) = run_in(d.path(), &["check", "--profile", "future.json", "s/session.json"]);
     assert_eq!(c, 15, "{err}");
     assert!(
-        err.contains("future.json")
-            && err.contains("crosscal-profile/2")
-            && err.contains("not supported"),
+        err.contains("future.json") && err.contains("crosscal-profile/2") && err.contains("not supported"),
         "{err}"
     );
-    let (c, _, err) = run_in(
-        d.path(),
-        &[
-            "correct",
-            "--profile",
-            "future.json",
-            "s/cone+10.csv",
-            "-o",
-            "x.csv",
-        ],
-    );
+    let (c, _, err) = run_in(d.path(), &["correct", "--profile", "future.json", "s/cone+10.csv", "-o", "x.csv"]);
     assert_eq!(c, 15, "{err}");
     assert!(!d.path().join("x.csv").exists());
-    std::fs::write(
-        d.path().join("other.json"),
-        text.replace("\"serial\": \"I1426-0042\"", "\"serial\": \"OTHER-7\""),
-    )
-    .unwrap();
-    let (c, _, err) = run_in(
-        d.path(),
-        &["check", "--profile", "other.json", "s/session.json"],
-    );
+    std::fs::write(d.path().join("other.json"), text.replace("\"serial\": \"I1426-0042\"", "\"serial\": \"OTHER-7\""))
+        .unwrap();
+    let (c, _, err) = run_in(d.path(), &["check", "--profile", "other.json", "s/session.json"]);
     assert_eq!(c, 16, "{err}");
-    assert!(
-        err.contains("other.json") && err.contains("OTHER-7") && err.contains("I1426-0042"),
-        "{err}"
-    );
+    assert!(err.contains("other.json") && err.contains("OTHER-7") && err.contains("I1426-0042"), "{err}");
 }
 
 #[test]
@@ -310,8 +211,5 @@ fn unreadable_file() {
     let d = tempfile::tempdir().unwrap();
     let (c, _, err) = run_in(d.path(), &["fit", "nowhere/session.json"]);
     assert_eq!(c, 3, "{err}");
-    assert!(
-        err.contains("nowhere/session.json") && err.contains("cannot read"),
-        "{err}"
-    );
+    assert!(err.contains("nowhere/session.json") && err.contains("cannot read"), "{err}");
 }

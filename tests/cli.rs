@@ -4,15 +4,7 @@ use crate::common::run_in;
 use std::path::Path;
 
 fn simulate(dir: &Path, extra: &[&str]) {
-    let mut args = vec![
-        "simulate",
-        "--preset",
-        "paper",
-        "-o",
-        "demo",
-        "--duration",
-        "12",
-    ];
+    let mut args = vec!["simulate", "--preset", "paper", "-o", "demo", "--duration", "12"];
     args.extend_from_slice(extra);
     let (code, out, err) = run_in(dir, &args);
     assert_eq!(code, 0, "{out}{err}");
@@ -32,10 +24,17 @@ fn simulate_fit_correct_check() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
     simulate(dir, &["--gyro-noise", "0.002", "--accel-noise", "2e-5"]);
-    let (code, out, err) = run_in(
-        dir,
-        &["fit", "demo/session.json", "--out", "calib-profiles/"],
-    );
+    let snapshot = || {
+        let mut v: Vec<(std::path::PathBuf, Vec<u8>)> = std::fs::read_dir(dir.join("demo"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .map(|p| (p.clone(), std::fs::read(&p).unwrap()))
+            .collect();
+        v.sort();
+        v
+    };
+    let before = snapshot();
+    let (code, out, err) = run_in(dir, &["fit", "demo/session.json", "--out", "calib-profiles/"]);
     assert_eq!(code, 0, "{out}{err}");
     assert!(out.contains("gyro.c_xy") && out.contains(" ± "), "{out}");
     assert!(out.contains("profile written to"), "{out}");
@@ -45,97 +44,41 @@ fn simulate_fit_correct_check() {
 
     // A second fit keeps the first profile.
     let first = std::fs::read(&p[0]).unwrap();
-    let (code, _, _) = run_in(
-        dir,
-        &["fit", "demo/session.json", "--out", "calib-profiles/"],
-    );
+    let (code, _, _) = run_in(dir, &["fit", "demo/session.json", "--out", "calib-profiles/"]);
     assert_eq!(code, 0);
     assert_eq!(profiles(dir).len(), 2);
     assert_eq!(std::fs::read(&p[0]).unwrap(), first);
 
-    let (code, out, err) = run_in(
-        dir,
-        &[
-            "correct",
-            "--profile",
-            &prof,
-            "demo/cone+10.csv",
-            "-o",
-            "corrected.csv",
-        ],
-    );
+    let (code, out, err) = run_in(dir, &["correct", "--profile", &prof, "demo/cone+10.csv", "-o", "corrected.csv"]);
     assert_eq!(code, 0, "{out}{err}");
     let text = std::fs::read_to_string(dir.join("corrected.csv")).unwrap();
     assert!(text.starts_with("t,gx,gy,gz,ax,ay,az\n"));
     assert_eq!(text.lines().count(), 1 + 1200);
     // The corrected z rate of the nominal cone+10 run is ω_s (1 − cos α) = 0.1519 °/s.
-    let gz: Vec<f64> = text
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').nth(3).unwrap().parse().unwrap())
-        .collect();
+    let gz: Vec<f64> = text.lines().skip(1).map(|l| l.split(',').nth(3).unwrap().parse().unwrap()).collect();
     let mean = gz.iter().sum::<f64>() / gz.len() as f64;
     let expect = 10.0 * (1.0 - 10f64.to_radians().cos());
     assert!((mean - expect).abs() < 2e-4, "{mean} vs {expect}");
 
     // Never overwrite the output unless asked.
-    let (code, _, err) = run_in(
-        dir,
-        &[
-            "correct",
-            "--profile",
-            &prof,
-            "demo/cone+10.csv",
-            "-o",
-            "corrected.csv",
-        ],
-    );
+    let (code, _, err) = run_in(dir, &["correct", "--profile", &prof, "demo/cone+10.csv", "-o", "corrected.csv"]);
     assert_eq!(code, 2);
     assert!(err.contains("already exists"), "{err}");
 
     let (code, out, err) = run_in(dir, &["check", "--profile", &prof, "demo/session.json"]);
     assert_eq!(code, 0, "{out}{err}");
     assert!(out.contains("PASS") && out.contains("reduction"), "{out}");
-    let (code, out, _) = run_in(
-        dir,
-        &["check", "--profile", &prof, "demo/session.json", "--json"],
-    );
+    let (code, out, _) = run_in(dir, &["check", "--profile", &prof, "demo/session.json", "--json"]);
     assert_eq!(code, 0);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["pass"], serde_json::Value::Bool(true));
     assert_eq!(v["summary"].as_array().unwrap().len(), 6);
     // A model that leaves out a real coupling leaves a systematic error: exit code 1.
-    let (code, out, err) = run_in(
-        dir,
-        &[
-            "fit",
-            "demo/session.json",
-            "--disable",
-            "gyro.c_xy",
-            "--out",
-            "bad",
-        ],
-    );
+    let (code, out, err) = run_in(dir, &["fit", "demo/session.json", "--disable", "gyro.c_xy", "--out", "bad"]);
     assert_eq!(code, 0, "{out}{err}");
-    assert!(
-        out.contains("gyro.c_xy") && out.contains("(fixed)"),
-        "{out}"
-    );
-    let bad = std::fs::read_dir(dir.join("bad/I1426-0042"))
-        .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path();
-    let (code, out, _) = run_in(
-        dir,
-        &[
-            "check",
-            "--profile",
-            bad.to_str().unwrap(),
-            "demo/session.json",
-        ],
-    );
+    assert!(out.contains("gyro.c_xy") && out.contains("(fixed)"), "{out}");
+    let bad = std::fs::read_dir(dir.join("bad/I1426-0042")).unwrap().next().unwrap().unwrap().path();
+    let (code, out, _) = run_in(dir, &["check", "--profile", bad.to_str().unwrap(), "demo/session.json"]);
     assert_eq!(code, 1, "{out}");
     assert!(out.contains("FAIL") && out.contains("NO"), "{out}");
     // Nothing the user gave was modified.
@@ -147,26 +90,12 @@ fn demo_prints_the_paper_table() {
     let d = tempfile::tempdir().unwrap();
     let (code, out, err) = run_in(d.path(), &["demo"]);
     assert_eq!(code, 0, "{out}{err}");
-    for word in [
-        "axis",
-        "before",
-        "after",
-        "reduction",
-        "paper",
-        "pass",
-        "11 % -> 0.4 %",
-        "0.25 % -> 0.000006 %",
-        "DEMO PASS",
-    ] {
+    for word in
+        ["axis", "before", "after", "reduction", "paper", "pass", "11 % -> 0.4 %", "0.25 % -> 0.000006 %", "DEMO PASS"]
+    {
         assert!(out.contains(word), "missing '{word}' in\n{out}");
     }
-    assert_eq!(
-        out.lines()
-            .filter(|l| l.starts_with("gyro ") || l.starts_with("accel "))
-            .count(),
-        12,
-        "{out}"
-    );
+    assert_eq!(out.lines().filter(|l| l.starts_with("gyro ") || l.starts_with("accel ")).count(), 12, "{out}");
 }
 
 #[test]
@@ -187,10 +116,7 @@ fn fit_names_unidentifiable_terms_and_still_writes_a_profile() {
 fn bad_input_gives_file_line_column_and_its_exit_code() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
-    simulate(
-        dir,
-        &["--mounts", "1", "--rates", "10", "--cone-angles", "10"],
-    );
+    simulate(dir, &["--mounts", "1", "--rates", "10", "--cone-angles", "10"]);
     let csv = dir.join("demo/cone+10.csv");
     let mut text = std::fs::read_to_string(&csv).unwrap();
     let lines: Vec<&str> = text.lines().collect();
@@ -201,14 +127,8 @@ fn bad_input_gives_file_line_column_and_its_exit_code() {
     std::fs::write(&csv, text).unwrap();
     let (code, out, err) = run_in(dir, &["fit", "demo/session.json"]);
     assert_eq!(code, 6, "{out}{err}");
-    assert!(
-        err.contains("cone+10.csv:6:4 (gz)") && err.contains("'oops'"),
-        "{err}"
-    );
-    assert!(
-        !dir.join("calib-profiles").exists(),
-        "a failed fit must not write anything"
-    );
+    assert!(err.contains("cone+10.csv:6:4 (gz)") && err.contains("'oops'"), "{err}");
+    assert!(!dir.join("calib-profiles").exists(), "a failed fit must not write anything");
 
     let (code, _, err) = run_in(dir, &["fit", "missing.json"]);
     assert_eq!(code, 3);

@@ -22,11 +22,7 @@ pub fn bin() -> std::path::PathBuf {
 
 /// Runs the binary in a folder; returns (exit code, stdout, stderr).
 pub fn run_in(dir: &std::path::Path, args: &[&str]) -> (i32, String, String) {
-    let out = std::process::Command::new(bin())
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .expect("run crosscal");
+    let out = std::process::Command::new(bin()).args(args).current_dir(dir).output().expect("run crosscal");
     (
         out.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&out.stdout).into_owned(),

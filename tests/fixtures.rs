@@ -36,11 +36,7 @@ fn fixture_is_reproduced_by_the_simulator() {
         let p = entry.unwrap().path();
         let name = p.file_name().unwrap();
         let generated = std::fs::read(d.path().join("gen").join(name)).unwrap();
-        assert!(
-            std::fs::read(&p).unwrap() == generated,
-            "{} differs from the simulator's output",
-            p.display()
-        );
+        assert!(std::fs::read(&p).unwrap() == generated, "{} differs from the simulator's output", p.display());
     }
 }
 
@@ -54,11 +50,6 @@ fn fixture_fits_within_four_standard_errors() {
     for c in fit.gyro.coefficients.iter().chain(&fit.accel.coefficients) {
         let t = truth.value(&c.name).unwrap();
         let se = c.std_error.unwrap();
-        assert!(
-            (c.value - t).abs() < 4.0 * se,
-            "{} = {} ± {se} (true {t})",
-            c.name,
-            c.value
-        );
+        assert!((c.value - t).abs() < 4.0 * se, "{} = {} ± {se} (true {t})", c.name, c.value);
     }
 }

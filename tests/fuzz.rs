@@ -51,10 +51,7 @@ fn mutate(base: &str, edits: &[(f64, u8, u8)]) -> Vec<u8> {
 
 /// Bytes that matter to the readers, favoured so mutations hit interesting cases.
 fn interesting_byte() -> impl Strategy<Value = u8> {
-    prop_oneof![
-        prop::sample::select(b",.-+eE0123456789\n\r#\"{}[]:nNaIifx ".to_vec()),
-        any::<u8>(),
-    ]
+    prop_oneof![prop::sample::select(b",.-+eE0123456789\n\r#\"{}[]:nNaIifx ".to_vec()), any::<u8>(),]
 }
 
 fn edits() -> impl Strategy<Value = Vec<(f64, u8, u8)>> {
@@ -62,18 +59,11 @@ fn edits() -> impl Strategy<Value = Vec<(f64, u8, u8)>> {
 }
 
 fn check_recording(bytes: &[u8], reference: bool) {
-    let opts = ReadOptions {
-        reference,
-        strict: false,
-    };
+    let opts = ReadOptions { reference, strict: false };
     if let Ok(r) = parse_recording(Path::new("x.csv"), bytes, &Units::default(), 9.80665, opts) {
         assert!(!r.is_empty());
         assert!(r.t_s.windows(2).all(|w| w[1] > w[0]));
-        assert!(r
-            .gyro
-            .iter()
-            .chain(&r.accel)
-            .all(|v| v.iter().all(|x| x.is_finite())));
+        assert!(r.gyro.iter().chain(&r.accel).all(|v| v.iter().all(|x| x.is_finite())));
         assert_eq!(r.gyro.len(), r.t_s.len());
     }
 }

@@ -11,24 +11,11 @@ fn without_remounts_e_xz_is_unidentifiable_and_the_rest_fits() {
     cfg.runs = conic_plan(&[10.0, -10.0, 20.0], &[10.0, 20.0], &cyclic_mounts(1), 36.0);
     let session = cfg.generate();
     let fit = fit_session(&session, &Model::default_model(), &FitOptions::default()).unwrap();
-    let held: Vec<&str> = fit
-        .gyro
-        .unidentifiable
-        .iter()
-        .map(|u| u.held.as_str())
-        .collect();
+    let held: Vec<&str> = fit.gyro.unidentifiable.iter().map(|u| u.held.as_str()).collect();
     for name in ["gyro.e_xz", "gyro.e_yz", "gyro.e_zz"] {
         assert!(held.contains(&name), "{name} not reported: {held:?}");
-        assert_eq!(
-            fit.gyro.get(name).unwrap().status,
-            CoefStatus::Unidentifiable
-        );
-        let u = fit
-            .gyro
-            .unidentifiable
-            .iter()
-            .find(|u| u.held == name)
-            .unwrap();
+        assert_eq!(fit.gyro.get(name).unwrap().status, CoefStatus::Unidentifiable);
+        let u = fit.gyro.unidentifiable.iter().find(|u| u.held == name).unwrap();
         assert!(u.remedy.contains("re-mount"), "{}", u.remedy);
     }
     assert_eq!(held.len(), 3, "{held:?}");
@@ -37,12 +24,7 @@ fn without_remounts_e_xz_is_unidentifiable_and_the_rest_fits() {
     for c in fit.gyro.coefficients.iter().chain(&fit.accel.coefficients) {
         if c.status == CoefStatus::Fitted {
             let truth = cfg.truth.value(&c.name).unwrap();
-            assert!(
-                (c.value - truth).abs() < 1e-9,
-                "{} = {} (true {truth})",
-                c.name,
-                c.value
-            );
+            assert!((c.value - truth).abs() < 1e-9, "{} = {} (true {truth})", c.name, c.value);
         }
     }
 }
@@ -53,27 +35,13 @@ fn single_run_names_every_lost_term_with_a_remedy() {
     cfg.runs.truncate(1);
     let session = cfg.generate();
     let fit = fit_session(&session, &Model::default_model(), &FitOptions::default()).unwrap();
-    let held: Vec<&str> = fit
-        .gyro
-        .unidentifiable
-        .iter()
-        .map(|u| u.held.as_str())
-        .collect();
+    let held: Vec<&str> = fit.gyro.unidentifiable.iter().map(|u| u.held.as_str()).collect();
     assert!(held.contains(&"gyro.e_xz"), "{held:?}");
     // One run: ε is a fixed multiple of ω and ω_z, a_z are constant, so biases and ε terms
     // blur with the rate couplings; each lost combination is named with a remedy.
-    assert!(
-        fit.gyro.unidentifiable.len() >= 6,
-        "{:?}",
-        fit.gyro.unidentifiable
-    );
+    assert!(fit.gyro.unidentifiable.len() >= 6, "{:?}", fit.gyro.unidentifiable);
     assert!(!fit.accel.unidentifiable.is_empty());
-    for u in fit
-        .gyro
-        .unidentifiable
-        .iter()
-        .chain(&fit.accel.unidentifiable)
-    {
+    for u in fit.gyro.unidentifiable.iter().chain(&fit.accel.unidentifiable) {
         assert!(!u.remedy.is_empty() && !u.reason.is_empty());
     }
     // The fit still returns finite values and standard errors for what it did fit.
@@ -91,38 +59,16 @@ fn a_second_rate_or_direction_separates_epsilon_from_rate_coupling() {
     // alias with the rate couplings (and ε_z ≡ 0).
     let mut cfg = SimConfig::paper();
     cfg.runs = conic_plan(&[10.0], &[10.0, 20.0], &cyclic_mounts(1), 36.0);
-    let fit = fit_session(
-        &cfg.generate(),
-        &Model::default_model(),
-        &FitOptions::default(),
-    )
-    .unwrap();
+    let fit = fit_session(&cfg.generate(), &Model::default_model(), &FitOptions::default()).unwrap();
     assert!(
-        fit.gyro
-            .unidentifiable
-            .iter()
-            .any(|u| u.remedy.contains("another stand rate")),
+        fit.gyro.unidentifiable.iter().any(|u| u.remedy.contains("another stand rate")),
         "{:?}",
         fit.gyro.unidentifiable
     );
     // The opposite direction breaks the tie; only the ε_z terms remain (no re-mount).
     cfg.runs = conic_plan(&[10.0, -10.0], &[10.0, 20.0], &cyclic_mounts(1), 36.0);
-    let fit = fit_session(
-        &cfg.generate(),
-        &Model::default_model(),
-        &FitOptions::default(),
-    )
-    .unwrap();
-    let held: Vec<&str> = fit
-        .gyro
-        .unidentifiable
-        .iter()
-        .map(|u| u.held.as_str())
-        .collect();
+    let fit = fit_session(&cfg.generate(), &Model::default_model(), &FitOptions::default()).unwrap();
+    let held: Vec<&str> = fit.gyro.unidentifiable.iter().map(|u| u.held.as_str()).collect();
     assert_eq!(held.len(), 3, "{held:?}");
-    assert!(
-        held.iter()
-            .all(|h| h.ends_with('z') && h.starts_with("gyro.e_")),
-        "{held:?}"
-    );
+    assert!(held.iter().all(|h| h.ends_with('z') && h.starts_with("gyro.e_")), "{held:?}");
 }

@@ -12,29 +12,16 @@ use crosscal::simulate::{SimConfig, UnitTruth};
 #[test]
 fn forward_model_is_paper_eq3_and_eq4() {
     let truth = UnitTruth::paper();
-    let s = State {
-        t_s: 0.0,
-        w: [0.3, -0.7, 0.11],
-        e: [1.3, 0.4, -2.1],
-        a: [0.5, -9.0, 3.0],
-        temp_c: f64::NAN,
-    };
+    let s = State { t_s: 0.0, w: [0.3, -0.7, 0.11], e: [1.3, 0.4, -2.1], a: [0.5, -9.0, 3.0], temp_c: f64::NAN };
     let gt = truth.model.terms(SensorKind::Gyro);
     let u = forward(&gt, &truth.term_values(SensorKind::Gyro), &s);
     let (w, e) = (s.w, s.e);
-    let expect = [
-        w[0] + 0.01 * w[1] + 0.001 * e[2],
-        w[1] + 0.01 * w[2] + 0.001 * e[0],
-        w[2] + 0.01 * w[0] + 0.001 * e[1],
-    ];
+    let expect =
+        [w[0] + 0.01 * w[1] + 0.001 * e[2], w[1] + 0.01 * w[2] + 0.001 * e[0], w[2] + 0.01 * w[0] + 0.001 * e[1]];
     let at = truth.model.terms(SensorKind::Accel);
     let ua = forward(&at, &truth.term_values(SensorKind::Accel), &s);
     let a = s.a;
-    let expect_a = [
-        a[0] + 0.01 * (a[1] + a[2]),
-        a[1] + 0.01 * (a[0] + a[2]),
-        a[2] + 0.01 * (a[0] + a[1]),
-    ];
+    let expect_a = [a[0] + 0.01 * (a[1] + a[2]), a[1] + 0.01 * (a[0] + a[2]), a[2] + 0.01 * (a[0] + a[1])];
     for i in 0..3 {
         assert!((u[i] - expect[i]).abs() < 1e-15, "gyro {i}");
         assert!((ua[i] - expect_a[i]).abs() < 1e-14, "accel {i}");
@@ -51,12 +38,7 @@ fn paper_preset_reproduces_the_paper_and_beats_it() {
     // Fitted C_w, C_e, K (and biases) match truth to 1e-9.
     for c in fit.gyro.coefficients.iter().chain(&fit.accel.coefficients) {
         let truth = cfg.truth.value(&c.name).expect("truth");
-        assert!(
-            (c.value - truth).abs() <= 1e-9,
-            "{} = {} (true {truth})",
-            c.name,
-            c.value
-        );
+        assert!((c.value - truth).abs() <= 1e-9, "{} = {} (true {truth})", c.name, c.value);
     }
     assert!(fit.gyro.unidentifiable.is_empty() && fit.accel.unidentifiable.is_empty());
 
@@ -72,28 +54,13 @@ fn paper_preset_reproduces_the_paper_and_beats_it() {
     let (sa, ca) = 10f64.to_radians().sin_cos();
     let gyro_z = 100.0 * sa * (0.01 - 0.001 * 10f64.to_radians()) / (1.0 - ca);
     let accel_z = 100.0 * 0.01 * 2f64.sqrt() * sa / ca;
-    let gz = rows
-        .iter()
-        .find(|r| r.sensor == SensorKind::Gyro && r.axis == 'z')
-        .unwrap();
-    let az = rows
-        .iter()
-        .find(|r| r.sensor == SensorKind::Accel && r.axis == 'z')
-        .unwrap();
+    let gz = rows.iter().find(|r| r.sensor == SensorKind::Gyro && r.axis == 'z').unwrap();
+    let az = rows.iter().find(|r| r.sensor == SensorKind::Accel && r.axis == 'z').unwrap();
     let gb = gz.before_pct.unwrap();
     let ab = az.before_pct.unwrap();
-    assert!(
-        (gb - gyro_z).abs() <= 0.02 * gyro_z,
-        "gyro z before {gb} vs {gyro_z}"
-    );
-    assert!(
-        (ab - accel_z).abs() <= 0.02 * accel_z,
-        "accel z before {ab} vs {accel_z}"
-    );
-    assert!(
-        (gb - 11.0).abs() < 0.5 && (ab - 0.25).abs() < 0.01,
-        "paper: 11 % and 0.25 %"
-    );
+    assert!((gb - gyro_z).abs() <= 0.02 * gyro_z, "gyro z before {gb} vs {gyro_z}");
+    assert!((ab - accel_z).abs() <= 0.02 * accel_z, "accel z before {ab} vs {accel_z}");
+    assert!((gb - 11.0).abs() < 0.5 && (ab - 0.25).abs() < 0.01, "paper: 11 % and 0.25 %");
 
     for r in &rows {
         let after = r.offline_pct.unwrap();
@@ -102,12 +69,7 @@ fn paper_preset_reproduces_the_paper_and_beats_it() {
             SensorKind::Gyro => {
                 assert!(after <= 1e-4, "gyro {} after {after} %", r.axis);
                 assert!(red >= 1e5, "gyro {} reduction {red}", r.axis);
-                assert!(
-                    r.streaming_pct.unwrap() <= 0.4 / 100.0,
-                    "gyro {} streaming {:?}",
-                    r.axis,
-                    r.streaming_pct
-                );
+                assert!(r.streaming_pct.unwrap() <= 0.4 / 100.0, "gyro {} streaming {:?}", r.axis, r.streaming_pct);
             }
             SensorKind::Accel => {
                 assert!(after <= 1e-6, "accel {} after {after} %", r.axis);
@@ -143,14 +105,7 @@ fn paper_model_fits_the_paper_unit() {
         let truth = cfg.truth.value(&c.name).unwrap();
         assert!((c.value - truth).abs() <= 1e-9, "{} = {}", c.name, c.value);
     }
-    assert_eq!(
-        fit.gyro
-            .coefficients
-            .iter()
-            .filter(|c| c.status == crosscal::estimate::CoefStatus::Fitted)
-            .count(),
-        9
-    );
+    assert_eq!(fit.gyro.coefficients.iter().filter(|c| c.status == crosscal::estimate::CoefStatus::Fitted).count(), 9);
 }
 
 /// A plain inverse that ignores ε leaves about 0.2 % on the paper unit: the ε estimate

@@ -43,15 +43,10 @@ fn write_read_correct_is_identical_and_never_overwrites() {
 fn unknown_profile_format_is_refused() {
     let session = SimConfig::paper().generate();
     let (_, profile, _) = fit_and_calibrate(&session, &Model::default_model());
-    let text = profile
-        .to_json()
-        .replace("crosscal-profile/1", "crosscal-profile/9");
+    let text = profile.to_json().replace("crosscal-profile/1", "crosscal-profile/9");
     let e = Profile::from_json(std::path::Path::new("p.json"), &text).unwrap_err();
     let m = e.to_string();
-    assert!(
-        m.contains("crosscal-profile/9") && m.contains("p.json"),
-        "{m}"
-    );
+    assert!(m.contains("crosscal-profile/9") && m.contains("p.json"), "{m}");
     let e = Profile::from_json(std::path::Path::new("p.json"), "{\"format\": 3").unwrap_err();
     assert!(e.to_string().starts_with("p.json:1:"), "{e}");
 }

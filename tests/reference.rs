@@ -22,13 +22,12 @@ fn write_reference_session(dir: &std::path::Path) -> UnitTruth {
     let mounts = [["+x", "+y", "+z"], ["+y", "+z", "+x"], ["+z", "+x", "+y"]];
     for (mi, names) in mounts.iter().enumerate() {
         let mount = Mount::parse(names).unwrap();
-        for (ri, &(alpha, rate)) in [(10.0, 10.0), (10.0, -10.0), (20.0, 20.0)]
-            .iter()
-            .enumerate()
-        {
+        for (ri, &(alpha, rate)) in [(10.0, 10.0), (10.0, -10.0), (20.0, 20.0)].iter().enumerate() {
             let c = Conic::from_deg(alpha, rate, 15.0);
             let name = format!("ref{mi}{ri}");
-            let mut text = String::from("# reference columns, jittered clock\nt,gx,gy,gz,ax,ay,az,wx_ref,wy_ref,wz_ref,ax_ref,ay_ref,az_ref\n");
+            let mut text = String::from(
+                "# reference columns, jittered clock\nt,gx,gy,gz,ax,ay,az,wx_ref,wy_ref,wz_ref,ax_ref,ay_ref,az_ref\n",
+            );
             for k in 0..3600 {
                 // Irregular sampling: 10 ms ± up to 3 ms, deterministic.
                 let t = k as f64 * 0.01 + 0.003 * ((k * 7919 % 13) as f64 / 13.0 - 0.5);
@@ -73,20 +72,10 @@ fn write_reference_session(dir: &std::path::Path) -> UnitTruth {
         let name = format!("static{i}");
         let mut text = String::from("t,gx,gy,gz,ax,ay,az\n");
         let a_stand = V3::<Stand>::new([up[0] * G, up[1] * G, up[2] * G]);
-        let s = State {
-            a: Mount::identity().to_sensor(a_stand).xyz,
-            ..Default::default()
-        };
+        let s = State { a: Mount::identity().to_sensor(a_stand).xyz, ..Default::default() };
         let ua = forward(&at, &av, &s);
         for k in 0..500 {
-            let _ = writeln!(
-                text,
-                "{},0,0,0,{},{},{}",
-                k as f64 * 0.01,
-                ua[0] / G,
-                ua[1] / G,
-                ua[2] / G
-            );
+            let _ = writeln!(text, "{},0,0,0,{},{},{}", k as f64 * 0.01, ua[0] / G, ua[1] / G, ua[2] / G);
         }
         std::fs::write(dir.join(format!("{name}.csv")), text).unwrap();
         runs.push(format!(
@@ -108,27 +97,13 @@ fn reference_columns_on_irregular_clock_fit_the_paper_unit() {
     let truth = write_reference_session(d.path());
     let s = Session::load(&d.path().join("session.json")).unwrap();
     assert_eq!(s.runs.len(), 11);
-    let fit = fit_session(
-        &s,
-        &crosscal::model::Model::default_model(),
-        &FitOptions::default(),
-    )
-    .unwrap();
+    let fit = fit_session(&s, &crosscal::model::Model::default_model(), &FitOptions::default()).unwrap();
     for c in fit.gyro.coefficients.iter().chain(&fit.accel.coefficients) {
         assert_eq!(c.status, CoefStatus::Fitted, "{}", c.name);
         let t = truth.value(&c.name).unwrap();
         // ε comes from the local-polynomial derivative of ω_ref on the jittered clock:
         // accurate to ~1e-7 relative, so ε coefficients to ~1e-7 s, the rest tighter.
-        let tol = if c.name.starts_with("gyro.e_") {
-            1e-6
-        } else {
-            1e-7
-        };
-        assert!(
-            (c.value - t).abs() < tol,
-            "{} = {} (true {t})",
-            c.name,
-            c.value
-        );
+        let tol = if c.name.starts_with("gyro.e_") { 1e-6 } else { 1e-7 };
+        assert!((c.value - t).abs() < tol, "{} = {} (true {t})", c.name, c.value);
     }
 }

@@ -29,44 +29,22 @@ fn huber_fit_shrugs_off_spikes_that_wreck_least_squares() {
         let f = crosscal::session::sanity::scan(&r.rec.gyro, &r.rec.accel);
         crosscal::session::sanity::describe(&f, &r.rec.t_s, &r.spec.name)
     });
-    assert!(
-        found.filter(|w| w.contains("spike")).count() >= 18,
-        "spikes not reported"
-    );
+    assert!(found.filter(|w| w.contains("spike")).count() >= 18, "spikes not reported");
 
     let m = Model::default_model();
     let ols = fit_session(&s, &m, &FitOptions::default()).unwrap();
-    let huber = fit_session(
-        &s,
-        &m,
-        &FitOptions {
-            robust: true,
-            ..FitOptions::default()
-        },
-    )
-    .unwrap();
+    let huber = fit_session(&s, &m, &FitOptions { robust: true, ..FitOptions::default() }).unwrap();
     // Errors in units of the robust standard errors (the least-squares ones are inflated by
     // the spikes, which is itself a symptom).
     let (mut worst_ols, mut worst_huber) = (0.0_f64, 0.0_f64);
-    for c in huber
-        .gyro
-        .coefficients
-        .iter()
-        .chain(&huber.accel.coefficients)
-    {
+    for c in huber.gyro.coefficients.iter().chain(&huber.accel.coefficients) {
         let t = cfg.truth.value(&c.name).unwrap();
         let se = c.std_error.unwrap();
         worst_huber = worst_huber.max((c.value - t).abs() / se);
         worst_ols = worst_ols.max((ols.get(&c.name).unwrap().value - t).abs() / se);
     }
-    assert!(
-        worst_huber < 4.0,
-        "robust fit: worst |error|/σ = {worst_huber}"
-    );
-    assert!(
-        worst_ols > 10.0,
-        "least squares should be visibly hurt: {worst_ols} vs {worst_huber}"
-    );
+    assert!(worst_huber < 4.0, "robust fit: worst |error|/σ = {worst_huber}");
+    assert!(worst_ols > 10.0, "least squares should be visibly hurt: {worst_ols} vs {worst_huber}");
     assert!(huber.gyro.channels.iter().all(|c| c.downweighted > 0));
 }
 
@@ -78,15 +56,7 @@ fn same_input_gives_bit_identical_profile_apart_from_its_time_stamp() {
     let m = Model::default_model();
     let json = |robust: bool| {
         let s = cfg.generate();
-        let f = fit_session(
-            &s,
-            &m,
-            &FitOptions {
-                robust,
-                ..FitOptions::default()
-            },
-        )
-        .unwrap();
+        let f = fit_session(&s, &m, &FitOptions { robust, ..FitOptions::default() }).unwrap();
         let mut p = Profile::from_fit(&s, &m, f, vec![]);
         p.created_utc = String::new();
         p.to_json()

@@ -34,10 +34,7 @@ pub struct Thresholds {
 
 impl Default for Thresholds {
     fn default() -> Self {
-        Self {
-            gyro_min_reduction: 30.0,
-            accel_min_reduction: 40_000.0,
-        }
+        Self { gyro_min_reduction: 30.0, accel_min_reduction: 40_000.0 }
     }
 }
 
@@ -155,12 +152,7 @@ fn systematic(err: &[f64], t_s: &[f64], motion: &MotionSpec) -> (f64, bool) {
     if n == 0 {
         return (0.0, false);
     }
-    if let MotionSpec::Conic {
-        cone_angle_deg,
-        rate_deg_s,
-        phase_deg,
-    } = motion
-    {
+    if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = motion {
         let c = Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
         let p = 2 * HARMONICS + 1;
         if n > 4 * p && c.rate_rad_s != 0.0 {
@@ -236,12 +228,7 @@ fn stats(err: &[f64], t_s: &[f64], motion: &MotionSpec) -> ErrorStats {
 
 /// Checks one run: `corrected` is the correction of `run`'s outputs, `track` its true motion.
 /// The corrector's warm-up samples (streaming) are left out of both before and after.
-pub fn check_run(
-    run: &Run,
-    track: &Track,
-    corrected: &Corrected,
-    raw_units: [bool; 2],
-) -> RunCheck {
+pub fn check_run(run: &Run, track: &Track, corrected: &Corrected, raw_units: [bool; 2]) -> RunCheck {
     let mut axes = Vec::with_capacity(6);
     let skip = corrected.warmup.min(track.t_s.len());
     let t_s = &track.t_s[skip..];
@@ -270,11 +257,7 @@ pub fn check_run(
             });
         }
     }
-    RunCheck {
-        run: run.spec.name.clone(),
-        skipped: skip,
-        axes,
-    }
+    RunCheck { run: run.spec.name.clone(), skipped: skip, axes }
 }
 
 fn ratio(a: Option<f64>, b: Option<f64>) -> Option<f64> {
@@ -296,9 +279,7 @@ pub fn summarize(runs: Vec<RunCheck>, thresholds: Thresholds) -> CheckReport {
         let maxo = |f: &dyn Fn(&AxisCheck) -> Option<f64>| {
             runs.iter()
                 .filter_map(|r| f(&r.axes[idx]))
-                .fold(None, |acc: Option<f64>, v| {
-                    Some(acc.map_or(v, |a| a.max(v)))
-                })
+                .fold(None, |acc: Option<f64>, v| Some(acc.map_or(v, |a| a.max(v))))
         };
         let before_pct = maxo(&|a| a.before.and_then(|b| a.pct(b.max_abs)));
         let after_pct = maxo(&|a| a.pct(a.after.max_abs));
@@ -324,10 +305,5 @@ pub fn summarize(runs: Vec<RunCheck>, thresholds: Thresholds) -> CheckReport {
         });
     }
     let pass = summary.iter().all(|s| s.pass);
-    CheckReport {
-        runs,
-        summary,
-        thresholds,
-        pass,
-    }
+    CheckReport { runs, summary, thresholds, pass }
 }

@@ -46,11 +46,7 @@ fn pct(a: &AxisCheck, x: f64) -> Option<f64> {
 }
 
 /// Rows for one run of an offline and a streaming check.
-pub fn paper_rows(
-    offline: &CheckReport,
-    streaming: &CheckReport,
-    run: &str,
-) -> Option<Vec<PaperRow>> {
+pub fn paper_rows(offline: &CheckReport, streaming: &CheckReport, run: &str) -> Option<Vec<PaperRow>> {
     let off = offline.runs.iter().find(|r| r.run == run)?;
     let st = streaming.runs.iter().find(|r| r.run == run)?;
     let mut rows = Vec::with_capacity(6);

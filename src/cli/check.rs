@@ -40,36 +40,28 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let profile = Profile::read(&a.profile)?;
-    let session = Session::load_with(&a.session, a.strict)
-        .with_context(|| format!("reading session {}", a.session.display()))?;
+    let session =
+        Session::load_with(&a.session, a.strict).with_context(|| format!("reading session {}", a.session.display()))?;
     if !a.allow_other_unit {
         profile
             .ensure_unit(&a.profile, &session.manifest.serial)
             .context("checking a unit against another unit's profile (pass --allow-other-unit to do it anyway)")?;
     }
     if profile.input_units != session.manifest.units {
-        eprintln!("note: the session's units differ from those the profile was fitted on; values are converted on read");
+        eprintln!(
+            "note: the session's units differ from those the profile was fitted on; values are converted on read"
+        );
     }
     let cal = Calibration::from_profile(&profile)?;
-    let thresholds = Thresholds {
-        gyro_min_reduction: a.gyro_min_reduction,
-        accel_min_reduction: a.accel_min_reduction,
-    };
+    let thresholds =
+        Thresholds { gyro_min_reduction: a.gyro_min_reduction, accel_min_reduction: a.accel_min_reduction };
     let report = check_session(&session, &cal, a.mode.into(), thresholds)?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        println!(
-            "unit {}: {} runs checked",
-            session.manifest.serial,
-            report.runs.len()
-        );
+        println!("unit {}: {} runs checked", session.manifest.serial, report.runs.len());
         print!("{}", format::check_summary(&report));
         println!("{}", if report.pass { "PASS" } else { "FAIL" });
     }
-    Ok(if report.pass {
-        Outcome::Ok
-    } else {
-        Outcome::CheckFailed
-    })
+    Ok(if report.pass { Outcome::Ok } else { Outcome::CheckFailed })
 }

@@ -5,9 +5,7 @@ use anyhow::Context;
 use crosscal::correct::Calibration;
 use crosscal::pipeline::{correct_run, Mode};
 use crosscal::profile::Profile;
-use crosscal::session::{
-    parse_recording, AccelUnit, GyroUnit, MotionSpec, ReadOptions, Run, RunSpec, Units,
-};
+use crosscal::session::{parse_recording, AccelUnit, GyroUnit, MotionSpec, ReadOptions, Run, RunSpec, Units};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -59,44 +57,24 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let profile = Profile::read(&a.profile)?;
-    let cal = Calibration::from_profile(&profile)
-        .with_context(|| format!("using profile {}", a.profile.display()))?;
+    let cal = Calibration::from_profile(&profile).with_context(|| format!("using profile {}", a.profile.display()))?;
     let mut units: Units = profile.input_units;
     if let Some(u) = &a.gyro_unit {
-        units.gyro = GyroUnit::parse(u).ok_or_else(|| {
-            anyhow::anyhow!("--gyro-unit '{u}': expected one of {}", GyroUnit::CHOICES)
-        })?;
+        units.gyro = GyroUnit::parse(u)
+            .ok_or_else(|| anyhow::anyhow!("--gyro-unit '{u}': expected one of {}", GyroUnit::CHOICES))?;
     }
     if let Some(u) = &a.accel_unit {
-        units.accel = AccelUnit::parse(u).ok_or_else(|| {
-            anyhow::anyhow!("--accel-unit '{u}': expected one of {}", AccelUnit::CHOICES)
-        })?;
+        units.accel = AccelUnit::parse(u)
+            .ok_or_else(|| anyhow::anyhow!("--accel-unit '{u}': expected one of {}", AccelUnit::CHOICES))?;
     }
     if a.output.exists() && !a.force {
-        anyhow::bail!(
-            "{} already exists: choose another output or pass --force to replace it",
-            a.output.display()
-        );
+        anyhow::bail!("{} already exists: choose another output or pass --force to replace it", a.output.display());
     }
-    if a.output
-        .canonicalize()
-        .ok()
-        .is_some_and(|o| a.input.canonicalize().ok().is_some_and(|i| i == o))
-    {
-        anyhow::bail!(
-            "the output {} is the input: crosscal never modifies the data it is given",
-            a.output.display()
-        );
+    if a.output.canonicalize().ok().is_some_and(|o| a.input.canonicalize().ok().is_some_and(|i| i == o)) {
+        anyhow::bail!("the output {} is the input: crosscal never modifies the data it is given", a.output.display());
     }
-    let bytes =
-        std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
-    let rec = parse_recording(
-        &a.input,
-        &bytes,
-        &units,
-        profile.g_m_s2,
-        ReadOptions::default(),
-    )?;
+    let bytes = std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
+    let rec = parse_recording(&a.input, &bytes, &units, profile.g_m_s2, ReadOptions::default())?;
     for w in &rec.warnings {
         eprintln!("warning: {w}");
     }
@@ -116,16 +94,8 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     // Output in the input's units (raw inputs come out in deg/s and g: the calibration
     // supplies the physical unit).
     let out_units = Units {
-        gyro: if units.gyro == GyroUnit::Raw {
-            GyroUnit::DegPerS
-        } else {
-            units.gyro
-        },
-        accel: if units.accel == AccelUnit::Raw {
-            AccelUnit::G
-        } else {
-            units.accel
-        },
+        gyro: if units.gyro == GyroUnit::Raw { GyroUnit::DegPerS } else { units.gyro },
+        accel: if units.accel == AccelUnit::Raw { AccelUnit::G } else { units.accel },
         time: units.time,
     };
     let kg = 1.0 / out_units.gyro.to_rad_s();
@@ -133,11 +103,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let kt = 1.0 / units.time.to_s();
     let has_temp = run.rec.temp_c.is_some();
     crosscal::atomic::write_atomic(&a.output, a.force, |w| {
-        writeln!(
-            w,
-            "t,gx,gy,gz,ax,ay,az{}",
-            if has_temp { ",temp" } else { "" }
-        )?;
+        writeln!(w, "t,gx,gy,gz,ax,ay,az{}", if has_temp { ",temp" } else { "" })?;
         for k in 0..run.rec.len() {
             let g = corrected.w_rad_s[k];
             let ac = corrected.a_m_s2[k];
@@ -168,10 +134,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             ModeArg::Streaming => "streaming",
         },
         if corrected.warmup > 0 {
-            format!(
-                ", first {} samples are derivative warm-up",
-                corrected.warmup
-            )
+            format!(", first {} samples are derivative warm-up", corrected.warmup)
         } else {
             String::new()
         },

@@ -31,15 +31,13 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         }
     };
     let cfg = SimConfig::paper();
-    println!("1. simulate: the paper's unit (C_w off-diagonal 0.01, C_e 0.001 s, K off-diagonal 0.01) on {} conic runs", cfg.runs.len());
-    let manifest =
-        write_session(&cfg.generate(), &dir.join("session")).context("writing the demo session")?;
-    let session = Session::load(&manifest)?;
     println!(
-        "   {} ({} samples)",
-        manifest.display(),
-        session.n_samples()
+        "1. simulate: the paper's unit (C_w off-diagonal 0.01, C_e 0.001 s, K off-diagonal 0.01) on {} conic runs",
+        cfg.runs.len()
     );
+    let manifest = write_session(&cfg.generate(), &dir.join("session")).context("writing the demo session")?;
+    let session = Session::load(&manifest)?;
+    println!("   {} ({} samples)", manifest.display(), session.n_samples());
     let model = Model::default_model();
     let fit = fit_session(&session, &model, &FitOptions::default())?;
     let profile = Profile::from_fit(&session, &model, fit, session.warnings());
@@ -50,11 +48,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         .coefficients
         .iter()
         .chain(&profile.accel.coefficients)
-        .filter_map(|c| {
-            cfg.truth
-                .value(&c.name)
-                .map(|truth| (c.value - truth).abs())
-        })
+        .filter_map(|c| cfg.truth.value(&c.name).map(|truth| (c.value - truth).abs()))
         .fold(0.0, f64::max);
     println!("   largest |fitted - true| coefficient error: {worst:.2e}");
     let profile = Profile::read(&path)?;
@@ -62,23 +56,17 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let thresholds = Thresholds::default();
     let offline = check_session(&session, &cal, Mode::Offline, thresholds)?;
     let streaming = check_session(&session, &cal, Mode::Streaming, thresholds)?;
-    println!(
-        "3. correct + check, all {} runs (offline):",
-        offline.runs.len()
-    );
+    println!("3. correct + check, all {} runs (offline):", offline.runs.len());
     print!("{}", format::check_summary(&offline));
     let run = "cone+10";
-    let rows = paper_rows(&offline, &streaming, run)
-        .context("the paper's run is missing from the demo session")?;
+    let rows = paper_rows(&offline, &streaming, run).context("the paper's run is missing from the demo session")?;
     println!("\n4. the paper's configuration (run {run}: α = 10°, ω_s = 10 °/s, nominal mount):");
     println!(
         "{:<6} {:<4} {:>12} {:>14} {:>12} {:>14} {:>22}  pass",
         "sensor", "axis", "before", "after", "reduction", "streaming", "paper before -> after"
     );
     for r in &rows {
-        let before = r
-            .paper_before_pct
-            .map_or("-".to_string(), |p| format!("{p} %"));
+        let before = r.paper_before_pct.map_or("-".to_string(), |p| format!("{p} %"));
         let paper = format!("{before} -> {} %", r.paper_after_pct);
         println!(
             "{:<6} {:<4} {:>12} {:>14} {:>12} {:>14} {:>22}  {}",
@@ -95,9 +83,5 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     println!("(pass: reduction >= the paper's (gyro 30x, accel 40000x), after <= the paper's, streaming <= the paper's / 100)");
     let pass = offline.pass && rows.iter().all(|r| r.pass);
     println!("{}", if pass { "DEMO PASS" } else { "DEMO FAIL" });
-    Ok(if pass {
-        Outcome::Ok
-    } else {
-        Outcome::CheckFailed
-    })
+    Ok(if pass { Outcome::Ok } else { Outcome::CheckFailed })
 }

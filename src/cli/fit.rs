@@ -55,37 +55,22 @@ pub fn build_model(preset: &str, effects: &[String], disable: &[String]) -> anyh
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let model = build_model(&a.model, &a.effects, &a.disable)?;
-    let session = Session::load_with(&a.session, a.strict)
-        .with_context(|| format!("reading session {}", a.session.display()))?;
+    let session =
+        Session::load_with(&a.session, a.strict).with_context(|| format!("reading session {}", a.session.display()))?;
     let deriv = DerivativeConfig::default();
     let tr = tracks(&session, &deriv);
-    let opts = FitOptions {
-        robust: a.robust,
-        ..FitOptions::default()
-    };
+    let opts = FitOptions { robust: a.robust, ..FitOptions::default() };
     let fit = crosscal::estimate::fit(&model, &fit_runs(&session, &tr), &opts)
         .with_context(|| format!("fitting {}", a.session.display()))?;
     if a.strict {
-        fit.ensure_identifiable()
-            .with_context(|| format!("fitting {} (--strict)", a.session.display()))?;
+        fit.ensure_identifiable().with_context(|| format!("fitting {} (--strict)", a.session.display()))?;
     }
     let mut notes = session.warnings();
     for (run, t) in session.runs.iter().zip(&tr) {
-        notes.push(format!(
-            "run {}: ε reference {}",
-            run.spec.name, t.epsilon_source
-        ));
+        notes.push(format!("run {}: ε reference {}", run.spec.name, t.epsilon_source));
     }
-    for u in fit
-        .gyro
-        .unidentifiable
-        .iter()
-        .chain(&fit.accel.unidentifiable)
-    {
-        notes.push(format!(
-            "{} unidentifiable, held at {}: {}; remedy: {}",
-            u.held, u.held_at, u.reason, u.remedy
-        ));
+    for u in fit.gyro.unidentifiable.iter().chain(&fit.accel.unidentifiable) {
+        notes.push(format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy));
     }
     let profile = Profile::from_fit(&session, &model, fit, notes);
     if a.json {
@@ -105,8 +90,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         print!("{}", format::sensor_fit(&profile.accel));
     }
     if !a.dry_run {
-        let path = save(&profile, &a.out)
-            .with_context(|| format!("saving the profile under {}", a.out.display()))?;
+        let path = save(&profile, &a.out).with_context(|| format!("saving the profile under {}", a.out.display()))?;
         if a.json {
             eprintln!("profile written to {}", path.display());
         } else {

@@ -60,11 +60,7 @@ pub fn sensor_fit(f: &SensorFit) -> String {
                 format!("{:>14} ± {:<11}", num(c.value * k), num(2.0 * se * k))
             }
             (CoefStatus::Fixed, _) => format!("{:>14}   {:<11}", num(c.value * k), "(fixed)"),
-            _ => format!(
-                "{:>14}   {:<11}",
-                num(c.value * k),
-                "(UNIDENTIFIABLE, held)"
-            ),
+            _ => format!("{:>14}   {:<11}", num(c.value * k), "(UNIDENTIFIABLE, held)"),
         };
         let _ = writeln!(s, "  {:<12} {v} {u}", c.name);
     }
@@ -86,18 +82,11 @@ pub fn sensor_fit(f: &SensorFit) -> String {
         );
     }
     for u in &f.unidentifiable {
-        let _ = writeln!(
-            s,
-            "  UNIDENTIFIABLE {} (held at {}): {}.\n    remedy: {}",
-            u.held, u.held_at, u.reason, u.remedy
-        );
+        let _ =
+            writeln!(s, "  UNIDENTIFIABLE {} (held at {}): {}.\n    remedy: {}", u.held, u.held_at, u.reason, u.remedy);
     }
     for c in &f.correlated {
-        let _ = writeln!(
-            s,
-            "  correlated: {} and {} (ρ = {:.3})",
-            c.a, c.b, c.correlation
-        );
+        let _ = writeln!(s, "  correlated: {} and {} (ρ = {:.3})", c.a, c.b, c.correlation);
     }
     s
 }
@@ -108,14 +97,7 @@ pub fn check_summary(r: &CheckReport) -> String {
     let _ = writeln!(
         s,
         "{:<6} {:<4} {:>13} {:>13} {:>12} {:>13} {:>12} {:>9}  pass",
-        "sensor",
-        "axis",
-        "before max",
-        "after max",
-        "reduction",
-        "after (sys)",
-        "red. (sys)",
-        "needed"
+        "sensor", "axis", "before max", "after max", "reduction", "after (sys)", "red. (sys)", "needed"
     );
     for a in &r.summary {
         let _ = writeln!(

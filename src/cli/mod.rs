@@ -93,11 +93,7 @@ pub fn main() -> ExitCode {
         Ok(c) => c,
         Err(e) => {
             let _ = e.print();
-            return if e.use_stderr() {
-                ExitCode::from(EXIT_INPUT)
-            } else {
-                ExitCode::SUCCESS
-            };
+            return if e.use_stderr() { ExitCode::from(EXIT_INPUT) } else { ExitCode::SUCCESS };
         }
     };
     let result = match cli.command {
@@ -122,9 +118,7 @@ pub fn parse_triple(s: &str) -> Result<[f64; 3], String> {
     let v: Result<Vec<f64>, _> = s.split(',').map(|p| p.trim().parse::<f64>()).collect();
     match v {
         Ok(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
-        _ => Err(format!(
-            "expected three finite numbers 'x,y,z', found '{s}'"
-        )),
+        _ => Err(format!("expected three finite numbers 'x,y,z', found '{s}'")),
     }
 }
 
@@ -137,8 +131,6 @@ pub fn parse_list(s: &str) -> Result<List, String> {
     let v: Result<Vec<f64>, _> = s.split(',').map(|p| p.trim().parse::<f64>()).collect();
     match v {
         Ok(v) if !v.is_empty() && v.iter().all(|x| x.is_finite()) => Ok(List(v)),
-        _ => Err(format!(
-            "expected a comma-separated list of numbers, found '{s}'"
-        )),
+        _ => Err(format!("expected a comma-separated list of numbers, found '{s}'")),
     }
 }

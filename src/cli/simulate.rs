@@ -62,30 +62,22 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     cfg.accel_noise_g = a.accel_noise;
     cfg.seed = a.seed;
     cfg.sample_rate_hz = a.rate_hz;
-    cfg.runs = conic_plan(
-        &a.rates.0,
-        &a.cone_angles.0,
-        &cyclic_mounts(a.mounts as usize),
-        a.duration,
-    );
+    cfg.runs = conic_plan(&a.rates.0, &a.cone_angles.0, &cyclic_mounts(a.mounts as usize), a.duration);
     if let Some(s) = a.serial {
         cfg.serial = s;
     }
-    for (sensor, bias, k) in [
-        (SensorKind::Gyro, a.gyro_bias, std::f64::consts::PI / 180.0),
-        (SensorKind::Accel, a.accel_bias, cfg.g_m_s2),
-    ] {
+    for (sensor, bias, k) in
+        [(SensorKind::Gyro, a.gyro_bias, std::f64::consts::PI / 180.0), (SensorKind::Accel, a.accel_bias, cfg.g_m_s2)]
+    {
         if let Some(b) = bias {
             for i in 0..3 {
-                cfg.truth
-                    .values
-                    .insert(format!("{}.b_{}", sensor.as_str(), AXES[i]), b[i] * k);
+                cfg.truth.values.insert(format!("{}.b_{}", sensor.as_str(), AXES[i]), b[i] * k);
             }
         }
     }
     let session = cfg.generate();
-    let path = write_session(&session, &a.out)
-        .with_context(|| format!("writing the session to {}", a.out.display()))?;
+    let path =
+        write_session(&session, &a.out).with_context(|| format!("writing the session to {}", a.out.display()))?;
     println!(
         "wrote {} ({} runs, {} samples, serial {})",
         path.display(),

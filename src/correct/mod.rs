@@ -79,11 +79,7 @@ impl SensorInverse {
             if e.sensor() != sensor {
                 continue;
             }
-            for t in model
-                .terms(sensor)
-                .iter()
-                .filter(|t| std::ptr::addr_eq(t.effect, e.as_ref()))
-            {
+            for t in model.terms(sensor).iter().filter(|t| std::ptr::addr_eq(t.effect, e.as_ref())) {
                 let value = match t.status {
                     crate::model::TermStatus::Fixed(v) => v,
                     crate::model::TermStatus::Fitted => t.term.nominal,
@@ -95,25 +91,14 @@ impl SensorInverse {
                     Role::Epsilon(j) => eps[(i, j)] += value,
                     Role::Other => {
                         if value != 0.0 {
-                            others.push(OtherTerm {
-                                effect: Arc::clone(e),
-                                index: t.index,
-                                channel: i,
-                                value,
-                            })
+                            others.push(OtherTerm { effect: Arc::clone(e), index: t.index, channel: i, value })
                         }
                     }
                 }
             }
         }
         let scale_inv = scale.try_inverse().ok_or(CorrectError::Singular(sensor))?;
-        Ok(Self {
-            bias,
-            scale,
-            scale_inv,
-            eps,
-            others,
-        })
+        Ok(Self { bias, scale, scale_inv, eps, others })
     }
 
     /// Contribution of the non-linear-block terms at a state.
@@ -192,28 +177,16 @@ pub fn correct_offline(
 ) -> Result<Corrected, CorrectError> {
     let n = t_s.len();
     if gyro.len() != n || accel.len() != n {
-        return Err(CorrectError::Length {
-            t: n,
-            g: gyro.len(),
-            a: accel.len(),
-        });
+        return Err(CorrectError::Length { t: n, g: gyro.len(), a: accel.len() });
     }
     let g = &cal.gyro;
     let a = &cal.accel;
     let sub = |u: [f64; 3], b: [f64; 3]| [u[0] - b[0], u[1] - b[1], u[2] - b[2]];
-    let mut w: Vec<[f64; 3]> = gyro
-        .iter()
-        .map(|u| mv(&g.scale_inv, sub(*u, g.bias)))
-        .collect();
-    let mut acc: Vec<[f64; 3]> = accel
-        .iter()
-        .map(|u| mv(&a.scale_inv, sub(*u, a.bias)))
-        .collect();
+    let mut w: Vec<[f64; 3]> = gyro.iter().map(|u| mv(&g.scale_inv, sub(*u, g.bias))).collect();
+    let mut acc: Vec<[f64; 3]> = accel.iter().map(|u| mv(&a.scale_inv, sub(*u, a.bias))).collect();
     let needs_eps = g.eps.iter().any(|v| *v != 0.0) || g.has_other_terms() || a.has_other_terms();
-    let deriv = DerivativeConfig {
-        half_window: cal.settings.derivative_half_window,
-        degree: cal.settings.derivative_degree,
-    };
+    let deriv =
+        DerivativeConfig { half_window: cal.settings.derivative_half_window, degree: cal.settings.derivative_degree };
     let mut e = vec![[0.0; 3]; n];
     let mut iterations = 0;
     let mut converged = !needs_eps;
@@ -221,37 +194,19 @@ pub fn correct_offline(
     while needs_eps && iterations < 50 {
         iterations += 1;
         derivative_offline(t_s, &w, &deriv, &mut e);
-        let (mut change_w, mut size_w, mut change_a, mut size_a) =
-            (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
+        let (mut change_w, mut size_w, mut change_a, mut size_a) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
         for k in 0..n {
-            let s = State {
-                t_s: t_s[k] - t0,
-                w: w[k],
-                e: e[k],
-                a: acc[k],
-                temp_c: temp_c.map_or(f64::NAN, |t| t[k]),
-            };
+            let s = State { t_s: t_s[k] - t0, w: w[k], e: e[k], a: acc[k], temp_c: temp_c.map_or(f64::NAN, |t| t[k]) };
             let ee = mv(&g.eps, e[k]);
             let og = g.other(&s);
             let oa = a.other(&s);
             let u = gyro[k];
             let wn = mv(
                 &g.scale_inv,
-                [
-                    u[0] - g.bias[0] - ee[0] - og[0],
-                    u[1] - g.bias[1] - ee[1] - og[1],
-                    u[2] - g.bias[2] - ee[2] - og[2],
-                ],
+                [u[0] - g.bias[0] - ee[0] - og[0], u[1] - g.bias[1] - ee[1] - og[1], u[2] - g.bias[2] - ee[2] - og[2]],
             );
             let u = accel[k];
-            let an = mv(
-                &a.scale_inv,
-                [
-                    u[0] - a.bias[0] - oa[0],
-                    u[1] - a.bias[1] - oa[1],
-                    u[2] - a.bias[2] - oa[2],
-                ],
-            );
+            let an = mv(&a.scale_inv, [u[0] - a.bias[0] - oa[0], u[1] - a.bias[1] - oa[1], u[2] - a.bias[2] - oa[2]]);
             for i in 0..3 {
                 change_w = change_w.max((wn[i] - w[k][i]).abs());
                 size_w = size_w.max(wn[i].abs());
@@ -261,20 +216,12 @@ pub fn correct_offline(
             w[k] = wn;
             acc[k] = an;
         }
-        if change_w <= 1e-14 * size_w.max(f64::MIN_POSITIVE)
-            && change_a <= 1e-14 * size_a.max(f64::MIN_POSITIVE)
-        {
+        if change_w <= 1e-14 * size_w.max(f64::MIN_POSITIVE) && change_a <= 1e-14 * size_a.max(f64::MIN_POSITIVE) {
             converged = true;
             break;
         }
     }
-    Ok(Corrected {
-        w_rad_s: w,
-        a_m_s2: acc,
-        iterations,
-        converged,
-        warmup: 0,
-    })
+    Ok(Corrected { w_rad_s: w, a_m_s2: acc, iterations, converged, warmup: 0 })
 }
 
 /// Causal sample-by-sample corrector with fixed memory.
@@ -323,13 +270,7 @@ impl Streaming {
 
     /// Corrects one sample (SI in, SI out): returns (ω rad/s, a m/s²).
     #[inline]
-    pub fn push(
-        &mut self,
-        t_s: f64,
-        gyro: [f64; 3],
-        accel: [f64; 3],
-        temp_c: f64,
-    ) -> ([f64; 3], [f64; 3]) {
+    pub fn push(&mut self, t_s: f64, gyro: [f64; 3], accel: [f64; 3], temp_c: f64) -> ([f64; 3], [f64; 3]) {
         let t0 = *self.t_first.get_or_insert(t_s);
         // Shift the window left by one when full; the current sample goes last.
         if self.filled == self.window {
@@ -359,20 +300,9 @@ impl Streaming {
             self.cached_inv = (g.scale + g.eps * w0).try_inverse().unwrap_or(g.scale_inv);
         }
         let ep = mv(&g.eps, p);
-        let mut rhs = [
-            gyro[0] - g.bias[0] - ep[0],
-            gyro[1] - g.bias[1] - ep[1],
-            gyro[2] - g.bias[2] - ep[2],
-        ];
+        let mut rhs = [gyro[0] - g.bias[0] - ep[0], gyro[1] - g.bias[1] - ep[1], gyro[2] - g.bias[2] - ep[2]];
         let mut w = mv(&self.cached_inv, rhs);
-        let mut acc = mv(
-            &a.scale_inv,
-            [
-                accel[0] - a.bias[0],
-                accel[1] - a.bias[1],
-                accel[2] - a.bias[2],
-            ],
-        );
+        let mut acc = mv(&a.scale_inv, [accel[0] - a.bias[0], accel[1] - a.bias[1], accel[2] - a.bias[2]]);
         if g.has_other_terms() || a.has_other_terms() {
             // Fixed-point passes for the remaining effects, from the linear solution.
             for _ in 0..4 {
@@ -393,11 +323,7 @@ impl Streaming {
                 w = mv(&self.cached_inv, rhs);
                 acc = mv(
                     &a.scale_inv,
-                    [
-                        accel[0] - a.bias[0] - oa[0],
-                        accel[1] - a.bias[1] - oa[1],
-                        accel[2] - a.bias[2] - oa[2],
-                    ],
+                    [accel[0] - a.bias[0] - oa[0], accel[1] - a.bias[1] - oa[1], accel[2] - a.bias[2] - oa[2]],
                 );
             }
         }
@@ -417,11 +343,7 @@ pub fn correct_streaming(
 ) -> Result<Corrected, CorrectError> {
     let n = t_s.len();
     if gyro.len() != n || accel.len() != n {
-        return Err(CorrectError::Length {
-            t: n,
-            g: gyro.len(),
-            a: accel.len(),
-        });
+        return Err(CorrectError::Length { t: n, g: gyro.len(), a: accel.len() });
     }
     let mut s = Streaming::new(cal.clone());
     let mut out = Corrected {

@@ -47,9 +47,7 @@ pub fn zero_column(t: &TermRef<'_>, ch: usize) -> Unidentifiable {
     } else {
         (
             format!("its regressor {key} is zero in every run"),
-            format!(
-                "add a run that excites {key}: a re-mount, another cone angle or a static pose"
-            ),
+            format!("add a run that excites {key}: a re-mount, another cone angle or a static pose"),
         )
     };
     Unidentifiable {
@@ -65,16 +63,9 @@ pub fn zero_column(t: &TermRef<'_>, ch: usize) -> Unidentifiable {
 /// Describes a lost combination (right singular vector `combo` over `fitted`) and picks
 /// the coefficient to hold: among those with a large weight, the highest drop priority.
 /// Returns the report and the position in `fitted` to drop.
-pub fn lost_combination(
-    terms: &[TermRef<'_>],
-    fitted: &[usize],
-    combo: &[f64],
-    ch: usize,
-) -> (Unidentifiable, usize) {
+pub fn lost_combination(terms: &[TermRef<'_>], fitted: &[usize], combo: &[f64], ch: usize) -> (Unidentifiable, usize) {
     let big = combo.iter().map(|v| v.abs()).fold(0.0, f64::max);
-    let members: Vec<usize> = (0..fitted.len())
-        .filter(|&a| combo[a].abs() >= 0.2 * big)
-        .collect();
+    let members: Vec<usize> = (0..fitted.len()).filter(|&a| combo[a].abs() >= 0.2 * big).collect();
     let drop_at = members
         .iter()
         .copied()
@@ -84,18 +75,15 @@ pub fn lost_combination(
             pa.cmp(&pb).then(combo[a].abs().total_cmp(&combo[b].abs()))
         })
         .unwrap_or(0);
-    let keys: Vec<&str> = members
-        .iter()
-        .map(|&a| terms[fitted[a]].term.key.as_str())
-        .collect();
-    let names: Vec<String> = members
-        .iter()
-        .map(|&a| terms[fitted[a]].term.name.clone())
-        .collect();
+    let keys: Vec<&str> = members.iter().map(|&a| terms[fitted[a]].term.key.as_str()).collect();
+    let names: Vec<String> = members.iter().map(|&a| terms[fitted[a]].term.name.clone()).collect();
     let has = |prefix: &str| keys.iter().any(|k| k.starts_with(prefix));
     let (reason, remedy) = if has("1") && keys.len() > 1 {
         (
-            format!("{} are constant together within every run (a bias against an input component that does not vary)", names.join(", ")),
+            format!(
+                "{} are constant together within every run (a bias against an input component that does not vary)",
+                names.join(", ")
+            ),
             "add a run at another rate, the opposite direction or another cone angle, or re-mount the unit".to_string(),
         )
     } else if has("e_") && has("w_") {
@@ -116,10 +104,7 @@ pub fn lost_combination(
         axis: AXES[ch],
         held: terms[fitted[drop_at]].term.name.clone(),
         held_at: terms[fitted[drop_at]].term.nominal,
-        combination: members
-            .iter()
-            .map(|&a| (terms[fitted[a]].term.name.clone(), combo[a]))
-            .collect(),
+        combination: members.iter().map(|&a| (terms[fitted[a]].term.name.clone(), combo[a])).collect(),
         reason,
         remedy,
     };

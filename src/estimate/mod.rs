@@ -45,11 +45,7 @@ pub struct FitRun<'a> {
 impl FitRun<'_> {
     /// Number of samples.
     pub fn len(&self) -> usize {
-        self.track
-            .t_s
-            .len()
-            .min(self.gyro.len())
-            .min(self.accel.len())
+        self.track.t_s.len().min(self.gyro.len()).min(self.accel.len())
     }
 
     /// True when empty.
@@ -66,11 +62,7 @@ impl FitRun<'_> {
             w: tr.w_rad_s[k],
             e: tr.e_rad_s2[k],
             a: tr.a_m_s2[k],
-            temp_c: self
-                .temp_c
-                .map(|t| t[k])
-                .or(self.temp_const_c)
-                .unwrap_or(f64::NAN),
+            temp_c: self.temp_c.map(|t| t[k]).or(self.temp_const_c).unwrap_or(f64::NAN),
         }
     }
 
@@ -97,11 +89,7 @@ pub struct FitOptions {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self {
-            chunk: 4096,
-            rcond: 1e-9,
-            robust: false,
-        }
+        Self { chunk: 4096, rcond: 1e-9, robust: false }
     }
 }
 
@@ -204,10 +192,7 @@ pub struct SensorFit {
 impl SensorFit {
     /// Value of a coefficient by name.
     pub fn value(&self, name: &str) -> Option<f64> {
-        self.coefficients
-            .iter()
-            .find(|c| c.name == name)
-            .map(|c| c.value)
+        self.coefficients.iter().find(|c| c.name == name).map(|c| c.value)
     }
 
     /// A coefficient by name.
@@ -346,9 +331,8 @@ fn fit_sensor(
     let mut fitted_sets: Vec<Vec<usize>> = Vec::with_capacity(3);
 
     for ch in 0..3 {
-        let mut fitted: Vec<usize> = (0..terms.len())
-            .filter(|&ti| terms[ti].term.channel == ch && status[ti] == CoefStatus::Fitted)
-            .collect();
+        let mut fitted: Vec<usize> =
+            (0..terms.len()).filter(|&ti| terms[ti].term.channel == ch && status[ti] == CoefStatus::Fitted).collect();
         // Columns nobody excites cannot be fitted at all.
         fitted.retain(|&ti| {
             let c = cols.of_term[ti];
@@ -391,12 +375,7 @@ fn fit_sensor(
         };
         let q = fitted.len();
         if n <= q as u64 {
-            return Err(EstimateError::TooFewSamples {
-                sensor,
-                axis: AXES[ch],
-                n,
-                q,
-            });
+            return Err(EstimateError::TooFewSamples { sensor, axis: AXES[ch], n, q });
         }
         let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n);
         for (a, &ti) in fitted.iter().enumerate() {
@@ -424,10 +403,7 @@ fn fit_sensor(
             residual_max: 0.0,
             sigma: sigma2.sqrt(),
             condition_number: cond,
-            covariance_names: fitted
-                .iter()
-                .map(|&ti| terms[ti].term.name.clone())
-                .collect(),
+            covariance_names: fitted.iter().map(|&ti| terms[ti].term.name.clone()).collect(),
             covariance: cov,
             downweighted: 0,
         });
@@ -482,13 +458,7 @@ fn fit_sensor(
             status: status[ti],
         })
         .collect();
-    Ok(SensorFit {
-        sensor,
-        coefficients,
-        channels,
-        unidentifiable,
-        correlated,
-    })
+    Ok(SensorFit { sensor, coefficients, channels, unidentifiable, correlated })
 }
 
 /// The channel's reduced problem `[R_s | z; 0 | ρ]` ((q+1) × (q+1)) from the accumulated R:
@@ -540,11 +510,7 @@ fn reduce(
 
 /// Convenience: the role of a coefficient, for correction.
 pub fn role_of(model: &Model, name: &str) -> Option<Role> {
-    SensorKind::BOTH
-        .iter()
-        .flat_map(|s| model.terms(*s))
-        .find(|t| t.term.name == name)
-        .map(|t| t.term.role)
+    SensorKind::BOTH.iter().flat_map(|s| model.terms(*s)).find(|t| t.term.name == name).map(|t| t.term.role)
 }
 
 /// Solves the reduced problem `[R_s | z; 0 | ρ]`: θ by back substitution, the covariance
@@ -624,16 +590,10 @@ fn robust_refit(
             abs_r.clear();
             abs_r.extend(resid.iter().map(|r| r[ch].abs()));
             let mid = abs_r.len() / 2;
-            let med = if abs_r.is_empty() {
-                0.0
-            } else {
-                *abs_r.select_nth_unstable_by(mid, f64::total_cmp).1
-            };
+            let med = if abs_r.is_empty() { 0.0 } else { *abs_r.select_nth_unstable_by(mid, f64::total_cmp).1 };
             scale[ch] = 1.4826 * med;
         }
-        let mut accs: Vec<QrAccumulator> = (0..3)
-            .map(|_| QrAccumulator::new(p + 3, opts.chunk))
-            .collect();
+        let mut accs: Vec<QrAccumulator> = (0..3).map(|_| QrAccumulator::new(p + 3, opts.chunk)).collect();
         let mut down = [0u64; 3];
         let mut idx = 0;
         for run in runs {

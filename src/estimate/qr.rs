@@ -23,14 +23,7 @@ impl QrAccumulator {
     /// Accumulator for rows of width `p`, re-factoring every `chunk` rows.
     pub fn new(p: usize, chunk: usize) -> Self {
         let chunk = chunk.max(p).max(1);
-        Self {
-            p,
-            chunk,
-            buf: Mat::zeros(p + chunk, p),
-            filled: 0,
-            rows: 0,
-            col_sq: vec![0.0; p],
-        }
+        Self { p, chunk, buf: Mat::zeros(p + chunk, p), filled: 0, rows: 0, col_sq: vec![0.0; p] }
     }
 
     /// Row width.
@@ -70,11 +63,7 @@ impl QrAccumulator {
         };
         for i in 0..self.p {
             for j in 0..self.p {
-                self.buf[(i, j)] = if j >= i && i < r.nrows() {
-                    r[(i, j)]
-                } else {
-                    0.0
-                };
+                self.buf[(i, j)] = if j >= i && i < r.nrows() { r[(i, j)] } else { 0.0 };
             }
         }
         self.filled = 0;
@@ -115,10 +104,7 @@ mod tests {
             for b in 0..p {
                 let direct: f64 = x.iter().map(|row| row[a] * row[b]).sum();
                 let via_r: f64 = (0..p).map(|k| r[(k, a)] * r[(k, b)]).sum();
-                assert!(
-                    (direct - via_r).abs() < 1e-9 * direct.abs().max(1.0),
-                    "{a},{b}"
-                );
+                assert!((direct - via_r).abs() < 1e-9 * direct.abs().max(1.0), "{a},{b}");
             }
         }
     }

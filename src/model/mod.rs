@@ -190,26 +190,14 @@ const PAPER_GYRO: [&str; 9] = [
 impl Model {
     /// A model of the given effects with every coefficient fitted.
     pub fn from_effects(name: &str, effects: Vec<Arc<dyn Effect>>) -> Self {
-        let status = effects
-            .iter()
-            .map(|e| vec![TermStatus::Fitted; e.terms().len()])
-            .collect();
-        Self {
-            name: name.to_string(),
-            effects,
-            status,
-        }
+        let status = effects.iter().map(|e| vec![TermStatus::Fitted; e.terms().len()]).collect();
+        Self { name: name.to_string(), effects, status }
     }
 
     /// The default model: biases, full C_ω, full C_ε (gyro); bias, full K (accelerometer).
     pub fn default_model() -> Self {
-        let ids = [
-            "gyro-bias",
-            "gyro-scale-coupling",
-            "gyro-angular-acceleration",
-            "accel-bias",
-            "accel-scale-coupling",
-        ];
+        let ids =
+            ["gyro-bias", "gyro-scale-coupling", "gyro-angular-acceleration", "accel-bias", "accel-scale-coupling"];
         let effects = ids.iter().filter_map(|id| find_effect(id)).collect();
         Self::from_effects("default", effects)
     }
@@ -217,14 +205,11 @@ impl Model {
     /// Exactly the paper's structure: eq. 3 (diagonal, c_xy, c_yz, c_zx, e_xz, e_yx, e_zy;
     /// no bias) and eq. 4 (full K, no bias).
     pub fn paper() -> Self {
-        let effects: Vec<Arc<dyn Effect>> = [
-            "gyro-scale-coupling",
-            "gyro-angular-acceleration",
-            "accel-scale-coupling",
-        ]
-        .iter()
-        .filter_map(|id| find_effect(id))
-        .collect();
+        let effects: Vec<Arc<dyn Effect>> =
+            ["gyro-scale-coupling", "gyro-angular-acceleration", "accel-scale-coupling"]
+                .iter()
+                .filter_map(|id| find_effect(id))
+                .collect();
         let mut m = Self::from_effects("paper", effects);
         for (ei, e) in m.effects.iter().enumerate() {
             if e.sensor() == SensorKind::Gyro {
@@ -264,29 +249,23 @@ impl Model {
 
     /// Holds a coefficient at a value instead of fitting it.
     pub fn fix(&mut self, name: &str, value: f64) -> Result<(), ModelError> {
-        let (ei, k) = self
-            .locate(name)
-            .ok_or_else(|| ModelError::UnknownCoefficient(name.to_string()))?;
+        let (ei, k) = self.locate(name).ok_or_else(|| ModelError::UnknownCoefficient(name.to_string()))?;
         self.status[ei][k] = TermStatus::Fixed(value);
         Ok(())
     }
 
     /// Holds a coefficient at its nominal value (1 for diagonal scales, else 0).
     pub fn disable(&mut self, name: &str) -> Result<(), ModelError> {
-        let (ei, k) = self
-            .locate(name)
-            .ok_or_else(|| ModelError::UnknownCoefficient(name.to_string()))?;
+        let (ei, k) = self.locate(name).ok_or_else(|| ModelError::UnknownCoefficient(name.to_string()))?;
         self.status[ei][k] = TermStatus::Fixed(self.effects[ei].terms()[k].nominal);
         Ok(())
     }
 
     fn locate(&self, name: &str) -> Option<(usize, usize)> {
-        self.effects.iter().enumerate().find_map(|(ei, e)| {
-            e.terms()
-                .iter()
-                .position(|t| t.name == name)
-                .map(|k| (ei, k))
-        })
+        self.effects
+            .iter()
+            .enumerate()
+            .find_map(|(ei, e)| e.terms().iter().position(|t| t.name == name).map(|k| (ei, k)))
     }
 
     /// The effects in the model.
@@ -302,12 +281,7 @@ impl Model {
                 continue;
             }
             for (k, t) in e.terms().iter().enumerate() {
-                out.push(TermRef {
-                    effect: e.as_ref(),
-                    index: k,
-                    term: t,
-                    status: self.status[ei][k],
-                });
+                out.push(TermRef { effect: e.as_ref(), index: k, term: t, status: self.status[ei][k] });
             }
         }
         out
@@ -358,10 +332,8 @@ mod tests {
 
     #[test]
     fn names_are_unique_across_catalogue() {
-        let mut names: Vec<String> = catalog()
-            .iter()
-            .flat_map(|e| e.terms().iter().map(|t| t.name.clone()).collect::<Vec<_>>())
-            .collect();
+        let mut names: Vec<String> =
+            catalog().iter().flat_map(|e| e.terms().iter().map(|t| t.name.clone()).collect::<Vec<_>>()).collect();
         let n = names.len();
         names.sort();
         names.dedup();

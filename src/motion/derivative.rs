@@ -25,10 +25,7 @@ pub struct DerivativeConfig {
 
 impl Default for DerivativeConfig {
     fn default() -> Self {
-        Self {
-            half_window: 5,
-            degree: 3,
-        }
+        Self { half_window: 5, degree: 3 }
     }
 }
 
@@ -71,11 +68,7 @@ impl SlopeWeights {
         let tol = 1e-9 * h.max(f64::MIN_POSITIVE);
         let same = self.valid
             && self.offsets.len() == times.len()
-            && self
-                .offsets
-                .iter()
-                .zip(times)
-                .all(|(o, t)| ((t - t0) - o).abs() <= tol);
+            && self.offsets.iter().zip(times).all(|(o, t)| ((t - t0) - o).abs() <= tol);
         if same {
             return &self.weights;
         }
@@ -155,9 +148,7 @@ mod tests {
 
     #[test]
     fn cubic_is_differentiated_exactly_on_irregular_times() {
-        let t: Vec<f64> = (0..40)
-            .map(|k| k as f64 * 0.01 + 0.003 * ((k * 7 % 5) as f64))
-            .collect();
+        let t: Vec<f64> = (0..40).map(|k| k as f64 * 0.01 + 0.003 * ((k * 7 % 5) as f64)).collect();
         let f = |t: f64| 2.0 - 3.0 * t + 0.5 * t * t - 4.0 * t * t * t;
         let df = |t: f64| -3.0 + t - 12.0 * t * t;
         let x: Vec<[f64; 3]> = t.iter().map(|&s| [f(s), 2.0 * f(s), 0.0]).collect();
@@ -176,11 +167,7 @@ mod tests {
         let x: Vec<[f64; 3]> = t.iter().map(|&s| [(w * s).sin(), 0.0, 0.0]).collect();
         let mut out = vec![[0.0; 3]; t.len()];
         derivative_offline(&t, &x, &DerivativeConfig::default(), &mut out);
-        let err: Vec<f64> = t
-            .iter()
-            .zip(&out)
-            .map(|(&s, o)| (o[0] - w * (w * s).cos()).abs())
-            .collect();
+        let err: Vec<f64> = t.iter().zip(&out).map(|(&s, o)| (o[0] - w * (w * s).cos()).abs()).collect();
         let interior = err[5..err.len() - 5].iter().copied().fold(0.0, f64::max);
         let edges = err.iter().copied().fold(0.0, f64::max);
         assert!(interior < 1e-10 * w, "interior slope error {interior}");

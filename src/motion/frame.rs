@@ -33,10 +33,7 @@ pub struct V3<F> {
 impl<F> V3<F> {
     /// Tags raw components with frame `F`.
     pub const fn new(xyz: [f64; 3]) -> Self {
-        Self {
-            xyz,
-            _frame: PhantomData,
-        }
+        Self { xyz, _frame: PhantomData }
     }
 }
 
@@ -51,10 +48,7 @@ pub struct Coupling<From, To> {
 impl<From, To> Coupling<From, To> {
     /// Wraps a matrix (row i = output axis i).
     pub fn new(m: Matrix3<f64>) -> Self {
-        Self {
-            m,
-            _kinds: PhantomData,
-        }
+        Self { m, _kinds: PhantomData }
     }
 
     /// The underlying matrix.
@@ -81,8 +75,7 @@ mod tests {
 
     #[test]
     fn inverse_round_trip() {
-        let c: Coupling<Truth, Output> =
-            Coupling::new(Matrix3::new(1.0, 0.01, 0.0, 0.0, 1.0, 0.01, 0.01, 0.0, 1.0));
+        let c: Coupling<Truth, Output> = Coupling::new(Matrix3::new(1.0, 0.01, 0.0, 0.0, 1.0, 0.01, 0.01, 0.0, 1.0));
         let inv = c.try_inverse().unwrap();
         let x = V3::<Truth>::new([0.3, -1.2, 2.5]);
         let back = inv.apply(c.apply(x));

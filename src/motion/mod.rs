@@ -112,29 +112,18 @@ pub fn track_for(
         tr.a_m_s2.push(mount.to_sensor(k.a_m_s2).xyz);
     };
     match motion {
-        MotionSpec::Conic {
-            cone_angle_deg,
-            rate_deg_s,
-            phase_deg,
-        } => {
+        MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
             let c = Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
             for &t in &rec.t_s {
                 push(&mut tr, c.at(t, g_m_s2));
             }
             tr.epsilon_source = "exact (conic motion, paper eq. 1 differentiated)".into();
         }
-        MotionSpec::Static {
-            up_stand,
-            earth_rate_rad_s,
-        } => {
+        MotionSpec::Static { up_stand, earth_rate_rad_s } => {
             let k = Kinematics {
                 w_rad_s: V3::new(*earth_rate_rad_s),
                 e_rad_s2: V3::new([0.0; 3]),
-                a_m_s2: V3::new([
-                    up_stand[0] * g_m_s2,
-                    up_stand[1] * g_m_s2,
-                    up_stand[2] * g_m_s2,
-                ]),
+                a_m_s2: V3::new([up_stand[0] * g_m_s2, up_stand[1] * g_m_s2, up_stand[2] * g_m_s2]),
             };
             for _ in 0..n {
                 push(&mut tr, k);
@@ -155,8 +144,7 @@ pub fn track_for(
                     let mut out = vec![[0.0; 3]; n];
                     derivative_offline(&rec.t_s, &r.w_rad_s, deriv, &mut out);
                     derived = out;
-                    tr.epsilon_source =
-                        format!("derived from the reference rate: {}", deriv.describe());
+                    tr.epsilon_source = format!("derived from the reference rate: {}", deriv.describe());
                     &derived
                 }
             };
@@ -185,9 +173,7 @@ mod tests {
         let h = 1e-5;
         for k in 0..20 {
             let t = k as f64 * 0.7;
-            let d = |i: usize| {
-                (c.at(t + h, 9.8).w_rad_s.xyz[i] - c.at(t - h, 9.8).w_rad_s.xyz[i]) / (2.0 * h)
-            };
+            let d = |i: usize| (c.at(t + h, 9.8).w_rad_s.xyz[i] - c.at(t - h, 9.8).w_rad_s.xyz[i]) / (2.0 * h);
             let e = c.at(t, 9.8).e_rad_s2.xyz;
             for i in 0..3 {
                 assert!((d(i) - e[i]).abs() < 1e-9, "axis {i}");
@@ -204,19 +190,10 @@ mod tests {
             let t = k as f64 * 1.3;
             let f = c.at(t, 9.8).a_m_s2.xyz;
             let w = c.at(t, 9.8).w_rad_s.xyz;
-            let cross = [
-                w[1] * f[2] - w[2] * f[1],
-                w[2] * f[0] - w[0] * f[2],
-                w[0] * f[1] - w[1] * f[0],
-            ];
+            let cross = [w[1] * f[2] - w[2] * f[1], w[2] * f[0] - w[0] * f[2], w[0] * f[1] - w[1] * f[0]];
             for i in 0..3 {
-                let fd =
-                    (c.at(t + h, 9.8).a_m_s2.xyz[i] - c.at(t - h, 9.8).a_m_s2.xyz[i]) / (2.0 * h);
-                assert!(
-                    (fd + cross[i]).abs() < 1e-7,
-                    "axis {i}: {fd} vs {}",
-                    -cross[i]
-                );
+                let fd = (c.at(t + h, 9.8).a_m_s2.xyz[i] - c.at(t - h, 9.8).a_m_s2.xyz[i]) / (2.0 * h);
+                assert!((fd + cross[i]).abs() < 1e-7, "axis {i}: {fd} vs {}", -cross[i]);
             }
             let norm = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
             assert!((norm - 9.8).abs() < 1e-12);

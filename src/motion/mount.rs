@@ -25,7 +25,9 @@ pub enum MountError {
     #[error("a mount names exactly 3 axes, found {0}")]
     WrongLength(usize),
     /// Two sensor axes along the same stand axis, or a mirror (determinant −1).
-    #[error("mount {0:?} is not a rotation ({1}); each stand axis must appear once and the result must be right-handed")]
+    #[error(
+        "mount {0:?} is not a rotation ({1}); each stand axis must appear once and the result must be right-handed"
+    )]
     NotRotation(Vec<String>, &'static str),
 }
 
@@ -49,10 +51,7 @@ fn axis(name: &str) -> Result<[f64; 3], MountError> {
 impl Mount {
     /// The nominal mount `["+x", "+y", "+z"]`.
     pub fn identity() -> Self {
-        Self {
-            names: ["+x".into(), "+y".into(), "+z".into()],
-            m: Matrix3::identity(),
-        }
+        Self { names: ["+x".into(), "+y".into(), "+z".into()], m: Matrix3::identity() }
     }
 
     /// Parses signed axis names (rows of M); rejects anything that is not a proper rotation.
@@ -65,27 +64,15 @@ impl Mount {
             rows[i] = axis(n.as_ref())?;
         }
         let m = Matrix3::from_fn(|i, j| rows[i][j]);
-        let owned: Vec<String> = names
-            .iter()
-            .map(|s| s.as_ref().trim().to_string())
-            .collect();
+        let owned: Vec<String> = names.iter().map(|s| s.as_ref().trim().to_string()).collect();
         let gram = m * m.transpose();
         if (gram - Matrix3::identity()).abs().max() > 1e-12 {
-            return Err(MountError::NotRotation(
-                owned,
-                "two sensor axes share a stand axis",
-            ));
+            return Err(MountError::NotRotation(owned, "two sensor axes share a stand axis"));
         }
         if m.determinant() < 0.0 {
-            return Err(MountError::NotRotation(
-                owned,
-                "it is a mirror image, determinant -1",
-            ));
+            return Err(MountError::NotRotation(owned, "it is a mirror image, determinant -1"));
         }
-        Ok(Self {
-            names: [owned[0].clone(), owned[1].clone(), owned[2].clone()],
-            m,
-        })
+        Ok(Self { names: [owned[0].clone(), owned[1].clone(), owned[2].clone()], m })
     }
 
     /// The axis names as written (e.g. `["+y", "+z", "+x"]`).
@@ -121,37 +108,17 @@ mod tests {
     fn cyclic_mount_maps_axes() {
         let m = Mount::parse(&["+y", "+z", "+x"]).unwrap();
         let s = m.to_sensor(V3::new([1.0, 2.0, 3.0]));
-        assert!(s
-            .xyz
-            .iter()
-            .zip([2.0, 3.0, 1.0])
-            .all(|(a, b)| (a - b).abs() < 1e-15));
+        assert!(s.xyz.iter().zip([2.0, 3.0, 1.0]).all(|(a, b)| (a - b).abs() < 1e-15));
         let back = m.to_stand(s);
-        assert!(back
-            .xyz
-            .iter()
-            .zip([1.0, 2.0, 3.0])
-            .all(|(a, b)| (a - b).abs() < 1e-15));
+        assert!(back.xyz.iter().zip([1.0, 2.0, 3.0]).all(|(a, b)| (a - b).abs() < 1e-15));
     }
 
     #[test]
     fn rejects_mirror_and_repeats() {
-        assert!(matches!(
-            Mount::parse(&["+y", "+x", "+z"]),
-            Err(MountError::NotRotation(..))
-        ));
-        assert!(matches!(
-            Mount::parse(&["+x", "+x", "+z"]),
-            Err(MountError::NotRotation(..))
-        ));
-        assert!(matches!(
-            Mount::parse(&["+x", "+q", "+z"]),
-            Err(MountError::BadAxis(_))
-        ));
-        assert!(matches!(
-            Mount::parse(&["+x"]),
-            Err(MountError::WrongLength(1))
-        ));
+        assert!(matches!(Mount::parse(&["+y", "+x", "+z"]), Err(MountError::NotRotation(..))));
+        assert!(matches!(Mount::parse(&["+x", "+x", "+z"]), Err(MountError::NotRotation(..))));
+        assert!(matches!(Mount::parse(&["+x", "+q", "+z"]), Err(MountError::BadAxis(_))));
+        assert!(matches!(Mount::parse(&["+x"]), Err(MountError::WrongLength(1))));
         assert!(Mount::parse(&["-x", "-y", "+z"]).is_ok());
     }
 }

@@ -67,12 +67,7 @@ pub struct CorrectionSettings {
 
 impl Default for CorrectionSettings {
     fn default() -> Self {
-        Self {
-            derivative_half_window: 5,
-            derivative_degree: 3,
-            streaming_window: 11,
-            streaming_degree: 2,
-        }
+        Self { derivative_half_window: 5, derivative_degree: 3, streaming_window: 11, streaming_degree: 2 }
     }
 }
 
@@ -210,17 +205,13 @@ impl Profile {
     pub fn model(&self) -> Result<Model, ModelError> {
         let mut effects = Vec::with_capacity(self.effects.len());
         for id in &self.effects {
-            effects.push(find_effect(id).ok_or_else(|| {
-                ModelError::UnknownEffect(id.clone(), "(this crosscal's catalogue)".into())
-            })?);
+            effects.push(
+                find_effect(id)
+                    .ok_or_else(|| ModelError::UnknownEffect(id.clone(), "(this crosscal's catalogue)".into()))?,
+            );
         }
         let mut m = Model::from_effects(&self.model, effects);
-        for c in self
-            .gyro
-            .coefficients
-            .iter()
-            .chain(&self.accel.coefficients)
-        {
+        for c in self.gyro.coefficients.iter().chain(&self.accel.coefficients) {
             m.fix(&c.name, c.value)?;
         }
         Ok(m)
@@ -267,10 +258,7 @@ impl Profile {
         match v.get("format").and_then(|f| f.as_str()) {
             Some(PROFILE_FORMAT) => {}
             Some(other) => {
-                return Err(ProfileError::UnknownFormat {
-                    path: path.to_path_buf(),
-                    found: other.to_string(),
-                })
+                return Err(ProfileError::UnknownFormat { path: path.to_path_buf(), found: other.to_string() })
             }
             None => {
                 return Err(ProfileError::Parse {
@@ -282,19 +270,14 @@ impl Profile {
             }
         }
         let p: Profile = serde_json::from_str(text).map_err(parse_err)?;
-        p.model().map_err(|source| ProfileError::Model {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        p.model().map_err(|source| ProfileError::Model { path: path.to_path_buf(), source })?;
         Ok(p)
     }
 
     /// Reads a profile file.
     pub fn read(path: &Path) -> Result<Self, ProfileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ProfileError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text =
+            std::fs::read_to_string(path).map_err(|source| ProfileError::Io { path: path.to_path_buf(), source })?;
         Self::from_json(path, &text)
     }
 
@@ -311,18 +294,11 @@ pub fn save(profile: &Profile, root: &Path) -> Result<PathBuf, ProfileError> {
         return Err(ProfileError::BadSerial(profile.serial.clone()));
     }
     let dir = root.join(&profile.serial);
-    std::fs::create_dir_all(&dir).map_err(|source| ProfileError::Io {
-        path: dir.clone(),
-        source,
-    })?;
+    std::fs::create_dir_all(&dir).map_err(|source| ProfileError::Io { path: dir.clone(), source })?;
     let json = profile.to_json();
     let stem = profile.file_stem();
     for k in 0..1000 {
-        let name = if k == 0 {
-            format!("{stem}.json")
-        } else {
-            format!("{stem}-{k}.json")
-        };
+        let name = if k == 0 { format!("{stem}.json") } else { format!("{stem}-{k}.json") };
         let path = dir.join(name);
         match crate::atomic::write_new(&path, json.as_bytes()) {
             Ok(()) => return Ok(path),

@@ -77,26 +77,12 @@ fn csv_err(
     column: impl Into<String>,
     msg: impl Into<String>,
 ) -> SessionError {
-    SessionError::Csv {
-        problem,
-        path: path.to_path_buf(),
-        line,
-        column: column.into(),
-        msg: msg.into(),
-    }
+    SessionError::Csv { problem, path: path.to_path_buf(), line, column: column.into(), msg: msg.into() }
 }
 
 /// Reads a recording file. `g_m_s2` converts `g` to m/s².
-pub fn read_recording(
-    path: &Path,
-    units: &Units,
-    g_m_s2: f64,
-    opts: ReadOptions,
-) -> Result<Recording, SessionError> {
-    let bytes = std::fs::read(path).map_err(|source| SessionError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+pub fn read_recording(path: &Path, units: &Units, g_m_s2: f64, opts: ReadOptions) -> Result<Recording, SessionError> {
+    let bytes = std::fs::read(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
     parse_recording(path, &bytes, units, g_m_s2, opts)
 }
 
@@ -207,16 +193,8 @@ pub fn parse_recording(
     let kg = units.gyro.to_rad_s();
     let ka = units.accel.to_m_s2(g_m_s2);
     // Reference columns of a raw session are read as deg/s and g.
-    let kwr = if units.gyro == super::units::GyroUnit::Raw {
-        std::f64::consts::PI / 180.0
-    } else {
-        kg
-    };
-    let kar = if units.accel == super::units::AccelUnit::Raw {
-        g_m_s2
-    } else {
-        ka
-    };
+    let kwr = if units.gyro == super::units::GyroUnit::Raw { std::f64::consts::PI / 180.0 } else { kg };
+    let kar = if units.accel == super::units::AccelUnit::Raw { g_m_s2 } else { ka };
 
     let cap = bytes.len() / 64;
     let mut out = Recording {
@@ -227,10 +205,7 @@ pub fn parse_recording(
         ..Default::default()
     };
     let mut refc = if opts.reference {
-        Some(ReferenceColumns {
-            e_rad_s2: eps_idx.map(|_| Vec::new()),
-            ..Default::default()
-        })
+        Some(ReferenceColumns { e_rad_s2: eps_idx.map(|_| Vec::new()), ..Default::default() })
     } else {
         None
     };
@@ -253,27 +228,23 @@ pub fn parse_recording(
                 &path,
                 line,
                 format!("{} ({})", rec.len() + 1, names[rec.len()]),
-                format!(
-                    "the row has {} fields, the header has {}: a truncated or incomplete row",
-                    rec.len(),
-                    width
-                ),
+                format!("the row has {} fields, the header has {}: a truncated or incomplete row", rec.len(), width),
             ));
         }
         let get = |k: usize| -> Result<f64, SessionError> {
             let field = rec.get(k).unwrap_or(b"");
-            let parsed = std::str::from_utf8(field)
-                .ok()
-                .and_then(|s| s.parse::<f64>().ok());
+            let parsed = std::str::from_utf8(field).ok().and_then(|s| s.parse::<f64>().ok());
             match parsed {
                 Some(v) if v.is_finite() => Ok(v),
-                Some(v) => Err(csv_err(Problem::Value,
+                Some(v) => Err(csv_err(
+                    Problem::Value,
                     &path,
                     line,
                     format!("{} ({})", k + 1, names[k]),
                     format!("expected a finite number, found '{v}' (NaN or infinite values are not accepted)"),
                 )),
-                None => Err(csv_err(Problem::Value,
+                None => Err(csv_err(
+                    Problem::Value,
                     &path,
                     line,
                     format!("{} ({})", k + 1, names[k]),
@@ -283,11 +254,7 @@ pub fn parse_recording(
         };
         let t = get(idx[0])? * kt;
         if t <= last_t {
-            let what = if t >= last_t {
-                "duplicate"
-            } else {
-                "decreasing"
-            };
+            let what = if t >= last_t { "duplicate" } else { "decreasing" };
             return Err(csv_err(
                 Problem::Time,
                 &path,
@@ -302,37 +269,21 @@ pub fn parse_recording(
         }
         last_t = t;
         out.t_s.push(t);
-        out.gyro
-            .push([get(idx[1])? * kg, get(idx[2])? * kg, get(idx[3])? * kg]);
-        out.accel
-            .push([get(idx[4])? * ka, get(idx[5])? * ka, get(idx[6])? * ka]);
+        out.gyro.push([get(idx[1])? * kg, get(idx[2])? * kg, get(idx[3])? * kg]);
+        out.accel.push([get(idx[4])? * ka, get(idx[5])? * ka, get(idx[6])? * ka]);
         if let (Some(k), Some(v)) = (temp_idx, out.temp_c.as_mut()) {
             v.push(get(k)?);
         }
         if let Some(r) = refc.as_mut() {
-            r.w_rad_s.push([
-                get(ref_idx[0])? * kwr,
-                get(ref_idx[1])? * kwr,
-                get(ref_idx[2])? * kwr,
-            ]);
-            r.a_m_s2.push([
-                get(ref_idx[3])? * kar,
-                get(ref_idx[4])? * kar,
-                get(ref_idx[5])? * kar,
-            ]);
+            r.w_rad_s.push([get(ref_idx[0])? * kwr, get(ref_idx[1])? * kwr, get(ref_idx[2])? * kwr]);
+            r.a_m_s2.push([get(ref_idx[3])? * kar, get(ref_idx[4])? * kar, get(ref_idx[5])? * kar]);
             if let (Some(e), Some(ev)) = (eps_idx, r.e_rad_s2.as_mut()) {
                 ev.push([get(e[0])? * kwr, get(e[1])? * kwr, get(e[2])? * kwr]);
             }
         }
     }
     if out.t_s.is_empty() {
-        return Err(csv_err(
-            Problem::Empty,
-            &path,
-            header_line,
-            "-",
-            "the file has a header but no samples",
-        ));
+        return Err(csv_err(Problem::Empty, &path, header_line, "-", "the file has a header but no samples"));
     }
     out.reference = refc;
     out.sha256 = sha256_hex(bytes);
@@ -351,21 +302,13 @@ pub fn parse_recording(
     }
     out.warnings = gaps.into_iter().map(|(_, w)| w).collect();
     let findings = super::sanity::scan(&out.gyro, &out.accel);
-    out.warnings.extend(super::sanity::describe(
-        &findings,
-        &out.t_s,
-        &path.display().to_string(),
-    ));
+    out.warnings.extend(super::sanity::describe(&findings, &out.t_s, &path.display().to_string()));
     Ok(out)
 }
 
 /// 1-based line of the k-th sample (0-based), by re-reading the bytes (used on errors only).
 fn line_of_sample(bytes: &[u8], k: usize) -> Option<u64> {
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .comment(Some(b'#'))
-        .flexible(true)
-        .from_reader(bytes);
+    let mut rdr = csv::ReaderBuilder::new().has_headers(false).comment(Some(b'#')).flexible(true).from_reader(bytes);
     let mut rec = csv::ByteRecord::new();
     let mut seen = 0usize;
     let mut header = true;
@@ -409,10 +352,7 @@ fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<(usize, String)> {
                 ),
             ));
             if warnings.len() >= 20 {
-                warnings.push((
-                    i + 1,
-                    format!("{}: further gaps not listed", path.display()),
-                ));
+                warnings.push((i + 1, format!("{}: further gaps not listed", path.display())));
                 break;
             }
         }
@@ -422,13 +362,7 @@ fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<(usize, String)> {
 
 fn map_csv_error(path: &Path, e: &csv::Error) -> SessionError {
     let line = e.position().map_or(0, |p| p.line());
-    csv_err(
-        Problem::Malformed,
-        path,
-        line,
-        "-",
-        format!("malformed CSV: {e}"),
-    )
+    csv_err(Problem::Malformed, path, line, "-", format!("malformed CSV: {e}"))
 }
 
 #[cfg(test)]
@@ -436,20 +370,12 @@ mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<Recording, SessionError> {
-        parse_recording(
-            Path::new("run.csv"),
-            text.as_bytes(),
-            &Units::default(),
-            9.80665,
-            ReadOptions::default(),
-        )
+        parse_recording(Path::new("run.csv"), text.as_bytes(), &Units::default(), 9.80665, ReadOptions::default())
     }
 
     #[test]
     fn reads_any_column_order_comments_and_blank_lines() {
-        let r =
-            parse("# c\ngz,t,gx,gy,ax,ay,az,extra\n\n3,0,1,2,0,0,1,x\n# mid\n6,0.5,4,5,0,0,1,y\n")
-                .unwrap();
+        let r = parse("# c\ngz,t,gx,gy,ax,ay,az,extra\n\n3,0,1,2,0,0,1,x\n# mid\n6,0.5,4,5,0,0,1,y\n").unwrap();
         assert_eq!(r.len(), 2);
         let k = std::f64::consts::PI / 180.0;
         assert!((r.gyro[1][2] - 6.0 * k).abs() < 1e-15);
@@ -466,17 +392,11 @@ mod tests {
         let e = parse("t,gx,gy,gz,ax,ay,az\n0,1,2,3,0,0,1\n0.1,1,NaN,3,0,0,1\n").unwrap_err();
         assert!(e.to_string().contains("finite"), "{e}");
         let e = parse("t,gx,gy,gz,ax,ay,az\n0,1,2,3,0,0,1\n0,1,2,3,0,0,1\n").unwrap_err();
-        assert!(
-            e.to_string().contains(":3:1 (t)") && e.to_string().contains("duplicate"),
-            "{e}"
-        );
+        assert!(e.to_string().contains(":3:1 (t)") && e.to_string().contains("duplicate"), "{e}");
         let e = parse("t,gx,gy,gz,ax,ay\n0,1,2,3,0,0\n").unwrap_err();
         assert!(e.to_string().contains("'az' is absent"), "{e}");
         let e = parse("t,gx,gy,gz,ax,ay,az\n0,1,2,3,0,0,1\n0.1,1,2,3\n").unwrap_err();
-        assert!(
-            e.to_string().contains(":3:5 (ax)") && e.to_string().contains("truncated"),
-            "{e}"
-        );
+        assert!(e.to_string().contains(":3:5 (ax)") && e.to_string().contains("truncated"), "{e}");
         let e = parse("").unwrap_err();
         assert!(e.to_string().contains("empty"), "{e}");
         let e = parse("0,1,2,3,0,0,1\n").unwrap_err();
@@ -487,11 +407,7 @@ mod tests {
     fn gaps_are_warned() {
         let mut s = String::from("t,gx,gy,gz,ax,ay,az\n");
         for k in 0..20 {
-            let t = if k < 10 {
-                k as f64 * 0.01
-            } else {
-                k as f64 * 0.01 + 1.0
-            };
+            let t = if k < 10 { k as f64 * 0.01 } else { k as f64 * 0.01 + 1.0 };
             s.push_str(&format!("{t},0,0,0,0,0,1\n"));
         }
         let r = parse(&s).unwrap();

@@ -10,9 +10,7 @@ mod error;
 pub mod sanity;
 pub mod units;
 
-pub use csvread::{
-    parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns,
-};
+pub use csvread::{parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns};
 pub use error::{Problem, SessionError};
 pub use units::{AccelUnit, GyroUnit, TimeUnit, Units};
 
@@ -113,10 +111,7 @@ impl Session {
         for spec in &manifest.runs {
             let path = dir.join(&spec.file);
             if !path.is_file() {
-                let (line, column) = locate(
-                    &std::fs::read_to_string(manifest_path).unwrap_or_default(),
-                    &spec.file,
-                );
+                let (line, column) = locate(&std::fs::read_to_string(manifest_path).unwrap_or_default(), &spec.file);
                 return Err(SessionError::Manifest {
                     problem: Problem::MissingFile,
                     path: manifest_path.to_path_buf(),
@@ -130,22 +125,11 @@ impl Session {
                     ),
                 });
             }
-            let opts = ReadOptions {
-                reference: matches!(spec.motion, MotionSpec::Reference),
-                strict,
-            };
+            let opts = ReadOptions { reference: matches!(spec.motion, MotionSpec::Reference), strict };
             let rec = read_recording(&path, &manifest.units, manifest.g_m_s2, opts)?;
-            runs.push(Run {
-                spec: spec.clone(),
-                path,
-                rec,
-            });
+            runs.push(Run { spec: spec.clone(), path, rec });
         }
-        Ok(Self {
-            manifest_path: manifest_path.to_path_buf(),
-            manifest,
-            runs,
-        })
+        Ok(Self { manifest_path: manifest_path.to_path_buf(), manifest, runs })
     }
 
     /// Total number of samples over all runs.
@@ -155,10 +139,7 @@ impl Session {
 
     /// Non-fatal findings of all recordings.
     pub fn warnings(&self) -> Vec<String> {
-        self.runs
-            .iter()
-            .flat_map(|r| r.rec.warnings.iter().cloned())
-            .collect()
+        self.runs.iter().flat_map(|r| r.rec.warnings.iter().cloned()).collect()
     }
 }
 
@@ -176,10 +157,7 @@ fn locate(text: &str, needle: &str) -> (usize, usize) {
 
 /// Reads and validates a manifest (without reading the recordings).
 pub fn read_manifest(path: &Path) -> Result<Manifest, SessionError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SessionError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = std::fs::read_to_string(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
     parse_manifest(path, &text)
 }
 
@@ -193,33 +171,17 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
     })?;
     let bad_kind = |problem: Problem, needle: &str, msg: String| {
         let (line, column) = locate(text, needle);
-        SessionError::Manifest {
-            problem,
-            path: path.to_path_buf(),
-            line,
-            column,
-            msg,
-        }
+        SessionError::Manifest { problem, path: path.to_path_buf(), line, column, msg }
     };
     let bad = |needle: &str, msg: String| bad_kind(Problem::Invalid, needle, msg);
     let units_err = |needle: &str, msg: String| bad_kind(Problem::Units, needle, msg);
-    let obj = json
-        .as_object()
-        .ok_or_else(|| bad("", "the manifest must be a JSON object".into()))?;
+    let obj = json.as_object().ok_or_else(|| bad("", "the manifest must be a JSON object".into()))?;
     match obj.get("format") {
         Some(Value::String(f)) if f == SESSION_FORMAT => {}
         Some(Value::String(f)) => {
-            return Err(SessionError::UnknownFormat {
-                path: path.to_path_buf(),
-                found: f.clone(),
-            })
+            return Err(SessionError::UnknownFormat { path: path.to_path_buf(), found: f.clone() })
         }
-        _ => {
-            return Err(bad(
-                "format",
-                format!("missing \"format\": expected \"format\": \"{SESSION_FORMAT}\""),
-            ))
-        }
+        _ => return Err(bad("format", format!("missing \"format\": expected \"format\": \"{SESSION_FORMAT}\""))),
     }
     let serial = match obj.get("serial") {
         Some(Value::String(s)) if valid_serial(s) => s.clone(),
@@ -232,10 +194,7 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
         _ => return Err(bad("serial", "missing \"serial\": expected the unit's serial number as a string".into())),
     };
     let units_obj = obj.get("units").and_then(Value::as_object).ok_or_else(|| {
-        bad(
-            "units",
-            "missing \"units\": expected {\"gyro\": ..., \"accel\": ..., \"time\": ...}".into(),
-        )
+        bad("units", "missing \"units\": expected {\"gyro\": ..., \"accel\": ..., \"time\": ...}".into())
     })?;
     let unit_str = |key: &str| -> Result<Option<&str>, SessionError> {
         match units_obj.get(key) {
@@ -245,46 +204,18 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
         }
     };
     let gyro = match unit_str("gyro")? {
-        Some(s) => GyroUnit::parse(s).ok_or_else(|| {
-            units_err(
-                s,
-                format!("units.gyro is '{s}': expected one of {}", GyroUnit::CHOICES),
-            )
-        })?,
-        None => {
-            return Err(units_err(
-                "units",
-                format!("missing units.gyro: expected one of {}", GyroUnit::CHOICES),
-            ))
-        }
+        Some(s) => GyroUnit::parse(s)
+            .ok_or_else(|| units_err(s, format!("units.gyro is '{s}': expected one of {}", GyroUnit::CHOICES)))?,
+        None => return Err(units_err("units", format!("missing units.gyro: expected one of {}", GyroUnit::CHOICES))),
     };
     let accel = match unit_str("accel")? {
-        Some(s) => AccelUnit::parse(s).ok_or_else(|| {
-            units_err(
-                s,
-                format!(
-                    "units.accel is '{s}': expected one of {}",
-                    AccelUnit::CHOICES
-                ),
-            )
-        })?,
-        None => {
-            return Err(units_err(
-                "units",
-                format!(
-                    "missing units.accel: expected one of {}",
-                    AccelUnit::CHOICES
-                ),
-            ))
-        }
+        Some(s) => AccelUnit::parse(s)
+            .ok_or_else(|| units_err(s, format!("units.accel is '{s}': expected one of {}", AccelUnit::CHOICES)))?,
+        None => return Err(units_err("units", format!("missing units.accel: expected one of {}", AccelUnit::CHOICES))),
     };
     let time = match unit_str("time")? {
-        Some(s) => TimeUnit::parse(s).ok_or_else(|| {
-            units_err(
-                s,
-                format!("units.time is '{s}': expected one of {}", TimeUnit::CHOICES),
-            )
-        })?,
+        Some(s) => TimeUnit::parse(s)
+            .ok_or_else(|| units_err(s, format!("units.time is '{s}': expected one of {}", TimeUnit::CHOICES)))?,
         None => TimeUnit::S,
     };
     let g_m_s2 = match obj.get("stand").and_then(|s| s.get("g")) {
@@ -292,10 +223,7 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
         Some(v) => match v.as_f64() {
             Some(g) if g.is_finite() && g > 0.0 => g,
             _ => {
-                return Err(bad(
-                    "\"g\"",
-                    format!("stand.g is {v}: expected local gravity in m/s^2, a positive number"),
-                ))
+                return Err(bad("\"g\"", format!("stand.g is {v}: expected local gravity in m/s^2, a positive number")))
             }
         },
     };
@@ -304,10 +232,7 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
         .and_then(Value::as_array)
         .ok_or_else(|| bad("runs", "missing \"runs\": expected a list of runs".into()))?;
     if runs_json.is_empty() {
-        return Err(bad(
-            "runs",
-            "\"runs\" is empty: a session needs at least one run".into(),
-        ));
+        return Err(bad("runs", "\"runs\" is empty: a session needs at least one run".into()));
     }
     let mut runs = Vec::with_capacity(runs_json.len());
     for (i, r) in runs_json.iter().enumerate() {
@@ -316,17 +241,9 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
     let mut names: Vec<&str> = runs.iter().map(|r: &RunSpec| r.name.as_str()).collect();
     names.sort_unstable();
     if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-        return Err(bad(
-            w[0],
-            format!("two runs are named '{}': run names must be unique", w[0]),
-        ));
+        return Err(bad(w[0], format!("two runs are named '{}': run names must be unique", w[0])));
     }
-    Ok(Manifest {
-        serial,
-        units: Units { gyro, accel, time },
-        g_m_s2,
-        runs,
-    })
+    Ok(Manifest { serial, units: Units { gyro, accel, time }, g_m_s2, runs })
 }
 
 /// A serial usable as a folder name.
@@ -334,8 +251,7 @@ pub fn valid_serial(s: &str) -> bool {
     !s.is_empty()
         && !s.starts_with('.')
         && s.len() <= 128
-        && s.chars()
-            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+        && s.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
 fn num(v: &Value, key: &str) -> Option<f64> {
@@ -347,36 +263,39 @@ where
     F: Fn(Problem, &str, String) -> SessionError,
 {
     let bad = |needle: &str, msg: String| bad_kind(Problem::Invalid, needle, msg);
-    let name = r
-        .get("name")
-        .and_then(Value::as_str)
-        .map(str::to_string)
-        .unwrap_or_else(|| format!("run{}", i + 1));
+    let name = r.get("name").and_then(Value::as_str).map(str::to_string).unwrap_or_else(|| format!("run{}", i + 1));
     let file = r
         .get("file")
         .and_then(Value::as_str)
-        .ok_or_else(|| bad(&name, format!("run '{name}' has no \"file\": expected the CSV's path relative to the manifest")))?
+        .ok_or_else(|| {
+            bad(&name, format!("run '{name}' has no \"file\": expected the CSV's path relative to the manifest"))
+        })?
         .to_string();
-    let m = r
-        .get("motion")
-        .ok_or_else(|| bad(&name, format!("run '{name}' has no \"motion\": expected {{\"kind\": \"conic\" | \"static\" | \"reference\", ...}}")))?;
+    let m = r.get("motion").ok_or_else(|| {
+        bad(
+            &name,
+            format!(
+                "run '{name}' has no \"motion\": expected {{\"kind\": \"conic\" | \"static\" | \"reference\", ...}}"
+            ),
+        )
+    })?;
     let kind = m.get("kind").and_then(Value::as_str).unwrap_or("");
     let motion = match kind {
         "conic" => {
             let need = |key: &str| {
-                num(m, key).ok_or_else(|| bad(&name, format!("run '{name}': conic motion needs a finite number \"{key}\"")))
+                num(m, key)
+                    .ok_or_else(|| bad(&name, format!("run '{name}': conic motion needs a finite number \"{key}\"")))
             };
             let cone_angle_deg = need("cone_angle_deg")?;
             let rate_deg_s = need("rate_deg_s")?;
             let phase_deg = num(m, "phase_deg").unwrap_or(0.0);
             if !(0.0..=90.0).contains(&cone_angle_deg) {
-                return Err(bad(&name, format!("run '{name}': cone_angle_deg is {cone_angle_deg}: expected 0..90 degrees")));
+                return Err(bad(
+                    &name,
+                    format!("run '{name}': cone_angle_deg is {cone_angle_deg}: expected 0..90 degrees"),
+                ));
             }
-            MotionSpec::Conic {
-                cone_angle_deg,
-                rate_deg_s,
-                phase_deg,
-            }
+            MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg }
         }
         "static" => {
             let up = m
@@ -412,10 +331,7 @@ where
                     }
                 }
             }
-            MotionSpec::Static {
-                up_stand: up,
-                earth_rate_rad_s: earth,
-            }
+            MotionSpec::Static { up_stand: up, earth_rate_rad_s: earth }
         }
         "reference" => MotionSpec::Reference,
         other => {
@@ -428,9 +344,7 @@ where
     let mount = match r.get("mount") {
         None => Mount::identity(),
         Some(v) => {
-            let names: Option<Vec<&str>> = v
-                .as_array()
-                .map(|a| a.iter().filter_map(Value::as_str).collect());
+            let names: Option<Vec<&str>> = v.as_array().map(|a| a.iter().filter_map(Value::as_str).collect());
             let names = names.ok_or_else(|| {
                 bad_kind(
                     Problem::Mount,
@@ -439,11 +353,7 @@ where
                 )
             })?;
             Mount::parse(&names).map_err(|e| {
-                bad_kind(
-                    Problem::Mount,
-                    names.first().copied().unwrap_or(&name),
-                    format!("run '{name}': {e}"),
-                )
+                bad_kind(Problem::Mount, names.first().copied().unwrap_or(&name), format!("run '{name}': {e}"))
             })?
         }
     };
@@ -485,28 +395,16 @@ mod tests {
 
     #[test]
     fn rejects_unknown_format_and_units_with_position() {
-        let e = parse_manifest(
-            Path::new("s.json"),
-            &GOOD.replace("crosscal-session/1", "crosscal-session/2"),
-        )
-        .unwrap_err();
+        let e =
+            parse_manifest(Path::new("s.json"), &GOOD.replace("crosscal-session/1", "crosscal-session/2")).unwrap_err();
         assert!(matches!(e, SessionError::UnknownFormat { .. }));
         assert!(e.to_string().contains("crosscal-session/2"));
-        let e = parse_manifest(
-            Path::new("s.json"),
-            &GOOD.replace("\"deg/s\"", "\"deg/sec\""),
-        )
-        .unwrap_err();
+        let e = parse_manifest(Path::new("s.json"), &GOOD.replace("\"deg/s\"", "\"deg/sec\"")).unwrap_err();
         let m = e.to_string();
-        assert!(
-            m.starts_with("s.json:4:") && m.contains("deg/sec") && m.contains("deg/s, rad/s, raw"),
-            "{m}"
-        );
-        let e = parse_manifest(
-            Path::new("s.json"),
-            &GOOD.replace("[\"+x\", \"+y\", \"+z\"]", "[\"+y\", \"+x\", \"+z\"]"),
-        )
-        .unwrap_err();
+        assert!(m.starts_with("s.json:4:") && m.contains("deg/sec") && m.contains("deg/s, rad/s, raw"), "{m}");
+        let e =
+            parse_manifest(Path::new("s.json"), &GOOD.replace("[\"+x\", \"+y\", \"+z\"]", "[\"+y\", \"+x\", \"+z\"]"))
+                .unwrap_err();
         assert!(e.to_string().contains("not a rotation"), "{e}");
         let e = parse_manifest(Path::new("s.json"), "{ \"format\": ").unwrap_err();
         assert!(matches!(e, SessionError::Json { line: 1, .. }), "{e}");

@@ -53,11 +53,7 @@ pub fn scan(gyro: &[[f64; 3]], accel: &[[f64; 3]]) -> Vec<Finding> {
 }
 
 fn saturation(x: &[f64], channel: &'static str) -> Option<Finding> {
-    let (lo, hi) = x
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+    let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     if x.len() < SATURATION_RUN || hi <= lo {
         return None;
     }
@@ -79,12 +75,7 @@ fn saturation(x: &[f64], channel: &'static str) -> Option<Finding> {
             }
         }
         if let Some(first) = first {
-            return Some(Finding::Saturation {
-                channel,
-                value: target,
-                samples,
-                first,
-            });
+            return Some(Finding::Saturation { channel, value: target, samples, first });
         }
     }
     None
@@ -104,18 +95,12 @@ fn spikes(x: &[f64], channel: &'static str) -> Option<Finding> {
         return None;
     }
     // Second differences: O(dt² x'') on smooth motion, −2A at a spike of height A.
-    let d2: Vec<f64> = (1..n - 1)
-        .map(|k| x[k - 1] - 2.0 * x[k] + x[k + 1])
-        .collect();
+    let d2: Vec<f64> = (1..n - 1).map(|k| x[k - 1] - 2.0 * x[k] + x[k + 1]).collect();
     let mut tmp = d2.clone();
     let centre = median(&mut tmp);
     let mut abs: Vec<f64> = d2.iter().map(|v| (v - centre).abs()).collect();
     let scale = 1.4826 * median(&mut abs);
-    let (lo, hi) = x
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
+    let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     let floor = 1e-6 * (hi - lo).max(f64::MIN_POSITIVE);
     let limit = (SPIKE_Z * scale).max(floor);
     // A spike at k shows as the largest |d2| at k (twice its neighbours'): report local maxima.
@@ -123,16 +108,8 @@ fn spikes(x: &[f64], channel: &'static str) -> Option<Finding> {
     for j in 0..d2.len() {
         let v = (d2[j] - centre).abs();
         if v > limit {
-            let left = if j > 0 {
-                (d2[j - 1] - centre).abs()
-            } else {
-                0.0
-            };
-            let right = if j + 1 < d2.len() {
-                (d2[j + 1] - centre).abs()
-            } else {
-                0.0
-            };
+            let left = if j > 0 { (d2[j - 1] - centre).abs() } else { 0.0 };
+            let right = if j + 1 < d2.len() { (d2[j + 1] - centre).abs() } else { 0.0 };
             if v >= left && v >= right {
                 at.push(j + 1);
             }
@@ -141,11 +118,7 @@ fn spikes(x: &[f64], channel: &'static str) -> Option<Finding> {
     if at.is_empty() {
         return None;
     }
-    Some(Finding::Spikes {
-        channel,
-        count: at.len(),
-        at: at.into_iter().take(10).collect(),
-    })
+    Some(Finding::Spikes { channel, count: at.len(), at: at.into_iter().take(10).collect() })
 }
 
 /// Human-readable lines for findings, naming sample numbers and times.
@@ -184,9 +157,7 @@ mod tests {
                 let t = k as f64 * 0.01;
                 // Pseudo-random noise (an LCG), uniform in ±0.5e-3.
                 let e = if noise {
-                    1e-3 * ((((k as u64 + 1) * 6364136223846793005) >> 40) as f64
-                        / (1u64 << 24) as f64
-                        - 0.5)
+                    1e-3 * ((((k as u64 + 1) * 6364136223846793005) >> 40) as f64 / (1u64 << 24) as f64 - 0.5)
                 } else {
                     0.0
                 };
@@ -211,15 +182,9 @@ mod tests {
         }
         g[1234][1] += 5.0;
         let f = scan(&g, &sine(3000, true));
+        assert!(f.iter().any(|f| matches!(f, Finding::Saturation { channel: "gx", .. })), "{f:?}");
         assert!(
-            f.iter()
-                .any(|f| matches!(f, Finding::Saturation { channel: "gx", .. })),
-            "{f:?}"
-        );
-        assert!(
-            f.iter().any(
-                |f| matches!(f, Finding::Spikes { channel: "gy", at, .. } if at.contains(&1234))
-            ),
+            f.iter().any(|f| matches!(f, Finding::Spikes { channel: "gy", at, .. } if at.contains(&1234))),
             "{f:?}"
         );
     }

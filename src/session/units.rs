@@ -57,11 +57,7 @@ pub struct Units {
 
 impl Default for Units {
     fn default() -> Self {
-        Self {
-            gyro: GyroUnit::DegPerS,
-            accel: AccelUnit::G,
-            time: TimeUnit::S,
-        }
+        Self { gyro: GyroUnit::DegPerS, accel: AccelUnit::G, time: TimeUnit::S }
     }
 }
 

@@ -7,9 +7,7 @@
 use crate::atomic::write_new;
 use crate::model::{forward, Model, SensorKind, State};
 use crate::motion::{track_for, DerivativeConfig, Mount};
-use crate::session::{
-    AccelUnit, GyroUnit, Manifest, MotionSpec, Recording, Run, RunSpec, Session, TimeUnit, Units,
-};
+use crate::session::{AccelUnit, GyroUnit, Manifest, MotionSpec, Recording, Run, RunSpec, Session, TimeUnit, Units};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -39,17 +37,11 @@ impl UnitTruth {
         for i in 0..3 {
             for j in 0..3 {
                 if i != j {
-                    values.insert(
-                        crate::model::matrix_name(SensorKind::Accel, "k", i, j),
-                        0.01,
-                    );
+                    values.insert(crate::model::matrix_name(SensorKind::Accel, "k", i, j), 0.01);
                 }
             }
         }
-        Self {
-            model: Model::default_model(),
-            values,
-        }
+        Self { model: Model::default_model(), values }
     }
 
     /// True value of a coefficient by name (its nominal value when not set), or None when
@@ -67,12 +59,7 @@ impl UnitTruth {
         self.model
             .terms(sensor)
             .iter()
-            .map(|t| {
-                self.values
-                    .get(&t.term.name)
-                    .copied()
-                    .unwrap_or(t.term.nominal)
-            })
+            .map(|t| self.values.get(&t.term.name).copied().unwrap_or(t.term.nominal))
             .collect()
     }
 }
@@ -114,47 +101,27 @@ pub struct SimConfig {
 /// The cyclic mounts used for re-mounted runs: nominal, then x→y→z→x twice.
 pub fn cyclic_mounts(count: usize) -> Vec<Mount> {
     let all = [["+x", "+y", "+z"], ["+y", "+z", "+x"], ["+z", "+x", "+y"]];
-    all.iter()
-        .take(count.clamp(1, 3))
-        .filter_map(|m| Mount::parse(m).ok())
-        .collect()
+    all.iter().take(count.clamp(1, 3)).filter_map(|m| Mount::parse(m).ok()).collect()
 }
 
 /// Conic runs for every combination of mount, cone angle and rate; the first mount's runs
 /// are named `cone+10`, others are prefixed by the mount (`yzx-cone+10`), and cone angles
 /// after the first get a suffix (`cone+10-a20`).
-pub fn conic_plan(
-    rates_deg_s: &[f64],
-    cone_angles_deg: &[f64],
-    mounts: &[Mount],
-    duration_s: f64,
-) -> Vec<RunPlan> {
+pub fn conic_plan(rates_deg_s: &[f64], cone_angles_deg: &[f64], mounts: &[Mount], duration_s: f64) -> Vec<RunPlan> {
     let mut runs = Vec::new();
     for (mi, m) in mounts.iter().enumerate() {
         let prefix = if mi == 0 {
             String::new()
         } else {
-            let letters: String = m
-                .names()
-                .iter()
-                .map(|n| n.trim_start_matches(['+', '-']))
-                .collect();
+            let letters: String = m.names().iter().map(|n| n.trim_start_matches(['+', '-'])).collect();
             format!("{letters}-")
         };
         for (ai, &alpha) in cone_angles_deg.iter().enumerate() {
-            let suffix = if ai == 0 {
-                String::new()
-            } else {
-                format!("-a{alpha}")
-            };
+            let suffix = if ai == 0 { String::new() } else { format!("-a{alpha}") };
             for &rate in rates_deg_s {
                 runs.push(RunPlan {
                     name: format!("{prefix}cone{rate:+}{suffix}"),
-                    motion: MotionSpec::Conic {
-                        cone_angle_deg: alpha,
-                        rate_deg_s: rate,
-                        phase_deg: 0.0,
-                    },
+                    motion: MotionSpec::Conic { cone_angle_deg: alpha, rate_deg_s: rate, phase_deg: 0.0 },
                     mount: m.clone(),
                     duration_s,
                 });
@@ -183,11 +150,7 @@ impl SimConfig {
     /// Generates the session in memory, exactly as it would read back from disk (outputs
     /// are generated in deg/s and g, then converted like the reader does).
     pub fn generate(&self) -> Session {
-        let units = Units {
-            gyro: GyroUnit::DegPerS,
-            accel: AccelUnit::G,
-            time: TimeUnit::S,
-        };
+        let units = Units { gyro: GyroUnit::DegPerS, accel: AccelUnit::G, time: TimeUnit::S };
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let gn = Normal::new(0.0, self.gyro_noise_deg_s.max(0.0)).ok();
         let an = Normal::new(0.0, self.accel_noise_g.max(0.0)).ok();
@@ -203,10 +166,7 @@ impl SimConfig {
         for plan in &self.runs {
             let n = (plan.duration_s * self.sample_rate_hz).round().max(1.0) as usize;
             let t_s: Vec<f64> = (0..n).map(|k| k as f64 / self.sample_rate_hz).collect();
-            let mut rec = Recording {
-                t_s,
-                ..Default::default()
-            };
+            let mut rec = Recording { t_s, ..Default::default() };
             let tr = track_for(&plan.motion, &plan.mount, &rec, self.g_m_s2, &deriv);
             rec.gyro.reserve(n);
             rec.accel.reserve(n);
@@ -289,12 +249,7 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
         return Err(SimulateError::Exists(existing.clone()));
     }
     let kg = 1.0 / session.manifest.units.gyro.to_rad_s();
-    let ka = 1.0
-        / session
-            .manifest
-            .units
-            .accel
-            .to_m_s2(session.manifest.g_m_s2);
+    let ka = 1.0 / session.manifest.units.accel.to_m_s2(session.manifest.g_m_s2);
     for run in &session.runs {
         let path = dir.join(&run.spec.file);
         let mut text = String::with_capacity(run.rec.len() * 120);
