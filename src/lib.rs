@@ -12,6 +12,7 @@
 pub mod atomic;
 pub mod check;
 pub mod correct;
+pub mod diagnose;
 pub mod estimate;
 pub mod model;
 pub mod motion;

@@ -3,6 +3,7 @@
 mod bad_input;
 mod cli;
 mod common;
+mod diagnose;
 mod fixtures;
 mod fuzz;
 mod identify;

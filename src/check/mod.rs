@@ -11,12 +11,12 @@
 //! from its white noise in any run (χ² test at 0.1 %) is reported as noise-limited and
 //! passes: the data cannot show a remaining error.
 
+pub mod harmonics;
 pub mod paper;
 
 use crate::correct::Corrected;
-use crate::estimate::QrAccumulator;
 use crate::model::{SensorKind, AXES};
-use crate::motion::{Conic, Track};
+use crate::motion::Track;
 use crate::session::{MotionSpec, Run};
 use serde::{Deserialize, Serialize};
 
@@ -135,94 +135,14 @@ pub struct CheckReport {
     pub pass: bool,
 }
 
-/// Upper `q` quantile of χ² with `k` degrees of freedom for q = 0.999 (Wilson–Hilferty:
-/// χ² ≈ k (1 − 2/(9k) + z √(2/(9k)))³, z = 3.090).
-fn chi2_999(k: usize) -> f64 {
-    let k = k.max(1) as f64;
-    let c = 2.0 / (9.0 * k);
-    k * (1.0 - c + 3.090 * c.sqrt()).powi(3)
-}
-
-/// Systematic part of an error series: harmonic fit on the cone phase (conic runs) or
-/// block means (others). Returns max |systematic| and whether it is significant, i.e.
-/// whether the fitted systematic curve differs from zero beyond what the series' own white
-/// noise explains (χ² test of all fitted coefficients at the 0.1 % level).
-fn systematic(err: &[f64], t_s: &[f64], motion: &MotionSpec) -> (f64, bool) {
-    let n = err.len();
-    if n == 0 {
-        return (0.0, false);
-    }
-    if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = motion {
-        let c = Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
-        let p = 2 * HARMONICS + 1;
-        if n > 4 * p && c.rate_rad_s != 0.0 {
-            let basis = |th: f64, row: &mut [f64]| {
-                row[0] = 1.0;
-                for h in 1..=HARMONICS {
-                    let (s, co) = (h as f64 * th).sin_cos();
-                    row[2 * h - 1] = co;
-                    row[2 * h] = s;
-                }
-            };
-            let mut acc = QrAccumulator::new(p + 1, 4096);
-            let mut row = vec![0.0; p + 1];
-            for k in 0..n {
-                basis(c.theta(t_s[k]), &mut row);
-                row[p] = err[k];
-                acc.push(&row);
-            }
-            let r = acc.r();
-            let mut coef = vec![0.0; p];
-            let mut ok = true;
-            for i in (0..p).rev() {
-                let mut s = r[(i, p)];
-                for j in i + 1..p {
-                    s -= r[(i, j)] * coef[j];
-                }
-                if r[(i, i)].abs() < 1e-300 {
-                    ok = false;
-                    break;
-                }
-                coef[i] = s / r[(i, i)];
-            }
-            if ok {
-                let mut worst = 0.0_f64;
-                for k in 0..n {
-                    basis(c.theta(t_s[k]), &mut row);
-                    let v: f64 = (0..p).map(|j| coef[j] * row[j]).sum();
-                    worst = worst.max(v.abs());
-                }
-                // ‖R θ‖² = ‖Qᵀy‖² over the fitted part; residual variance from ρ².
-                let explained: f64 = (0..p).map(|i| r[(i, p)] * r[(i, p)]).sum();
-                let sigma2 = r[(p, p)] * r[(p, p)] / (n - p) as f64;
-                let significant = explained > chi2_999(p) * sigma2;
-                return (worst, significant);
-            }
-        }
-    }
-    let block = ((n as f64).sqrt().ceil() as usize).max(2);
-    let mut worst = 0.0_f64;
-    let (mut chi, mut within, mut dof, mut blocks) = (0.0, 0.0, 0usize, 0usize);
-    for c in err.chunks(block) {
-        let m = c.iter().sum::<f64>() / c.len() as f64;
-        worst = worst.max(m.abs());
-        chi += m * m * c.len() as f64;
-        within += c.iter().map(|e| (e - m) * (e - m)).sum::<f64>();
-        dof += c.len() - 1;
-        blocks += 1;
-    }
-    let sigma2 = if dof > 0 { within / dof as f64 } else { 0.0 };
-    (worst, chi > chi2_999(blocks) * sigma2)
-}
-
 fn stats(err: &[f64], t_s: &[f64], motion: &MotionSpec) -> ErrorStats {
     let n = err.len().max(1) as f64;
-    let sys = systematic(err, t_s, motion);
+    let sys = harmonics::systematic(err, t_s, motion, HARMONICS);
     ErrorStats {
         max_abs: err.iter().map(|e| e.abs()).fold(0.0, f64::max),
         rms: (err.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
-        sys_max_abs: sys.0,
-        sys_significant: sys.1,
+        sys_max_abs: sys.max_abs(),
+        sys_significant: sys.significant(),
     }
 }
 

@@ -112,6 +112,14 @@ pub enum EstimateError {
     /// No runs.
     #[error("no samples to fit")]
     NoData,
+    /// An effect needs a temperature that a run does not have.
+    #[error("effect '{effect}' needs temperatures but run '{run}' has no temp column and no temperature_c")]
+    MissingTemperature {
+        /// Effect id.
+        effect: String,
+        /// Run name.
+        run: String,
+    },
     /// The runs cannot identify the requested model (strict mode).
     #[error("the runs cannot identify the requested model: {0}")]
     Unidentifiable(String),
@@ -245,6 +253,11 @@ impl Fit {
 pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
     if runs.iter().all(|r| r.is_empty()) {
         return Err(EstimateError::NoData);
+    }
+    for e in model.effects().iter().filter(|e| e.needs_temperature()) {
+        if let Some(r) = runs.iter().find(|r| r.temp_c.is_none() && r.temp_const_c.is_none()) {
+            return Err(EstimateError::MissingTemperature { effect: e.id().to_string(), run: r.name.to_string() });
+        }
     }
     Ok(Fit {
         gyro: fit_sensor(model, SensorKind::Gyro, runs, opts)?,

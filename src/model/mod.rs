@@ -17,12 +17,32 @@
 //! Write one file with a type implementing [`Effect`] and add it to [`catalog`].
 
 mod angular_accel;
+mod anisoelastic;
 mod bias;
 mod coupling;
+mod cubic;
+mod drift;
+mod g_sensitivity;
+mod hysteresis;
+mod lever_arm;
+mod quadratic;
+mod scale_asymmetry;
+mod temp_bias;
+mod temp_scale;
 
 pub use angular_accel::AngularAcceleration;
+pub use anisoelastic::Anisoelastic;
 pub use bias::Bias;
 pub use coupling::ScaleCoupling;
+pub use cubic::Cubic;
+pub use drift::Drift;
+pub use g_sensitivity::GSensitivity;
+pub use hysteresis::Hysteresis;
+pub use lever_arm::LeverArm;
+pub use quadratic::Quadratic;
+pub use scale_asymmetry::ScaleAsymmetry;
+pub use temp_bias::TempBias;
+pub use temp_scale::TempScale;
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -122,6 +142,58 @@ pub trait Effect: Send + Sync + fmt::Debug {
     fn terms(&self) -> &[Term];
     /// Regressor of term `k` at a true state.
     fn regressor(&self, k: usize, s: &State) -> f64;
+    /// Whether the regressors need a temperature (a `temp` column or `temperature_c`).
+    fn needs_temperature(&self) -> bool {
+        false
+    }
+}
+
+/// Reference temperature of the temperature effects, °C.
+pub const T_REF_C: f64 = 20.0;
+
+/// The sensor's own true input: ω for the gyro, a for the accelerometer.
+#[inline]
+pub fn own_input(sensor: SensorKind, s: &State) -> [f64; 3] {
+    match sensor {
+        SensorKind::Gyro => s.w,
+        SensorKind::Accel => s.a,
+    }
+}
+
+/// Name of the sensor's own input for regressor keys (`w` or `a`).
+pub fn input_letter(sensor: SensorKind) -> &'static str {
+    match sensor {
+        SensorKind::Gyro => "w",
+        SensorKind::Accel => "a",
+    }
+}
+
+/// SI unit of the sensor's output.
+pub fn output_unit(sensor: SensorKind) -> &'static str {
+    match sensor {
+        SensorKind::Gyro => "rad/s",
+        SensorKind::Accel => "m/s^2",
+    }
+}
+
+/// One term per output channel i, named `<sensor>.<letter>_<axis>`, acting through `key(i)`.
+pub fn per_axis_terms(
+    sensor: SensorKind,
+    letter: &str,
+    key: impl Fn(usize) -> String,
+    unit: &'static str,
+) -> Vec<Term> {
+    (0..3)
+        .map(|i| Term {
+            name: format!("{}.{letter}_{}", sensor.as_str(), AXES[i]),
+            channel: i,
+            key: key(i),
+            unit,
+            nominal: 0.0,
+            drop_priority: 4,
+            role: Role::Other,
+        })
+        .collect()
 }
 
 /// Every effect crosscal knows, in catalogue order.
@@ -132,6 +204,23 @@ pub fn catalog() -> Vec<Arc<dyn Effect>> {
         Arc::new(AngularAcceleration::new()),
         Arc::new(Bias::new(SensorKind::Accel)),
         Arc::new(ScaleCoupling::new(SensorKind::Accel)),
+        Arc::new(GSensitivity::new()),
+        Arc::new(Anisoelastic::new()),
+        Arc::new(Quadratic::new(SensorKind::Gyro)),
+        Arc::new(Quadratic::new(SensorKind::Accel)),
+        Arc::new(Cubic::new(SensorKind::Gyro)),
+        Arc::new(Cubic::new(SensorKind::Accel)),
+        Arc::new(ScaleAsymmetry::new(SensorKind::Gyro)),
+        Arc::new(ScaleAsymmetry::new(SensorKind::Accel)),
+        Arc::new(TempBias::new(SensorKind::Gyro)),
+        Arc::new(TempBias::new(SensorKind::Accel)),
+        Arc::new(TempScale::new(SensorKind::Gyro)),
+        Arc::new(TempScale::new(SensorKind::Accel)),
+        Arc::new(Drift::new(SensorKind::Gyro)),
+        Arc::new(Drift::new(SensorKind::Accel)),
+        Arc::new(LeverArm::new()),
+        Arc::new(Hysteresis::new(SensorKind::Gyro)),
+        Arc::new(Hysteresis::new(SensorKind::Accel)),
     ]
 }
 

@@ -96,6 +96,9 @@ pub struct SimConfig {
     pub g_m_s2: f64,
     /// Random seed.
     pub seed: u64,
+    /// Temperature ramp over the whole session (start, end), °C: when set, every run gets a
+    /// `temp` column.
+    pub temperature_c: Option<(f64, f64)>,
 }
 
 /// The cyclic mounts used for re-mounted runs: nominal, then x→y→z→x twice.
@@ -144,6 +147,7 @@ impl SimConfig {
             accel_noise_g: 0.0,
             g_m_s2: 9.80665,
             seed: 1,
+            temperature_c: None,
         }
     }
 
@@ -163,6 +167,8 @@ impl SimConfig {
         let kg = units.gyro.to_rad_s();
         let ka = units.accel.to_m_s2(self.g_m_s2);
         let mut runs = Vec::with_capacity(self.runs.len());
+        let total: f64 = self.runs.iter().map(|r| r.duration_s).sum::<f64>().max(f64::MIN_POSITIVE);
+        let mut elapsed = 0.0;
         for plan in &self.runs {
             let n = (plan.duration_s * self.sample_rate_hz).round().max(1.0) as usize;
             let t_s: Vec<f64> = (0..n).map(|k| k as f64 / self.sample_rate_hz).collect();
@@ -170,13 +176,18 @@ impl SimConfig {
             let tr = track_for(&plan.motion, &plan.mount, &rec, self.g_m_s2, &deriv);
             rec.gyro.reserve(n);
             rec.accel.reserve(n);
+            if let Some((t0, t1)) = self.temperature_c {
+                // Rounded to 1 mK, as a stand's sensor would log it.
+                let temp = |t: f64| ((t0 + (t1 - t0) * (elapsed + t) / total) * 1000.0).round() / 1000.0;
+                rec.temp_c = Some(rec.t_s.iter().map(|&t| temp(t)).collect());
+            }
             for k in 0..n {
                 let s = State {
                     t_s: tr.t_s[k] - tr.t_s[0],
                     w: tr.w_rad_s[k],
                     e: tr.e_rad_s2[k],
                     a: tr.a_m_s2[k],
-                    temp_c: f64::NAN,
+                    temp_c: rec.temp_c.as_ref().map_or(f64::NAN, |t| t[k]),
                 };
                 let ug = forward(&gterms, &gvals, &s);
                 let ua = forward(&aterms, &avals, &s);
@@ -191,6 +202,7 @@ impl SimConfig {
                 rec.gyro.push(g);
                 rec.accel.push(a);
             }
+            elapsed += plan.duration_s;
             runs.push(Run {
                 spec: RunSpec {
                     name: plan.name.clone(),
@@ -253,12 +265,12 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
     for run in &session.runs {
         let path = dir.join(&run.spec.file);
         let mut text = String::with_capacity(run.rec.len() * 120);
-        text.push_str("t,gx,gy,gz,ax,ay,az\n");
+        text.push_str(if run.rec.temp_c.is_some() { "t,gx,gy,gz,ax,ay,az,temp\n" } else { "t,gx,gy,gz,ax,ay,az\n" });
         for k in 0..run.rec.len() {
             let g = run.rec.gyro[k];
             let a = run.rec.accel[k];
             use std::fmt::Write as _;
-            let _ = writeln!(
+            let _ = write!(
                 text,
                 "{},{},{},{},{},{},{}",
                 run.rec.t_s[k],
@@ -269,6 +281,10 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
                 a[1] * ka,
                 a[2] * ka
             );
+            let _ = match &run.rec.temp_c {
+                Some(t) => writeln!(text, ",{}", t[k]),
+                None => writeln!(text),
+            };
         }
         write_new(&path, text.as_bytes()).map_err(io(&path))?;
     }

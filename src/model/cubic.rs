@@ -1,0 +1,54 @@
+//! Cubic scale nonlinearity (catalogue effect).
+
+use super::{input_letter, own_input, per_axis_terms, Effect, SensorKind, State, Term};
+
+/// Cubic scale nonlinearity, one coefficient per axis (see `explain`).
+#[derive(Debug, Clone)]
+pub struct Cubic {
+    sensor: SensorKind,
+    terms: Vec<Term>,
+}
+
+impl Cubic {
+    /// The effect on the given sensor.
+    pub fn new(sensor: SensorKind) -> Self {
+        let inp = input_letter(sensor);
+        let terms = per_axis_terms(
+            sensor,
+            "k3",
+            |i| format!("{inp}_{}^3", super::AXES[i]),
+            match sensor {
+                SensorKind::Gyro => "1/(rad/s)^2",
+                SensorKind::Accel => "1/(m/s^2)^2",
+            },
+        );
+        Self { sensor, terms }
+    }
+}
+
+impl Effect for Cubic {
+    fn id(&self) -> &'static str {
+        match self.sensor {
+            SensorKind::Gyro => "gyro-cubic",
+            SensorKind::Accel => "accel-cubic",
+        }
+    }
+
+    fn sensor(&self) -> SensorKind {
+        self.sensor
+    }
+
+    fn explain(&self) -> &'static str {
+        "Cubic scale nonlinearity: u_i += k3_i x_i^3, a symmetric gain compression or expansion at large inputs (spring stiffening, amplifier saturation onset). It shows as a third-harmonic residual that grows with the cube of the rate or cone angle."
+    }
+
+    fn terms(&self) -> &[Term] {
+        &self.terms
+    }
+
+    #[inline]
+    fn regressor(&self, k: usize, s: &State) -> f64 {
+        let x = own_input(self.sensor, s)[k % 3];
+        x * x * x
+    }
+}

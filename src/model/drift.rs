@@ -1,0 +1,52 @@
+//! Bias drift with time (catalogue effect).
+
+use super::{per_axis_terms, Effect, SensorKind, State, Term};
+
+/// Bias drift with time, one coefficient per axis (see `explain`).
+#[derive(Debug, Clone)]
+pub struct Drift {
+    sensor: SensorKind,
+    terms: Vec<Term>,
+}
+
+impl Drift {
+    /// The effect on the given sensor.
+    pub fn new(sensor: SensorKind) -> Self {
+        let terms = per_axis_terms(
+            sensor,
+            "d",
+            |_| "t".to_string(),
+            match sensor {
+                SensorKind::Gyro => "rad/s^2",
+                SensorKind::Accel => "m/s^3",
+            },
+        );
+        Self { sensor, terms }
+    }
+}
+
+impl Effect for Drift {
+    fn id(&self) -> &'static str {
+        match self.sensor {
+            SensorKind::Gyro => "gyro-drift",
+            SensorKind::Accel => "accel-drift",
+        }
+    }
+
+    fn sensor(&self) -> SensorKind {
+        self.sensor
+    }
+
+    fn explain(&self) -> &'static str {
+        "Bias drift with time: u_i += d_i t (t from the start of each run), from warm-up or slow relaxation. It shows as a residual trend within runs, the same sign whatever the motion."
+    }
+
+    fn terms(&self) -> &[Term] {
+        &self.terms
+    }
+
+    #[inline]
+    fn regressor(&self, _k: usize, s: &State) -> f64 {
+        s.t_s
+    }
+}

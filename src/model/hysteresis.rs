@@ -1,0 +1,59 @@
+//! Hysteresis (catalogue effect).
+
+use super::{input_letter, output_unit, per_axis_terms, Effect, SensorKind, State, Term};
+
+/// Hysteresis, one coefficient per axis (see `explain`).
+#[derive(Debug, Clone)]
+pub struct Hysteresis {
+    sensor: SensorKind,
+    terms: Vec<Term>,
+}
+
+impl Hysteresis {
+    /// The effect on the given sensor.
+    pub fn new(sensor: SensorKind) -> Self {
+        let inp = input_letter(sensor);
+        let terms = per_axis_terms(sensor, "h", |i| format!("sgn(d{inp}_{})", super::AXES[i]), output_unit(sensor));
+        Self { sensor, terms }
+    }
+}
+
+impl Effect for Hysteresis {
+    fn id(&self) -> &'static str {
+        match self.sensor {
+            SensorKind::Gyro => "gyro-hysteresis",
+            SensorKind::Accel => "accel-hysteresis",
+        }
+    }
+
+    fn sensor(&self) -> SensorKind {
+        self.sensor
+    }
+
+    fn explain(&self) -> &'static str {
+        "Hysteresis: the output depends on whether the input is rising or falling (u_i += h_i sign(dx_i/dt)), from friction in gimbal bearings or magnetic hysteresis. It shows as a residual square wave locked to the cone phase, switching where the input on that axis turns. For the accelerometer dx/dt is taken as the gravity rotation rate -(w x a)."
+    }
+
+    fn terms(&self) -> &[Term] {
+        &self.terms
+    }
+
+    #[inline]
+    fn regressor(&self, k: usize, s: &State) -> f64 {
+        let d = match self.sensor {
+            SensorKind::Gyro => s.e[k % 3],
+            SensorKind::Accel => {
+                let (w, a) = (s.w, s.a);
+                let c = [w[1] * a[2] - w[2] * a[1], w[2] * a[0] - w[0] * a[2], w[0] * a[1] - w[1] * a[0]];
+                -c[k % 3]
+            }
+        };
+        if d > 0.0 {
+            1.0
+        } else if d < 0.0 {
+            -1.0
+        } else {
+            0.0
+        }
+    }
+}

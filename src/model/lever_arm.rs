@@ -1,0 +1,70 @@
+//! Accelerometer lever arm (size effect): each accelerometer sits at a distance r_i from
+//! the rotation centre, so it also senses ε × r_i + ω × (ω × r_i).
+
+use super::{Effect, Role, SensorKind, State, Term, AXES};
+
+/// u_i += [ε × r_i + ω × (ω × r_i)]_i with r_i (metres) the position of accelerometer i;
+/// linear in r: the regressor of r_ij is (ε × e_j)_i + ω_i ω_j − δ_ij |ω|².
+#[derive(Debug, Clone)]
+pub struct LeverArm {
+    terms: Vec<Term>,
+}
+
+impl LeverArm {
+    /// Nine coefficients r_ij: component j of accelerometer i's position, metres.
+    pub fn new() -> Self {
+        let mut terms = Vec::with_capacity(9);
+        for i in 0..3 {
+            for j in 0..3 {
+                terms.push(Term {
+                    name: format!("accel.r_{}{}", AXES[i], AXES[j]),
+                    channel: i,
+                    key: format!("lever_{}{}", AXES[i], AXES[j]),
+                    unit: "m",
+                    nominal: 0.0,
+                    drop_priority: 4,
+                    role: Role::Other,
+                });
+            }
+        }
+        Self { terms }
+    }
+}
+
+impl Default for LeverArm {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Effect for LeverArm {
+    fn id(&self) -> &'static str {
+        "accel-lever-arm"
+    }
+
+    fn sensor(&self) -> SensorKind {
+        SensorKind::Accel
+    }
+
+    fn explain(&self) -> &'static str {
+        "Lever arm (size effect): the accelerometers are not at the stand's centre of rotation, \
+         so each also senses the tangential acceleration ε × r and the centripetal acceleration \
+         ω × (ω × r) of its own position r (coefficients in metres). It grows with the square \
+         of the stand rate while gravity does not, so runs at two rates separate it from K."
+    }
+
+    fn terms(&self) -> &[Term] {
+        &self.terms
+    }
+
+    #[inline]
+    fn regressor(&self, k: usize, s: &State) -> f64 {
+        let (i, j) = ((k / 3) % 3, k % 3);
+        // (ε × e_j)_i
+        let mut ej = [0.0; 3];
+        ej[j] = 1.0;
+        let cross = [s.e[1] * ej[2] - s.e[2] * ej[1], s.e[2] * ej[0] - s.e[0] * ej[2], s.e[0] * ej[1] - s.e[1] * ej[0]];
+        let w2 = s.w[0] * s.w[0] + s.w[1] * s.w[1] + s.w[2] * s.w[2];
+        cross[i] + s.w[i] * s.w[j] - if i == j { w2 } else { 0.0 }
+    }
+}

@@ -1,0 +1,138 @@
+//! Discovery: a session with one effect the model lacks; `diagnose` must name it.
+
+use crosscal::diagnose::{diagnose, Diagnosis, Verdict};
+use crosscal::estimate::FitOptions;
+use crosscal::model::Model;
+use crosscal::motion::DerivativeConfig;
+use crosscal::pipeline::{fit_runs, tracks};
+use crosscal::session::{MotionSpec, Session};
+use crosscal::simulate::SimConfig;
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+const G: f64 = 9.80665;
+
+/// The paper's multi-run session (rates ±10, +20 °/s; cone 10° and 20°; three mounts) with
+/// realistic noise and the given hidden effect values.
+pub fn hidden(effect: &str, values: &[(&str, f64)], seed: u64) -> (SimConfig, Session) {
+    let mut cfg = SimConfig::paper();
+    cfg.gyro_noise_deg_s = 0.002;
+    cfg.accel_noise_g = 2e-5;
+    cfg.seed = seed;
+    if !effect.is_empty() {
+        cfg.truth.model.add_effect(effect).unwrap();
+        if effect.contains("temp") {
+            cfg.temperature_c = Some((15.0, 35.0));
+        }
+    }
+    for (n, v) in values {
+        cfg.truth.values.insert(n.to_string(), *v);
+    }
+    let s = cfg.generate();
+    (cfg, s)
+}
+
+pub fn run_diagnose(s: &Session) -> Diagnosis {
+    let tr = tracks(s, &DerivativeConfig::default());
+    let runs = fit_runs(s, &tr);
+    let motions: Vec<&MotionSpec> = s.runs.iter().map(|r| &r.spec.motion).collect();
+    diagnose(&Model::default_model(), &runs, &motions, &FitOptions::default()).unwrap()
+}
+
+/// Runs the discovery acceptance for one hidden effect.
+fn discovers(effect: &str, values: &[(&str, f64)]) {
+    let (cfg, s) = hidden(effect, values, 11);
+    let d = run_diagnose(&s);
+    let first = d.steps.first().unwrap_or_else(|| panic!("{effect}: nothing proposed: {d:#?}"));
+    assert!(
+        first.effect == effect || first.indistinguishable.iter().any(|e| e == effect),
+        "{effect}: ranked {} first (tied: {:?})",
+        first.effect,
+        first.indistinguishable
+    );
+    assert_eq!(d.verdict, Verdict::Explained, "{effect}: {:?} {:?}", d.verdict, d.unexplained);
+    let sensor = first.score.sensor;
+    let before: Vec<_> = d.channels.iter().filter(|c| c.sensor == sensor).collect();
+    let after: Vec<_> = d.steps.last().unwrap().channels.iter().filter(|c| c.sensor == sensor).collect();
+    let noise = match sensor {
+        crosscal::model::SensorKind::Gyro => cfg.gyro_noise_deg_s * DEG,
+        crosscal::model::SensorKind::Accel => cfg.accel_noise_g * G,
+    };
+    for (b, a) in before.iter().zip(&after) {
+        assert!(
+            (a.residual_rms / noise - 1.0).abs() < 0.1,
+            "{effect} {}: residual {} vs noise {noise}",
+            a.axis,
+            a.residual_rms
+        );
+    }
+    let sys_before: f64 = before.iter().map(|c| c.systematic_rms).fold(0.0, f64::max);
+    let sys_after: f64 = after.iter().map(|c| c.systematic_rms).fold(0.0, f64::max);
+    assert!(sys_after * 10.0 <= sys_before, "{effect}: systematic {sys_before} -> {sys_after}");
+    // Coefficients of the added effect within 4 standard errors of truth.
+    let mut m = Model::default_model();
+    m.add_effect(effect).unwrap();
+    let f = crosscal::pipeline::fit_session(&s, &m, &FitOptions::default()).unwrap();
+    for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients).filter(|c| c.effect == effect) {
+        let t = cfg.truth.value(&c.name).unwrap();
+        if let Some(se) = c.std_error {
+            assert!((c.value - t).abs() < 4.0 * se, "{}: {} ± {se}, true {t}", c.name, c.value);
+        }
+    }
+}
+
+#[test]
+fn discovers_gyro_g_sensitivity() {
+    let k = DEG / G;
+    discovers("gyro-g-sensitivity", &[("gyro.g_xx", 0.02 * k), ("gyro.g_yz", -0.015 * k), ("gyro.g_zy", 0.01 * k)]);
+}
+
+#[test]
+fn discovers_accel_scale_asymmetry() {
+    discovers("accel-scale-asymmetry", &[("accel.sa_x", 1e-3), ("accel.sa_y", -5e-4), ("accel.sa_z", 8e-4)]);
+}
+
+#[test]
+fn discovers_quadratic_nonlinearity() {
+    discovers("gyro-quadratic", &[("gyro.q_x", 0.02), ("gyro.q_y", -0.01), ("gyro.q_z", 0.015)]);
+}
+
+#[test]
+fn discovers_lever_arm() {
+    discovers(
+        "accel-lever-arm",
+        &[("accel.r_xx", 0.03), ("accel.r_yy", 0.04), ("accel.r_zz", -0.02), ("accel.r_xy", 0.01)],
+    );
+}
+
+#[test]
+fn discovers_temperature_bias() {
+    discovers("gyro-temp-bias", &[("gyro.tb_x", 1e-3 * DEG), ("gyro.tb_y", -5e-4 * DEG), ("gyro.tb_z", 8e-4 * DEG)]);
+}
+
+#[test]
+fn clean_sessions_are_adequate_over_20_seeds() {
+    for seed in 0..20 {
+        let (_, s) = hidden("", &[], 500 + seed);
+        let d = run_diagnose(&s);
+        assert_eq!(d.verdict, Verdict::Adequate, "seed {seed}: {:#?}", d.steps);
+        assert!(d.proposal.is_empty());
+    }
+}
+
+#[test]
+fn an_uncatalogued_wobble_is_reported_as_unexplained() {
+    let (_, mut s) = hidden("", &[], 77);
+    // A 3rd-harmonic wobble of 0.01 °/s on gyro y only, phase 40°, in every conic run.
+    for run in &mut s.runs {
+        if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = run.spec.motion {
+            let c = crosscal::motion::Conic::from_deg(cone_angle_deg, rate_deg_s, phase_deg);
+            for (k, g) in run.rec.gyro.iter_mut().enumerate() {
+                g[1] += 0.01 * DEG * (3.0 * c.theta(run.rec.t_s[k]) + 0.7).sin();
+            }
+        }
+    }
+    let d = run_diagnose(&s);
+    assert_eq!(d.verdict, Verdict::Unexplained, "{:#?}", d.steps);
+    assert!(d.proposal.is_empty());
+    assert!(d.unexplained.iter().any(|u| u.starts_with("gyro y") && u.contains("harmonic 3")), "{:?}", d.unexplained);
+}
