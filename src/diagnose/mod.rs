@@ -137,7 +137,7 @@ fn channel_reports(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMot
         let values = values_of(f, model, sensor);
         let mut res: Vec<Vec<Vec<f64>>> = vec![Vec::new(); 3];
         for run in runs {
-            let mut r = vec![Vec::with_capacity(run.len()); 3];
+            let mut r: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(run.len())).collect();
             for k in 0..run.len() {
                 let u = forward(&terms, &values, &run.state(k));
                 let y = run.output(sensor, k);
