@@ -136,3 +136,47 @@ fn bad_input_gives_file_line_column_and_its_exit_code() {
     let (code, _, _) = run_in(dir, &["fit"]);
     assert_eq!(code, 2);
 }
+
+#[test]
+fn diagnose_names_a_hidden_lever_arm_and_fit_then_corrects_with_it() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    simulate(
+        dir,
+        &[
+            "--gyro-noise",
+            "0.002",
+            "--accel-noise",
+            "2e-5",
+            "--hidden",
+            "accel-lever-arm",
+            "--set",
+            "accel.r_xx=0.03",
+            "--set",
+            "accel.r_yy=0.04",
+        ],
+    );
+    let (code, out, err) = run_in(dir, &["diagnose", "demo/session.json"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("SYSTEMATIC"), "{out}");
+    assert!(out.contains("step 1: add accel-lever-arm"), "{out}");
+    assert!(out.contains("verdict: add accel-lever-arm"), "{out}");
+    let (code, out, _) = run_in(dir, &["diagnose", "demo/session.json", "--json"]);
+    assert_eq!(code, 0);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["verdict"], "explained");
+    assert_eq!(v["proposal"][0], "accel-lever-arm");
+
+    let (code, out, err) = run_in(dir, &["fit", "demo/session.json", "--effect", "accel-lever-arm"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("accel.r_xx"), "{out}");
+    let prof = profiles(dir)[0].to_string_lossy().to_string();
+    // The lever arm is in the profile, so the correction removes it: accelerometer passes.
+    let (code, out, err) = run_in(dir, &["check", "--profile", &prof, "demo/session.json", "--json"]);
+    assert_eq!(code, 0, "{out}{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["pass"], serde_json::Value::Bool(true), "{out}");
+    let (code, out, err) = run_in(dir, &["diagnose", "demo/session.json", "--effect", "accel-lever-arm"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("verdict: the model is adequate"), "{out}");
+}

@@ -57,7 +57,7 @@ fn discovers(effect: &str, values: &[(&str, f64)]) {
         crosscal::model::SensorKind::Gyro => cfg.gyro_noise_deg_s * DEG,
         crosscal::model::SensorKind::Accel => cfg.accel_noise_g * G,
     };
-    for (b, a) in before.iter().zip(&after) {
+    for a in &after {
         assert!(
             (a.residual_rms / noise - 1.0).abs() < 0.1,
             "{effect} {}: residual {} vs noise {noise}",

@@ -3,6 +3,7 @@
 mod check;
 mod correct;
 mod demo;
+mod diagnose;
 mod fit;
 mod format;
 mod simulate;
@@ -77,6 +78,8 @@ enum Command {
     Check(check::Args),
     /// Run the whole pipeline on the paper's stand and print the paper comparison.
     Demo(demo::Args),
+    /// Compare model and measurement: where the model fails and which effect is missing.
+    Diagnose(diagnose::Args),
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -102,6 +105,7 @@ pub fn main() -> ExitCode {
         Command::Correct(a) => correct::run(a),
         Command::Check(a) => check::run(a),
         Command::Demo(a) => demo::run(a),
+        Command::Diagnose(a) => diagnose::run(a),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

@@ -48,6 +48,24 @@ pub struct Args {
     /// Serial number of the simulated unit.
     #[arg(long)]
     serial: Option<String>,
+    /// Hide a catalogue effect in the unit (repeatable); give its values with --set.
+    #[arg(long = "hidden")]
+    hidden: Vec<String>,
+    /// Set a true coefficient, NAME=VALUE in SI units (repeatable), e.g. gyro.g_xx=1.8e-5.
+    #[arg(long = "set", value_parser = parse_set)]
+    set: Vec<(String, f64)>,
+    /// Temperature ramp over the session, START,END in °C (adds a temp column).
+    #[arg(long, value_parser = parse_list, allow_hyphen_values = true)]
+    temperature: Option<List>,
+}
+
+fn parse_set(s: &str) -> Result<(String, f64), String> {
+    let (name, value) = s.split_once('=').ok_or_else(|| format!("expected NAME=VALUE, found '{s}'"))?;
+    let v: f64 = value.trim().parse().map_err(|_| format!("'{value}' is not a number"))?;
+    if !v.is_finite() {
+        return Err(format!("'{value}' is not finite"));
+    }
+    Ok((name.trim().to_string(), v))
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
@@ -73,6 +91,23 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             for i in 0..3 {
                 cfg.truth.values.insert(format!("{}.b_{}", sensor.as_str(), AXES[i]), b[i] * k);
             }
+        }
+    }
+    for h in &a.hidden {
+        cfg.truth.model.add_effect(h)?;
+    }
+    for (name, v) in &a.set {
+        if cfg.truth.value(name).is_none() {
+            anyhow::bail!(
+                "--set {name}: no such coefficient in the simulated unit's model (add its effect with --hidden)"
+            );
+        }
+        cfg.truth.values.insert(name.clone(), *v);
+    }
+    if let Some(List(t)) = &a.temperature {
+        match t.as_slice() {
+            [a, b] => cfg.temperature_c = Some((*a, *b)),
+            _ => anyhow::bail!("--temperature expects START,END in °C"),
         }
     }
     let session = cfg.generate();

@@ -1,0 +1,124 @@
+//! `crosscal diagnose`.
+
+use super::fit::build_model;
+use super::{format, Outcome};
+use anyhow::Context;
+use crosscal::diagnose::{diagnose, ChannelReport, Verdict};
+use crosscal::estimate::FitOptions;
+use crosscal::model::SensorKind;
+use crosscal::motion::DerivativeConfig;
+use crosscal::pipeline::{fit_runs, tracks};
+use crosscal::session::{MotionSpec, Session};
+use std::path::PathBuf;
+
+/// Options of `diagnose`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The session manifest (session.json).
+    session: PathBuf,
+    /// Model to start from: `default` or `paper`.
+    #[arg(long, default_value = "default")]
+    model: String,
+    /// Effects already in the model (repeatable).
+    #[arg(long = "effect")]
+    effects: Vec<String>,
+    /// Print the diagnosis as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn unit(s: SensorKind) -> (&'static str, f64) {
+    match s {
+        SensorKind::Gyro => ("deg/s", 180.0 / std::f64::consts::PI),
+        SensorKind::Accel => ("m/s^2", 1.0),
+    }
+}
+
+fn channel_table(c: &[ChannelReport]) -> String {
+    let mut s = format!(
+        "  {:<6} {:<4} {:>13} {:>13} {:>13}  {:<11} {}\n",
+        "sensor", "axis", "residual rms", "noise floor", "systematic", "", "largest systematic part"
+    );
+    for r in c {
+        let (u, k) = unit(r.sensor);
+        let worst = match &r.worst {
+            Some((run, Some(0), a)) => format!("constant {} {u} ({run})", format::num(a * k)),
+            Some((run, Some(h), a)) => format!("harmonic {h}: {} {u} ({run})", format::num(a * k)),
+            Some((run, None, a)) => format!("{} {u} ({run})", format::num(a * k)),
+            None => "-".into(),
+        };
+        s.push_str(&format!(
+            "  {:<6} {:<4} {:>13} {:>13} {:>13}  {:<11} {}\n",
+            r.sensor.as_str(),
+            r.axis,
+            format::num(r.residual_rms * k),
+            format::num(r.noise_floor * k),
+            format::num(r.systematic_rms * k),
+            if r.systematic { "SYSTEMATIC" } else { "noise" },
+            if r.systematic { worst } else { String::new() }
+        ));
+    }
+    s
+}
+
+pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    let model = build_model(&a.model, &a.effects, &[])?;
+    let session = Session::load(&a.session).with_context(|| format!("reading session {}", a.session.display()))?;
+    let tr = tracks(&session, &DerivativeConfig::default());
+    let runs = fit_runs(&session, &tr);
+    let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
+    let d = diagnose(&model, &runs, &motions, &FitOptions::default())?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&d)?);
+        return Ok(Outcome::Ok);
+    }
+    println!(
+        "unit {}: model '{}' against {} runs ({} samples)",
+        session.manifest.serial,
+        d.model,
+        session.runs.len(),
+        session.n_samples()
+    );
+    println!("\nresidual per channel (units: gyro deg/s, accel m/s^2):");
+    print!("{}", channel_table(&d.channels));
+    if !d.candidates.is_empty() {
+        println!("\ncandidate effects, best first (ΔBIC < {} is strong evidence):", crosscal::diagnose::BIC_EVIDENCE);
+        println!("  {:<28} {:>6} {:>12} {:>11} {:>12}", "effect", "params", "rss change", "p-value", "ΔBIC");
+        for c in d.candidates.iter().take(10) {
+            let change = if c.rss_before > 0.0 { 100.0 * (c.rss_after / c.rss_before - 1.0) } else { 0.0 };
+            println!(
+                "  {:<28} {:>6} {:>11.2}% {:>11.2e} {:>12.1}",
+                c.effect, c.added_params, change, c.p_value, c.delta_bic
+            );
+        }
+    }
+    for (i, s) in d.steps.iter().enumerate() {
+        println!("\nstep {}: add {} (ΔBIC {:.1})", i + 1, s.effect, s.score.delta_bic);
+        println!("  why: {}", s.score.explanation);
+        if !s.indistinguishable.is_empty() {
+            println!("  indistinguishable on these runs from: {}", s.indistinguishable.join(", "));
+        }
+        print!("{}", channel_table(&s.channels));
+    }
+    for w in &d.warnings {
+        println!("warning: {w}");
+    }
+    match d.verdict {
+        Verdict::Adequate => {
+            println!("\nverdict: the model is adequate: residuals are at the noise floor; nothing to add.")
+        }
+        Verdict::Explained => println!(
+            "\nverdict: add {} — then the residual is at the noise floor. Fit it with: crosscal fit {} {}",
+            d.proposal.join(", "),
+            a.session.display(),
+            d.proposal.iter().map(|e| format!("--effect {e}")).collect::<Vec<_>>().join(" ")
+        ),
+        Verdict::Unexplained => {
+            println!("\nverdict: a systematic residual remains that no catalogued effect explains:");
+            for u in &d.unexplained {
+                println!("  {u}");
+            }
+        }
+    }
+    Ok(Outcome::Ok)
+}
