@@ -72,12 +72,38 @@ fn discovers(effect: &str, values: &[(&str, f64)]) {
     let mut m = Model::default_model();
     m.add_effect(effect).unwrap();
     let f = crosscal::pipeline::fit_session(&s, &m, &FitOptions::default()).unwrap();
+    let mut checked = 0;
     for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients).filter(|c| c.effect == effect) {
         let t = cfg.truth.value(&c.name).unwrap();
         if let Some(se) = c.std_error {
             assert!((c.value - t).abs() < 4.0 * se, "{}: {} ± {se}, true {t}", c.name, c.value);
+            checked += 1;
         }
     }
+    for p in f.nonlinear.iter().filter(|p| p.effect == effect) {
+        let t = cfg.truth.value(&p.name).unwrap();
+        let se = p.std_error.unwrap_or_else(|| panic!("{}: no standard error", p.name));
+        assert!((p.value - t).abs() < 4.0 * se, "{}: {} ± {se}, true {t}", p.name, p.value);
+        checked += 1;
+    }
+    assert!(checked > 0, "{effect}: nothing checked");
+}
+
+#[test]
+fn discovers_time_delay_of_5_ms() {
+    discovers("time-delay", &[("time_delay", 0.005)]);
+    // And recovers it within 0.2 ms.
+    let (_, s) = hidden("time-delay", &[("time_delay", 0.005)], 3);
+    let mut m = Model::default_model();
+    m.add_effect("time-delay").unwrap();
+    let f = crosscal::pipeline::fit_session(&s, &m, &FitOptions::default()).unwrap();
+    let tau = f.nonlinear[0].value;
+    assert!((tau - 0.005).abs() < 2e-4, "τ = {tau}");
+}
+
+#[test]
+fn discovers_dead_zone() {
+    discovers("gyro-dead-zone", &[("gyro.dz_x", 0.0009), ("gyro.dz_y", 0.0005), ("gyro.dz_z", 0.0007)]);
 }
 
 #[test]

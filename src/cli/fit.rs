@@ -88,6 +88,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         }
         print!("{}", format::sensor_fit(&profile.gyro));
         print!("{}", format::sensor_fit(&profile.accel));
+        print!("{}", format::nonlinear(&profile.nonlinear));
     }
     if !a.dry_run {
         let path = save(&profile, &a.out).with_context(|| format!("saving the profile under {}", a.out.display()))?;

@@ -91,6 +91,26 @@ pub fn sensor_fit(f: &SensorFit) -> String {
     s
 }
 
+/// Nonlinear parameters (time delay, dead zone), value ± 2σ.
+pub fn nonlinear(params: &[crosscal::estimate::NonlinearParam]) -> String {
+    let mut s = String::new();
+    if params.is_empty() {
+        return s;
+    }
+    let _ = writeln!(s, "nonlinear parameters (value ± 2σ):");
+    for p in params {
+        let (u, k) = display_unit(&p.unit);
+        let u = if u.is_empty() { p.unit.as_str() } else { u };
+        let se = match (p.fitted, p.std_error) {
+            (false, _) => "(fixed)".to_string(),
+            (true, Some(se)) => num(2.0 * se * k),
+            (true, None) => "(at a bound: no σ)".to_string(),
+        };
+        let _ = writeln!(s, "  {:<12} {:>14} ± {:<11} {u}", p.name, num(p.value * k), se);
+    }
+    s
+}
+
 /// The check summary table.
 pub fn check_summary(r: &CheckReport) -> String {
     let mut s = String::new();

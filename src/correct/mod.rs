@@ -35,6 +35,9 @@ pub enum CorrectError {
     /// The profile cannot be turned into a model.
     #[error("{0}")]
     Model(String),
+    /// The profile has an effect the correction cannot invert yet.
+    #[error("the profile contains '{0}', whose correction is not implemented yet; refit without it to correct")]
+    Unsupported(String),
     /// Input arrays disagree in length.
     #[error("input lengths differ: t has {t}, gyro {g}, accel {a}")]
     Length {
@@ -131,6 +134,9 @@ pub struct Calibration {
 impl Calibration {
     /// From a model whose coefficients are all fixed at their calibrated values.
     pub fn from_model(model: &Model, settings: CorrectionSettings) -> Result<Self, CorrectError> {
+        if let Some(e) = model.nonlinear().first() {
+            return Err(CorrectError::Unsupported(e.effect.id().to_string()));
+        }
         Ok(Self {
             gyro: SensorInverse::build(model, SensorKind::Gyro)?,
             accel: SensorInverse::build(model, SensorKind::Accel)?,

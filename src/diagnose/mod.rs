@@ -7,8 +7,9 @@
 //!    constant + [`HARMONICS`] cone harmonics; one χ² test per channel pooled over runs
 //!    against white noise, at the level of [`SIGNIFICANCE_Z`]).
 //! 2. For each catalogue effect not in the model, refit with it and score it: residual
-//!    reduction, an F-test p-value and ΔBIC = N ln(RSS₁/RSS₀) + Δp ln N over the sensor's
-//!    channels. Candidates that do not reach ΔBIC < [`BIC_EVIDENCE`] are not proposed.
+//!    reduction, a likelihood-ratio (χ²) p-value and ΔBIC = Σ_s N_s ln(RSS₁/RSS₀) + Δp ln N
+//!    over both sensors. Nonlinear effects (time delay, dead zone) are fitted by variable
+//!    projection for each try. Candidates that do not reach ΔBIC < [`BIC_EVIDENCE`] are not proposed.
 //! 3. Climb greedily: add the best candidate, re-score the rest, until the systematic
 //!    residual is at the noise floor or nothing helps. Candidates whose scores are within
 //!    [`BIC_TIE`] of the best are reported as indistinguishable on these runs.
@@ -18,10 +19,10 @@
 
 use crate::check::harmonics::{chi2_upper, systematic, Systematic};
 use crate::estimate::{fit, CoefStatus, EstimateError, Fit, FitOptions, FitRun};
-use crate::model::{catalog, forward, Model, SensorKind, AXES};
+use crate::model::{catalog, forward, nonlinear_catalog, Model, SensorKind, AXES};
 use crate::session::MotionSpec;
 use serde::{Deserialize, Serialize};
-use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// Cone harmonics in the systematic-residual fit.
 pub const HARMONICS: usize = 6;
@@ -59,15 +60,15 @@ pub struct ChannelReport {
 pub struct Candidate {
     /// Effect id.
     pub effect: String,
-    /// Sensor it acts on.
+    /// Sensor whose residual it reduces most.
     pub sensor: SensorKind,
     /// Coefficients it adds that the runs could identify.
     pub added_params: usize,
-    /// Sensor RSS before (SI²).
+    /// That sensor's RSS before (SI²).
     pub rss_before: f64,
     /// Sensor RSS with the effect.
     pub rss_after: f64,
-    /// F-test p-value of the added coefficients.
+    /// Likelihood-ratio p-value of the added coefficients.
     pub p_value: f64,
     /// ΔBIC (negative = supported).
     pub delta_bic: f64,
@@ -135,8 +136,13 @@ fn channel_reports(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMot
     for sensor in SensorKind::BOTH {
         let terms = model.terms(sensor);
         let values = values_of(f, model, sensor);
+        let seen = crate::estimate::nonlinear::seen_tracks(model, f, sensor, runs);
+        let moved: Vec<FitRun<'_>> = match &seen {
+            Some(tracks) => runs.iter().zip(tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect(),
+            None => runs.to_vec(),
+        };
         let mut res: Vec<Vec<Vec<f64>>> = vec![Vec::new(); 3];
-        for run in runs {
+        for run in &moved {
             let mut r: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(run.len())).collect();
             for k in 0..run.len() {
                 let u = forward(&terms, &values, &run.state(k));
@@ -207,27 +213,39 @@ fn sensor_rss(f: &Fit, sensor: SensorKind) -> (f64, u64, usize) {
     (rss, n, p)
 }
 
-fn score(base: &Fit, with: &Fit, sensor: SensorKind, effect: &str, explanation: &str) -> Candidate {
-    let (rss0, n, p0) = sensor_rss(base, sensor);
-    let (rss1, _, p1) = sensor_rss(with, sensor);
-    let dp = p1.saturating_sub(p0);
-    let nf = n as f64;
-    let dof = nf - p1 as f64;
-    let p_value = if dp == 0 || rss1 <= 0.0 || dof <= 0.0 {
-        1.0
-    } else {
-        let f = ((rss0 - rss1).max(0.0) / dp as f64) / (rss1 / dof);
-        FisherSnedecor::new(dp as f64, dof).map(|d| d.sf(f)).unwrap_or(1.0)
-    };
-    let delta_bic = if rss0 > 0.0 && rss1 > 0.0 { nf * (rss1 / rss0).ln() + dp as f64 * nf.ln() } else { 0.0 };
+/// Scores a refit against the base fit over both sensors: the likelihood-ratio statistic
+/// LR = Σ_s N_s ln(RSS₀/RSS₁) (χ² with Δp degrees of freedom under "no effect", giving the
+/// p-value) and ΔBIC = −LR + Δp ln N.
+fn score(base: &Fit, with: &Fit, effect: &str, explanation: &str) -> Candidate {
+    let fitted_nl = |f: &Fit| f.nonlinear.iter().filter(|p| p.fitted).count();
+    let mut lr = 0.0;
+    let mut dp = fitted_nl(with).saturating_sub(fitted_nl(base));
+    let mut n_total = 0.0;
+    let (mut best_sensor, mut best_gain) = (SensorKind::Gyro, f64::NEG_INFINITY);
+    let (mut rss_before, mut rss_after) = (0.0, 0.0);
+    for s in SensorKind::BOTH {
+        let (rss0, n, p0) = sensor_rss(base, s);
+        let (rss1, _, p1) = sensor_rss(with, s);
+        dp += p1.saturating_sub(p0);
+        n_total += n as f64;
+        let gain = if rss0 > 0.0 && rss1 > 0.0 { n as f64 * (rss0 / rss1).ln() } else { 0.0 };
+        lr += gain;
+        if gain > best_gain {
+            best_gain = gain;
+            best_sensor = s;
+            rss_before = rss0;
+            rss_after = rss1;
+        }
+    }
+    let p_value = if dp == 0 { 1.0 } else { ChiSquared::new(dp as f64).map(|d| d.sf(lr.max(0.0))).unwrap_or(1.0) };
     Candidate {
         effect: effect.to_string(),
-        sensor,
+        sensor: best_sensor,
         added_params: dp,
-        rss_before: rss0,
-        rss_after: rss1,
+        rss_before,
+        rss_after,
         p_value,
-        delta_bic,
+        delta_bic: -lr + dp as f64 * n_total.max(1.0).ln(),
         explanation: explanation.to_string(),
     }
 }
@@ -251,26 +269,44 @@ pub fn diagnose(
     let mut first_round: Option<Vec<Candidate>> = None;
     let mut picture = channels.clone();
     while steps.len() < MAX_STEPS && picture.iter().any(|c| c.systematic) {
+        let mut options: Vec<(&'static str, &'static str)> =
+            catalog().iter().filter(|e| !(e.needs_temperature() && !has_temp)).map(|e| (e.id(), e.explain())).collect();
+        options.extend(nonlinear_catalog().iter().map(|e| (e.id(), e.explain())));
+        // Candidates are scored with the nonlinear parameters found so far held (a linear
+        // refit each); the chosen one is then refitted jointly with everything.
+        let mut held = current.clone();
+        for e in current.nonlinear() {
+            let values = current_fit.nonlinear.iter().filter(|p| p.effect == e.effect.id()).map(|p| p.value).collect();
+            let _ = held.fix_nonlinear(e.effect.id(), values);
+        }
         let mut scored = Vec::new();
-        for e in catalog() {
-            if current.effects().iter().any(|m| m.id() == e.id()) || (e.needs_temperature() && !has_temp) {
+        for (id, explain) in options {
+            let present = current.effects().iter().any(|m| m.id() == id)
+                || current.nonlinear().iter().any(|m| m.effect.id() == id);
+            if present {
                 continue;
             }
-            let mut m = current.clone();
-            if m.add_effect(e.id()).is_err() {
+            let mut m = held.clone();
+            if m.add_effect(id).is_err() {
                 continue;
             }
             let Ok(f) = fit(&m, runs, opts) else { continue };
-            scored.push((score(&current_fit, &f, e.sensor(), e.id(), e.explain()), m, f));
+            scored.push((score(&current_fit, &f, id, explain), id, f));
         }
         scored.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
         if first_round.is_none() {
             first_round = Some(scored.iter().map(|s| s.0.clone()).collect());
         }
-        let Some((best, m, f)) = scored.first().cloned() else { break };
+        let Some((best, id, _)) = scored.first().cloned() else { break };
         if best.delta_bic >= BIC_EVIDENCE {
             break;
         }
+        let mut m = current.clone();
+        if m.add_effect(id).is_err() {
+            break;
+        }
+        let f = fit(&m, runs, opts)?;
+        let best = score(&current_fit, &f, id, &best.explanation);
         let indistinguishable: Vec<String> = scored[1..]
             .iter()
             .filter(|s| s.0.sensor == best.sensor && s.0.delta_bic - best.delta_bic < BIC_TIE)

@@ -14,9 +14,11 @@
 //! kind of run that would identify it; the rest of the fit proceeds.
 
 pub mod identify;
+pub mod nonlinear;
 pub mod qr;
 
 pub use identify::{Correlation, Unidentifiable};
+pub use nonlinear::NonlinearParam;
 pub use qr::QrAccumulator;
 
 use crate::model::{Model, Role, SensorKind, State, TermStatus, AXES};
@@ -120,6 +122,9 @@ pub enum EstimateError {
         /// Run name.
         run: String,
     },
+    /// A nonlinear parameter search failed.
+    #[error("nonlinear fit failed: {0}")]
+    NotConverged(String),
     /// The runs cannot identify the requested model (strict mode).
     #[error("the runs cannot identify the requested model: {0}")]
     Unidentifiable(String),
@@ -216,6 +221,9 @@ pub struct Fit {
     pub gyro: SensorFit,
     /// Accelerometer.
     pub accel: SensorFit,
+    /// Parameters of nonlinear effects (time delay, dead zone), if the model has any.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub nonlinear: Vec<NonlinearParam>,
 }
 
 impl Fit {
@@ -259,9 +267,13 @@ pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit,
             return Err(EstimateError::MissingTemperature { effect: e.id().to_string(), run: r.name.to_string() });
         }
     }
+    if !model.nonlinear().is_empty() {
+        return nonlinear::fit(model, runs, opts);
+    }
     Ok(Fit {
         gyro: fit_sensor(model, SensorKind::Gyro, runs, opts)?,
         accel: fit_sensor(model, SensorKind::Accel, runs, opts)?,
+        nonlinear: Vec::new(),
     })
 }
 

@@ -21,28 +21,34 @@ mod anisoelastic;
 mod bias;
 mod coupling;
 mod cubic;
+mod dead_zone;
 mod drift;
 mod g_sensitivity;
 mod hysteresis;
 mod lever_arm;
+pub mod nonlinear;
 mod quadratic;
 mod scale_asymmetry;
 mod temp_bias;
 mod temp_scale;
+mod time_delay;
 
 pub use angular_accel::AngularAcceleration;
 pub use anisoelastic::Anisoelastic;
 pub use bias::Bias;
 pub use coupling::ScaleCoupling;
 pub use cubic::Cubic;
+pub use dead_zone::DeadZone;
 pub use drift::Drift;
 pub use g_sensitivity::GSensitivity;
 pub use hysteresis::Hysteresis;
 pub use lever_arm::LeverArm;
+pub use nonlinear::{NonlinearEffect, ParamDef};
 pub use quadratic::Quadratic;
 pub use scale_asymmetry::ScaleAsymmetry;
 pub use temp_bias::TempBias;
 pub use temp_scale::TempScale;
+pub use time_delay::TimeDelay;
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -224,6 +230,21 @@ pub fn catalog() -> Vec<Arc<dyn Effect>> {
     ]
 }
 
+/// Every effect with nonlinear parameters crosscal knows.
+pub fn nonlinear_catalog() -> Vec<Arc<dyn NonlinearEffect>> {
+    vec![Arc::new(TimeDelay), Arc::new(DeadZone::new(SensorKind::Gyro)), Arc::new(DeadZone::new(SensorKind::Accel))]
+}
+
+/// Finds a nonlinear catalogue effect by id.
+pub fn find_nonlinear(id: &str) -> Option<Arc<dyn NonlinearEffect>> {
+    nonlinear_catalog().into_iter().find(|e| e.id() == id)
+}
+
+/// Ids of every catalogue effect, linear and nonlinear.
+pub fn all_effect_ids() -> Vec<&'static str> {
+    catalog().iter().map(|e| e.id()).chain(nonlinear_catalog().iter().map(|e| e.id())).collect()
+}
+
 /// Finds a catalogue effect by id.
 pub fn find_effect(id: &str) -> Option<Arc<dyn Effect>> {
     catalog().into_iter().find(|e| e.id() == id)
@@ -239,6 +260,17 @@ pub enum TermStatus {
     Fixed(f64),
 }
 
+/// A nonlinear effect in a model, with its parameter values.
+#[derive(Debug, Clone)]
+pub struct NonlinearEntry {
+    /// The effect.
+    pub effect: Arc<dyn NonlinearEffect>,
+    /// Current (start or fixed) parameter values.
+    pub values: Vec<f64>,
+    /// Whether the parameters are estimated (false: held at `values`).
+    pub fitted: bool,
+}
+
 /// A model: effects plus, per coefficient, whether it is fitted.
 #[derive(Debug, Clone)]
 pub struct Model {
@@ -246,6 +278,7 @@ pub struct Model {
     pub name: String,
     effects: Vec<Arc<dyn Effect>>,
     status: Vec<Vec<TermStatus>>,
+    nonlinear: Vec<NonlinearEntry>,
 }
 
 /// Model construction errors.
@@ -280,7 +313,22 @@ impl Model {
     /// A model of the given effects with every coefficient fitted.
     pub fn from_effects(name: &str, effects: Vec<Arc<dyn Effect>>) -> Self {
         let status = effects.iter().map(|e| vec![TermStatus::Fitted; e.terms().len()]).collect();
-        Self { name: name.to_string(), effects, status }
+        Self { name: name.to_string(), effects, status, nonlinear: Vec::new() }
+    }
+
+    /// The nonlinear effects.
+    pub fn nonlinear(&self) -> &[NonlinearEntry] {
+        &self.nonlinear
+    }
+
+    /// Holds a nonlinear effect's parameters at given values (adds it if absent).
+    pub fn fix_nonlinear(&mut self, id: &str, values: Vec<f64>) -> Result<(), ModelError> {
+        self.add_effect(id)?;
+        if let Some(e) = self.nonlinear.iter_mut().find(|e| e.effect.id() == id) {
+            e.values = values;
+            e.fitted = false;
+        }
+        Ok(())
     }
 
     /// The default model: biases, full C_ω, full C_ε (gyro); bias, full K (accelerometer).
@@ -323,13 +371,17 @@ impl Model {
 
     /// Adds a catalogue effect (no-op when already present).
     pub fn add_effect(&mut self, id: &str) -> Result<(), ModelError> {
-        if self.effects.iter().any(|e| e.id() == id) {
+        if self.effects.iter().any(|e| e.id() == id) || self.nonlinear.iter().any(|e| e.effect.id() == id) {
             return Ok(());
         }
-        let e = find_effect(id).ok_or_else(|| {
-            let known: Vec<&str> = catalog().iter().map(|e| e.id()).collect();
-            ModelError::UnknownEffect(id.to_string(), known.join(", "))
-        })?;
+        if let Some(e) = find_nonlinear(id) {
+            let values = e.params().iter().map(|p| p.nominal).collect();
+            self.nonlinear.push(NonlinearEntry { effect: e, values, fitted: true });
+            self.name = format!("{}+{id}", self.name);
+            return Ok(());
+        }
+        let e =
+            find_effect(id).ok_or_else(|| ModelError::UnknownEffect(id.to_string(), all_effect_ids().join(", ")))?;
         self.status.push(vec![TermStatus::Fitted; e.terms().len()]);
         self.effects.push(e);
         self.name = format!("{}+{id}", self.name);

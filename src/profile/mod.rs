@@ -96,6 +96,9 @@ pub struct Profile {
     pub gyro: SensorFit,
     /// Accelerometer coefficients, covariance and residuals.
     pub accel: SensorFit,
+    /// Parameters of nonlinear effects (time delay, dead zone).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub nonlinear: Vec<crate::estimate::NonlinearParam>,
     /// Runs used to fit.
     pub runs: Vec<RunUsed>,
     /// Correction settings.
@@ -175,9 +178,15 @@ impl Profile {
             g_m_s2: session.manifest.g_m_s2,
             conventions: Conventions::default(),
             model: model.name.clone(),
-            effects: model.effects().iter().map(|e| e.id().to_string()).collect(),
+            effects: model
+                .effects()
+                .iter()
+                .map(|e| e.id().to_string())
+                .chain(model.nonlinear().iter().map(|e| e.effect.id().to_string()))
+                .collect(),
             gyro: fit.gyro,
             accel: fit.accel,
+            nonlinear: fit.nonlinear,
             runs: session
                 .runs
                 .iter()

@@ -44,14 +44,23 @@ impl UnitTruth {
         Self { model: Model::default_model(), values }
     }
 
-    /// True value of a coefficient by name (its nominal value when not set), or None when
-    /// the truth model has no such coefficient.
+    /// True value of a coefficient or nonlinear parameter by name (its nominal value when
+    /// not set), or None when the truth model has no such coefficient.
     pub fn value(&self, name: &str) -> Option<f64> {
-        SensorKind::BOTH
+        let nominal = SensorKind::BOTH
             .iter()
             .flat_map(|s| self.model.terms(*s))
             .find(|t| t.term.name == name)
-            .map(|t| self.values.get(name).copied().unwrap_or(t.term.nominal))
+            .map(|t| t.term.nominal)
+            .or_else(|| {
+                self.model
+                    .nonlinear()
+                    .iter()
+                    .flat_map(|e| e.effect.params())
+                    .find(|d| d.name == name)
+                    .map(|d| d.nominal)
+            })?;
+        Some(self.values.get(name).copied().unwrap_or(nominal))
     }
 
     /// Value of every term of a sensor, in model order.
@@ -174,6 +183,23 @@ impl SimConfig {
             let t_s: Vec<f64> = (0..n).map(|k| k as f64 / self.sample_rate_hz).collect();
             let mut rec = Recording { t_s, ..Default::default() };
             let tr = track_for(&plan.motion, &plan.mount, &rec, self.g_m_s2, &deriv);
+            // Nonlinear effects change the motion as each sensor sees it.
+            let seen = |sensor: SensorKind| {
+                let mut t = tr.clone();
+                for e in self.truth.model.nonlinear() {
+                    if e.effect.sensor().is_none_or(|s| s == sensor) {
+                        let p: Vec<f64> = e
+                            .effect
+                            .params()
+                            .iter()
+                            .map(|d| self.truth.values.get(&d.name).copied().unwrap_or(d.nominal))
+                            .collect();
+                        t = e.effect.transform(&p, &t);
+                    }
+                }
+                t
+            };
+            let (tg, ta) = (seen(SensorKind::Gyro), seen(SensorKind::Accel));
             rec.gyro.reserve(n);
             rec.accel.reserve(n);
             if let Some((t0, t1)) = self.temperature_c {
@@ -182,15 +208,15 @@ impl SimConfig {
                 rec.temp_c = Some(rec.t_s.iter().map(|&t| temp(t)).collect());
             }
             for k in 0..n {
-                let s = State {
+                let state = |tr: &crate::motion::Track| State {
                     t_s: tr.t_s[k] - tr.t_s[0],
                     w: tr.w_rad_s[k],
                     e: tr.e_rad_s2[k],
                     a: tr.a_m_s2[k],
                     temp_c: rec.temp_c.as_ref().map_or(f64::NAN, |t| t[k]),
                 };
-                let ug = forward(&gterms, &gvals, &s);
-                let ua = forward(&aterms, &avals, &s);
+                let ug = forward(&gterms, &gvals, &state(&tg));
+                let ua = forward(&aterms, &avals, &state(&ta));
                 let mut g = [0.0; 3];
                 let mut a = [0.0; 3];
                 for i in 0..3 {

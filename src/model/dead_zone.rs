@@ -1,0 +1,72 @@
+//! Dead zone: no output until the input on an axis exceeds a threshold.
+
+use super::nonlinear::{NonlinearEffect, ParamDef};
+use super::{output_unit, SensorKind, AXES};
+use crate::motion::Track;
+
+/// The sensor sees x_i − clamp(x_i, −d_i, d_i) on its own axis i (d_i ≥ 0).
+#[derive(Debug, Clone)]
+pub struct DeadZone {
+    sensor: SensorKind,
+}
+
+impl DeadZone {
+    /// Dead zone of a sensor's three axes.
+    pub fn new(sensor: SensorKind) -> Self {
+        Self { sensor }
+    }
+}
+
+impl NonlinearEffect for DeadZone {
+    fn id(&self) -> &'static str {
+        match self.sensor {
+            SensorKind::Gyro => "gyro-dead-zone",
+            SensorKind::Accel => "accel-dead-zone",
+        }
+    }
+
+    fn sensor(&self) -> Option<SensorKind> {
+        Some(self.sensor)
+    }
+
+    fn explain(&self) -> &'static str {
+        "Dead zone (threshold): below a minimum input the sensor does not respond at all, from \
+         static friction in a gimbal or pivot or a comparator threshold; above it the output \
+         follows the input less the threshold. On a conic stand it shows where an axis's input \
+         crosses zero, as odd harmonics of the cone frequency (a square wave of height d) and \
+         as a direction-dependent offset on an axis with a constant input. Inside the band the \
+         input cannot be recovered: corrected samples there are flagged, not invented."
+    }
+
+    fn params(&self) -> Vec<ParamDef> {
+        let scale = match self.sensor {
+            SensorKind::Gyro => 1e-4,
+            SensorKind::Accel => 1e-3,
+        };
+        (0..3)
+            .map(|i| ParamDef {
+                name: format!("{}.dz_{}", self.sensor.as_str(), AXES[i]),
+                unit: output_unit(self.sensor),
+                nominal: 0.0,
+                scale,
+                min: 0.0,
+                max: f64::INFINITY,
+            })
+            .collect()
+    }
+
+    fn transform(&self, p: &[f64], tr: &Track) -> Track {
+        let mut out = tr.clone();
+        let xs = match self.sensor {
+            SensorKind::Gyro => &mut out.w_rad_s,
+            SensorKind::Accel => &mut out.a_m_s2,
+        };
+        for x in xs.iter_mut() {
+            for i in 0..3 {
+                let d = p.get(i).copied().unwrap_or(0.0).abs();
+                x[i] -= x[i].clamp(-d, d);
+            }
+        }
+        out
+    }
+}

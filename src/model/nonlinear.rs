@@ -1,0 +1,81 @@
+//! Effects whose parameters enter nonlinearly (time delay, dead zone). Such an effect does
+//! not add regressors; it changes the true motion *as the sensor sees it*, and the linear
+//! model is then fitted on the transformed motion (variable projection, see
+//! [`crate::estimate::nonlinear`]).
+
+use super::SensorKind;
+use crate::motion::Track;
+use std::fmt;
+
+/// One nonlinear parameter.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamDef {
+    /// Name, e.g. `time_delay` or `gyro.dz_x`.
+    pub name: String,
+    /// SI unit.
+    pub unit: &'static str,
+    /// Value when the effect is absent.
+    pub nominal: f64,
+    /// Typical size, for the optimiser's first simplex and numerical derivatives.
+    pub scale: f64,
+    /// Smallest physical value.
+    pub min: f64,
+    /// Largest physical value.
+    pub max: f64,
+}
+
+/// An effect with nonlinear parameters.
+pub trait NonlinearEffect: Send + Sync + fmt::Debug {
+    /// Identifier (command line, profiles).
+    fn id(&self) -> &'static str;
+    /// The sensor whose outputs it affects (None: both).
+    fn sensor(&self) -> Option<SensorKind>;
+    /// A paragraph explaining the physics.
+    fn explain(&self) -> &'static str;
+    /// Its parameters.
+    fn params(&self) -> Vec<ParamDef>;
+    /// The true motion as the sensor sees it, for parameter values `p`.
+    fn transform(&self, p: &[f64], track: &Track) -> Track;
+}
+
+/// Value at time `t` of a sampled series by Catmull–Rom cubic interpolation on the
+/// (possibly non-uniform) time stamps, clamped at the ends.
+pub fn interpolate(t_s: &[f64], x: &[[f64; 3]], t: f64, hint: &mut usize) -> [f64; 3] {
+    let n = t_s.len();
+    if n == 0 {
+        return [0.0; 3];
+    }
+    if n == 1 || t <= t_s[0] {
+        return x[0];
+    }
+    if t >= t_s[n - 1] {
+        return x[n - 1];
+    }
+    let mut i = (*hint).min(n - 2);
+    while i + 1 < n - 1 && t_s[i + 1] <= t {
+        i += 1;
+    }
+    while i > 0 && t_s[i] > t {
+        i -= 1;
+    }
+    *hint = i;
+    let (t0, t1) = (t_s[i], t_s[i + 1]);
+    let h = t1 - t0;
+    let u = (t - t0) / h;
+    let slope = |j: usize, c: usize| -> f64 {
+        let a = j.saturating_sub(1);
+        let b = (j + 1).min(n - 1);
+        (x[b][c] - x[a][c]) / (t_s[b] - t_s[a]) * h
+    };
+    let (h00, h10, h01, h11) = (
+        2.0 * u * u * u - 3.0 * u * u + 1.0,
+        u * u * u - 2.0 * u * u + u,
+        -2.0 * u * u * u + 3.0 * u * u,
+        u * u * u - u * u,
+    );
+    let mut out = [0.0; 3];
+    for c in 0..3 {
+        out[c] = h00 * x[i][c] + h10 * slope(i, c) + h01 * x[i + 1][c] + h11 * slope(i + 1, c);
+    }
+    out
+}

@@ -1,0 +1,51 @@
+//! Time delay between the sensor's clock and the stand's.
+
+use super::nonlinear::{interpolate, NonlinearEffect, ParamDef};
+use super::SensorKind;
+use crate::motion::Track;
+
+/// The outputs stamped t show the motion at t − τ (τ > 0: the sensor lags the stand).
+#[derive(Debug, Clone, Default)]
+pub struct TimeDelay;
+
+impl NonlinearEffect for TimeDelay {
+    fn id(&self) -> &'static str {
+        "time-delay"
+    }
+
+    fn sensor(&self) -> Option<SensorKind> {
+        None
+    }
+
+    fn explain(&self) -> &'static str {
+        "Time delay: the unit's samples are stamped later (or earlier) than the stand's motion \
+         they measure, from filter group delay, transmission latency or an offset between the \
+         two clocks. Output at t shows the truth at t − τ. On a gyro it looks exactly like the \
+         diagonal angular-acceleration terms (e_ii = −τ); on the accelerometer it looks like \
+         τ (ω × a), which grows with the stand rate. Runs at several rates separate it from \
+         cross-coupling."
+    }
+
+    fn params(&self) -> Vec<ParamDef> {
+        vec![ParamDef { name: "time_delay".into(), unit: "s", nominal: 0.0, scale: 1e-3, min: -1.0, max: 1.0 }]
+    }
+
+    fn transform(&self, p: &[f64], tr: &Track) -> Track {
+        let tau = p.first().copied().unwrap_or(0.0);
+        let n = tr.t_s.len();
+        let mut out = Track {
+            t_s: tr.t_s.clone(),
+            w_rad_s: Vec::with_capacity(n),
+            e_rad_s2: Vec::with_capacity(n),
+            a_m_s2: Vec::with_capacity(n),
+            epsilon_source: tr.epsilon_source.clone(),
+        };
+        let (mut h1, mut h2, mut h3) = (0, 0, 0);
+        for &t in &tr.t_s {
+            out.w_rad_s.push(interpolate(&tr.t_s, &tr.w_rad_s, t - tau, &mut h1));
+            out.e_rad_s2.push(interpolate(&tr.t_s, &tr.e_rad_s2, t - tau, &mut h2));
+            out.a_m_s2.push(interpolate(&tr.t_s, &tr.a_m_s2, t - tau, &mut h3));
+        }
+        out
+    }
+}
