@@ -270,7 +270,7 @@ pub fn diagnose(
     let mut picture = channels.clone();
     while steps.len() < MAX_STEPS && picture.iter().any(|c| c.systematic) {
         let mut options: Vec<(&'static str, &'static str)> =
-            catalog().iter().filter(|e| !(e.needs_temperature() && !has_temp)).map(|e| (e.id(), e.explain())).collect();
+            catalog().iter().filter(|e| !e.needs_temperature() || has_temp).map(|e| (e.id(), e.explain())).collect();
         options.extend(nonlinear_catalog().iter().map(|e| (e.id(), e.explain())));
         // Candidates are scored with the nonlinear parameters found so far held (a linear
         // refit each); the chosen one is then refitted jointly with everything.
