@@ -26,6 +26,12 @@ where
         w.flush()?;
     }
     tmp.as_file().sync_all()?;
+    // Temporary files are created 0600; the result is an ordinary file (0644 before umask).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644))?;
+    }
     if replace {
         tmp.persist(path).map_err(|e| e.error)?;
     } else {

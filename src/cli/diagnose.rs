@@ -25,6 +25,10 @@ pub struct Args {
     /// Print the diagnosis as JSON.
     #[arg(long)]
     json: bool,
+    /// Write a self-contained HTML report with plots (residual vs time, vs cone phase,
+    /// harmonic amplitudes per channel).
+    #[arg(long)]
+    report: Option<PathBuf>,
 }
 
 fn unit(s: SensorKind) -> (&'static str, f64) {
@@ -68,6 +72,19 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let runs = fit_runs(&session, &tr);
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
     let d = diagnose(&model, &runs, &motions, &FitOptions::default())?;
+    if let Some(path) = &a.report {
+        let base_fit = crosscal::estimate::fit(&model, &runs, &FitOptions::default())?;
+        let before = crosscal::diagnose::residuals(&model, &base_fit, &runs, &motions);
+        let after = (!d.steps.is_empty()).then(|| {
+            let m = crosscal::diagnose::ladder_model(&model, &d);
+            crosscal::diagnose::residuals(&m, &d.final_fit, &runs, &motions)
+        });
+        let title = format!("crosscal diagnose: unit {}", session.manifest.serial);
+        let html = crosscal::diagnose::report::html(&title, &d, &before, after.as_deref(), &motions);
+        crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, html.as_bytes()))
+            .with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("report written to {}", path.display());
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&d)?);
         return Ok(Outcome::Ok);

@@ -1,6 +1,7 @@
 //! Subcommands. Parsing and printing only; every number comes from the library.
 
 mod check;
+mod compare;
 mod correct;
 mod demo;
 mod diagnose;
@@ -80,6 +81,8 @@ enum Command {
     Demo(demo::Args),
     /// Compare model and measurement: where the model fails and which effect is missing.
     Diagnose(diagnose::Args),
+    /// The model ladder: paper model, default, then each effect diagnose adds.
+    Compare(compare::Args),
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -106,6 +109,7 @@ pub fn main() -> ExitCode {
         Command::Check(a) => check::run(a),
         Command::Demo(a) => demo::run(a),
         Command::Diagnose(a) => diagnose::run(a),
+        Command::Compare(a) => compare::run(a),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

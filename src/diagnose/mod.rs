@@ -17,6 +17,9 @@
 //!    effects bring the systematic residual to the noise floor), or unexplained (the channel,
 //!    harmonic and runs where the systematic residual stays).
 
+pub mod plot;
+pub mod report;
+
 use crate::check::harmonics::{chi2_upper, systematic, Systematic};
 use crate::estimate::{fit, CoefStatus, EstimateError, Fit, FitOptions, FitRun};
 use crate::model::{catalog, forward, nonlinear_catalog, Model, SensorKind, AXES};
@@ -120,6 +123,17 @@ pub struct Diagnosis {
     pub unexplained: Vec<String>,
     /// Cautions (aliasing between candidates, missing inputs).
     pub warnings: Vec<String>,
+    /// Fit of the model at the end of the ladder (see [`ladder_model`]).
+    pub final_fit: Fit,
+}
+
+/// The model at the end of a diagnosis's ladder: the base model plus each added effect.
+pub fn ladder_model(base: &Model, d: &Diagnosis) -> Model {
+    let mut m = base.clone();
+    for s in &d.steps {
+        let _ = m.add_effect(&s.effect);
+    }
+    m
 }
 
 /// Motion of each run (for the cone phase).
@@ -130,10 +144,38 @@ fn values_of(f: &Fit, model: &Model, sensor: SensorKind) -> Vec<f64> {
     model.terms(sensor).iter().map(|t| sf.value(&t.term.name).unwrap_or(t.term.nominal)).collect()
 }
 
-/// Channel reports of a fitted model.
-fn channel_reports(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotions<'_>) -> Vec<ChannelReport> {
-    let mut out = Vec::with_capacity(6);
-    for sensor in SensorKind::BOTH {
+/// Residuals (output − model, SI) of a fitted model, one run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunResiduals {
+    /// Run name.
+    pub run: String,
+    /// Time stamps, s.
+    pub t_s: Vec<f64>,
+    /// Cone phase θ (rad) per sample, for conic runs.
+    pub theta: Option<Vec<f64>>,
+    /// Six channels: gyro x, y, z, accel x, y, z.
+    pub r: Vec<Vec<f64>>,
+}
+
+/// Residuals of a fitted model on every run (nonlinear effects applied).
+pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotions<'_>) -> Vec<RunResiduals> {
+    let mut out: Vec<RunResiduals> = runs
+        .iter()
+        .zip(motions.iter())
+        .map(|(run, m)| RunResiduals {
+            run: run.name.to_string(),
+            t_s: run.track.t_s.clone(),
+            theta: match m {
+                MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
+                    let c = crate::motion::Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
+                    Some(run.track.t_s.iter().map(|&t| c.theta(t).rem_euclid(std::f64::consts::TAU)).collect())
+                }
+                _ => None,
+            },
+            r: (0..6).map(|_| Vec::with_capacity(run.len())).collect(),
+        })
+        .collect();
+    for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
         let terms = model.terms(sensor);
         let values = values_of(f, model, sensor);
         let seen = crate::estimate::nonlinear::seen_tracks(model, f, sensor, runs);
@@ -141,66 +183,69 @@ fn channel_reports(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMot
             Some(tracks) => runs.iter().zip(tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect(),
             None => runs.to_vec(),
         };
-        let mut res: Vec<Vec<Vec<f64>>> = vec![Vec::new(); 3];
-        for run in &moved {
-            let mut r: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(run.len())).collect();
+        for (run, o) in moved.iter().zip(out.iter_mut()) {
             for k in 0..run.len() {
                 let u = forward(&terms, &values, &run.state(k));
                 let y = run.output(sensor, k);
                 for ch in 0..3 {
-                    r[ch].push(y[ch] - u[ch]);
+                    o.r[3 * si + ch].push(y[ch] - u[ch]);
                 }
-            }
-            for ch in 0..3 {
-                res[ch].push(std::mem::take(&mut r[ch]));
             }
         }
-        for ch in 0..3 {
-            let mut diffs = Vec::new();
-            let (mut ss, mut n, mut sys_ss) = (0.0, 0usize, 0.0);
-            let (mut chi, mut dof) = (0.0, 0usize);
-            let mut worst: Option<(String, Option<usize>, f64)> = None;
-            for (ri, r) in res[ch].iter().enumerate() {
-                diffs.extend(r.windows(2).map(|w| (w[1] - w[0]).abs()));
-                ss += r.iter().map(|v| v * v).sum::<f64>();
-                n += r.len();
-                let sys: Systematic = systematic(r, &runs[ri].track.t_s, motions[ri], HARMONICS);
-                sys_ss += sys.curve.iter().map(|v| v * v).sum::<f64>();
-                if sys.sigma2 > 0.0 {
-                    chi += sys.explained / sys.sigma2;
-                    dof += sys.params;
-                }
-                let (h, amp) = if sys.amplitudes.is_empty() {
-                    (None, sys.max_abs())
-                } else {
-                    let (h, a) = sys
-                        .amplitudes
-                        .iter()
-                        .enumerate()
-                        .fold((0, 0.0), |acc, (h, &a)| if a > acc.1 { (h, a) } else { acc });
-                    (Some(h), a)
-                };
-                if worst.as_ref().is_none_or(|w| amp > w.2) {
-                    worst = Some((runs[ri].name.to_string(), h, amp));
-                }
+    }
+    out
+}
+
+/// Channel reports from residuals.
+fn channel_reports(res: &[RunResiduals], motions: &RunMotions<'_>) -> Vec<ChannelReport> {
+    let mut out = Vec::with_capacity(6);
+    for c in 0..6 {
+        let sensor = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
+        let mut diffs = Vec::new();
+        let (mut ss, mut n, mut sys_ss) = (0.0, 0usize, 0.0);
+        let (mut chi, mut dof) = (0.0, 0usize);
+        let mut worst: Option<(String, Option<usize>, f64)> = None;
+        for (ri, run) in res.iter().enumerate() {
+            let r = &run.r[c];
+            diffs.extend(r.windows(2).map(|w| (w[1] - w[0]).abs()));
+            ss += r.iter().map(|v| v * v).sum::<f64>();
+            n += r.len();
+            let sys: Systematic = systematic(r, &run.t_s, motions[ri], HARMONICS);
+            sys_ss += sys.curve.iter().map(|v| v * v).sum::<f64>();
+            if sys.sigma2 > 0.0 {
+                chi += sys.explained / sys.sigma2;
+                dof += sys.params;
             }
-            // One pooled test per channel over all runs, at 0.001 % (few false alarms even
-            // over many channels and sessions).
-            let significant = dof > 0 && chi > chi2_upper(dof, SIGNIFICANCE_Z);
-            let mid = diffs.len() / 2;
-            let mad = if diffs.is_empty() { 0.0 } else { *diffs.select_nth_unstable_by(mid, f64::total_cmp).1 };
-            // For white noise, |Δr| has median 0.6745·√2·σ.
-            let noise_floor = mad / (0.674_489_75 * std::f64::consts::SQRT_2);
-            out.push(ChannelReport {
-                sensor,
-                axis: AXES[ch],
-                residual_rms: (ss / n.max(1) as f64).sqrt(),
-                noise_floor,
-                systematic_rms: (sys_ss / n.max(1) as f64).sqrt(),
-                systematic: significant,
-                worst,
-            });
+            let (h, amp) = if sys.amplitudes.is_empty() {
+                (None, sys.max_abs())
+            } else {
+                let (h, a) = sys
+                    .amplitudes
+                    .iter()
+                    .enumerate()
+                    .fold((0, 0.0), |acc, (h, &a)| if a > acc.1 { (h, a) } else { acc });
+                (Some(h), a)
+            };
+            if worst.as_ref().is_none_or(|w| amp > w.2) {
+                worst = Some((run.run.clone(), h, amp));
+            }
         }
+        // One pooled test per channel over all runs, at 0.001 % (few false alarms even
+        // over many channels and sessions).
+        let significant = dof > 0 && chi > chi2_upper(dof, SIGNIFICANCE_Z);
+        let mid = diffs.len() / 2;
+        let mad = if diffs.is_empty() { 0.0 } else { *diffs.select_nth_unstable_by(mid, f64::total_cmp).1 };
+        // For white noise, |Δr| has median 0.6745·√2·σ.
+        let noise_floor = mad / (0.674_489_75 * std::f64::consts::SQRT_2);
+        out.push(ChannelReport {
+            sensor,
+            axis: AXES[c % 3],
+            residual_rms: (ss / n.max(1) as f64).sqrt(),
+            noise_floor,
+            systematic_rms: (sys_ss / n.max(1) as f64).sqrt(),
+            systematic: significant,
+            worst,
+        });
     }
     out
 }
@@ -264,7 +309,7 @@ pub fn diagnose(
     }
     let mut current = model.clone();
     let mut current_fit = fit(&current, runs, opts)?;
-    let channels = channel_reports(&current, &current_fit, runs, motions);
+    let channels = channel_reports(&residuals(&current, &current_fit, runs, motions), motions);
     let mut steps: Vec<Step> = Vec::new();
     let mut first_round: Option<Vec<Candidate>> = None;
     let mut picture = channels.clone();
@@ -321,7 +366,7 @@ pub fn diagnose(
         }
         current = m;
         current_fit = f;
-        picture = channel_reports(&current, &current_fit, runs, motions);
+        picture = channel_reports(&residuals(&current, &current_fit, runs, motions), motions);
         steps.push(Step { effect: best.effect.clone(), score: best, indistinguishable, channels: picture.clone() });
     }
     let remaining: Vec<&ChannelReport> = picture.iter().filter(|c| c.systematic).collect();
@@ -352,6 +397,7 @@ pub fn diagnose(
     let proposal =
         if verdict == Verdict::Explained { steps.iter().map(|s| s.effect.clone()).collect() } else { Vec::new() };
     Ok(Diagnosis {
+        final_fit: current_fit,
         model: model.name.clone(),
         channels,
         candidates: first_round.unwrap_or_default(),
@@ -361,4 +407,79 @@ pub fn diagnose(
         unexplained,
         warnings,
     })
+}
+
+/// One rung of the model ladder.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Rung {
+    /// Model name.
+    pub model: String,
+    /// Fitted parameters (linear and nonlinear).
+    pub params: usize,
+    /// Residual RMS per channel (gyro x, y, z, accel x, y, z), SI.
+    pub rms: Vec<f64>,
+    /// Largest |residual| per channel, SI.
+    pub max: Vec<f64>,
+    /// Noise floor per channel, SI.
+    pub noise_floor: Vec<f64>,
+    /// BIC = Σ_s N_s ln(RSS_s/N_s) + p ln N.
+    pub bic: f64,
+    /// Worst-channel residual RMS of the paper model over this model's, per sensor (gyro, accel).
+    pub reduction: Vec<f64>,
+}
+
+fn rung(name: &str, f: &Fit, res: &[RunResiduals], motions: &RunMotions<'_>) -> Rung {
+    let ch = channel_reports(res, motions);
+    let mut bic = 0.0;
+    let mut n_total = 0.0;
+    let mut params = f.nonlinear.iter().filter(|p| p.fitted).count();
+    for s in SensorKind::BOTH {
+        let (rss, n, p) = sensor_rss(f, s);
+        if n > 0 && rss > 0.0 {
+            bic += n as f64 * (rss / n as f64).ln();
+        }
+        n_total += n as f64;
+        params += p;
+    }
+    bic += params as f64 * n_total.max(1.0).ln();
+    let max = (0..6).map(|c| res.iter().flat_map(|r| r.r[c].iter()).fold(0.0_f64, |m, v| m.max(v.abs()))).collect();
+    Rung {
+        model: name.to_string(),
+        params,
+        rms: ch.iter().map(|c| c.residual_rms).collect(),
+        max,
+        noise_floor: ch.iter().map(|c| c.noise_floor).collect(),
+        bic,
+        reduction: Vec::new(),
+    }
+}
+
+/// The model ladder: the paper's model, the default model, then each effect `diagnose` adds,
+/// with residuals, BIC and the reduction against the paper's model.
+pub fn compare(
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    opts: &FitOptions,
+) -> Result<(Vec<Rung>, Diagnosis), EstimateError> {
+    let paper = Model::paper();
+    let base = Model::default_model();
+    let d = diagnose(&base, runs, motions, opts)?;
+    let mut rungs = Vec::new();
+    let pf = fit(&paper, runs, opts)?;
+    rungs.push(rung("paper (eqs. 3-4)", &pf, &residuals(&paper, &pf, runs, motions), motions));
+    let mut m = base.clone();
+    let f = fit(&m, runs, opts)?;
+    rungs.push(rung("default", &f, &residuals(&m, &f, runs, motions), motions));
+    for st in &d.steps {
+        let _ = m.add_effect(&st.effect);
+        let f = fit(&m, runs, opts)?;
+        rungs.push(rung(&format!("+ {}", st.effect), &f, &residuals(&m, &f, runs, motions), motions));
+    }
+    let worst = |r: &Rung, s: usize| r.rms[3 * s..3 * s + 3].iter().copied().fold(0.0, f64::max);
+    let paper_worst = [worst(&rungs[0], 0), worst(&rungs[0], 1)];
+    for r in &mut rungs {
+        r.reduction =
+            (0..2).map(|s| if worst(r, s) > 0.0 { paper_worst[s] / worst(r, s) } else { f64::INFINITY }).collect();
+    }
+    Ok((rungs, d))
 }

@@ -1,0 +1,182 @@
+//! A self-contained HTML report (inline SVG, no scripts, no network) of a diagnosis:
+//! residual versus time, versus cone phase (binned) and harmonic amplitudes per channel.
+
+use super::plot::{bars, lines};
+use super::{ChannelReport, Diagnosis, RunResiduals, Verdict, HARMONICS};
+use crate::check::harmonics::systematic;
+use crate::session::MotionSpec;
+use std::fmt::Write;
+
+const CHANNELS: [&str; 6] = ["gyro x", "gyro y", "gyro z", "accel x", "accel y", "accel z"];
+
+fn unit(c: usize) -> (&'static str, f64) {
+    if c < 3 {
+        ("deg/s", 180.0 / std::f64::consts::PI)
+    } else {
+        ("m/s^2", 1.0)
+    }
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// Residual of channel `c` against time, runs end to end, averaged in buckets (≤ 1500 points).
+fn vs_time(res: &[RunResiduals], c: usize) -> Vec<(f64, f64)> {
+    let (_, k) = unit(c);
+    let total: usize = res.iter().map(|r| r.r[c].len()).sum();
+    let bucket = total.div_ceil(1500).max(1);
+    let mut out = Vec::with_capacity(1500);
+    let mut offset = 0.0;
+    for r in res {
+        let t0 = r.t_s.first().copied().unwrap_or(0.0);
+        for (ch, tt) in r.r[c].chunks(bucket).zip(r.t_s.chunks(bucket)) {
+            let m = ch.iter().sum::<f64>() / ch.len() as f64;
+            out.push((offset + tt[0] - t0, m * k));
+        }
+        offset += r.t_s.last().copied().unwrap_or(t0) - t0;
+    }
+    out
+}
+
+/// Mean residual of channel `c` in 36 cone-phase bins over all conic runs.
+fn vs_phase(res: &[RunResiduals], c: usize) -> Vec<(f64, f64)> {
+    let (_, k) = unit(c);
+    let mut sum = [0.0; 36];
+    let mut cnt = [0usize; 36];
+    for r in res {
+        if let Some(th) = &r.theta {
+            for (v, t) in r.r[c].iter().zip(th) {
+                let b = ((t.to_degrees() / 10.0) as usize).min(35);
+                sum[b] += v;
+                cnt[b] += 1;
+            }
+        }
+    }
+    (0..36).filter(|&b| cnt[b] > 0).map(|b| (b as f64 * 10.0 + 5.0, sum[b] / cnt[b] as f64 * k)).collect()
+}
+
+/// RMS over runs of each cone harmonic's amplitude in channel `c`.
+fn harmonics(res: &[RunResiduals], motions: &[&MotionSpec], c: usize) -> Vec<(String, f64)> {
+    let (_, k) = unit(c);
+    let mut acc = [0.0; HARMONICS + 1];
+    let mut n = 0usize;
+    for (r, m) in res.iter().zip(motions) {
+        let s = systematic(&r.r[c], &r.t_s, m, HARMONICS);
+        if s.amplitudes.len() == HARMONICS + 1 {
+            for (a, v) in acc.iter_mut().zip(&s.amplitudes) {
+                *a += v * v;
+            }
+            n += 1;
+        }
+    }
+    (0..=HARMONICS).map(|h| (format!("{h}"), (acc[h] / n.max(1) as f64).sqrt() * k)).collect()
+}
+
+fn channel_table(title: &str, c: &[ChannelReport]) -> String {
+    let mut s = format!(
+        "<h3>{}</h3><table><tr><th>channel</th><th>residual RMS</th><th>noise floor</th><th>systematic RMS</th><th></th></tr>",
+        esc(title)
+    );
+    for (i, r) in c.iter().enumerate() {
+        let (u, k) = unit(i);
+        let _ = write!(
+            s,
+            "<tr><td>{}</td><td>{:.4e} {u}</td><td>{:.4e} {u}</td><td>{:.4e} {u}</td><td>{}</td></tr>",
+            CHANNELS[i],
+            r.residual_rms * k,
+            r.noise_floor * k,
+            r.systematic_rms * k,
+            if r.systematic { "<b>systematic</b>" } else { "noise" }
+        );
+    }
+    s.push_str("</table>");
+    s
+}
+
+/// The HTML report. `after` are the residuals at the end of the ladder, when effects were added.
+pub fn html(
+    title: &str,
+    d: &Diagnosis,
+    before: &[RunResiduals],
+    after: Option<&[RunResiduals]>,
+    motions: &[&MotionSpec],
+) -> String {
+    let mut s = String::with_capacity(1 << 20);
+    let _ = write!(
+        s,
+        "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
+         body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}}\
+         table{{border-collapse:collapse;margin:0.5em 0}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
+         th{{background:#eee}}.verdict{{font-size:1.2em;padding:0.5em;background:#f4f4f4}}</style></head><body>\
+         <h1>{t}</h1>",
+        t = esc(title)
+    );
+    let verdict = match d.verdict {
+        Verdict::Adequate => "The model is adequate: the residuals are at the noise floor; nothing to add.".to_string(),
+        Verdict::Explained => format!("Add {}: the residual then sits at the noise floor.", d.proposal.join(", ")),
+        Verdict::Unexplained => {
+            format!(
+                "A systematic residual remains that no catalogued effect explains:<br>{}",
+                d.unexplained.iter().map(|u| esc(u)).collect::<Vec<_>>().join("<br>")
+            )
+        }
+    };
+    let _ = write!(s, "<p class=\"verdict\">{verdict}</p>");
+    for w in &d.warnings {
+        let _ = write!(s, "<p>warning: {}</p>", esc(w));
+    }
+    s.push_str(&channel_table(&format!("model '{}'", d.model), &d.channels));
+    if !d.candidates.is_empty() {
+        s.push_str("<h3>candidate effects</h3><table><tr><th>effect</th><th>params</th><th>RSS change</th><th>p-value</th><th>ΔBIC</th><th>explanation</th></tr>");
+        for c in d.candidates.iter().take(12) {
+            let change = if c.rss_before > 0.0 { 100.0 * (c.rss_after / c.rss_before - 1.0) } else { 0.0 };
+            let _ = write!(
+                s,
+                "<tr><td>{}</td><td>{}</td><td>{change:.2} %</td><td>{:.2e}</td><td>{:.1}</td><td style=\"text-align:left\">{}</td></tr>",
+                esc(&c.effect),
+                c.added_params,
+                c.p_value,
+                c.delta_bic,
+                esc(&c.explanation)
+            );
+        }
+        s.push_str("</table>");
+    }
+    for (i, st) in d.steps.iter().enumerate() {
+        s.push_str(&channel_table(
+            &format!("step {}: add {} (ΔBIC {:.1})", i + 1, st.effect, st.score.delta_bic),
+            &st.channels,
+        ));
+    }
+    for c in 0..6 {
+        let (u, _) = unit(c);
+        let _ = write!(s, "<h2>{}</h2>", CHANNELS[c]);
+        let mut t = vec![("model".to_string(), vs_time(before, c))];
+        let mut p = vec![("model".to_string(), vs_phase(before, c))];
+        if let Some(a) = after {
+            t.push(("with added effects".to_string(), vs_time(a, c)));
+            p.push(("with added effects".to_string(), vs_phase(a, c)));
+        }
+        s.push_str(&lines(
+            &format!("{}: residual vs time (runs end to end, bucket means)", CHANNELS[c]),
+            "t (s)",
+            u,
+            &t,
+        ));
+        s.push_str(&lines(
+            &format!("{}: residual vs cone phase (10° bins, conic runs)", CHANNELS[c]),
+            "cone phase (deg)",
+            u,
+            &p,
+        ));
+        s.push_str(&bars(
+            &format!("{}: residual cone harmonics (RMS over runs)", CHANNELS[c]),
+            "harmonic of the cone frequency",
+            u,
+            &harmonics(before, motions, c),
+        ));
+    }
+    s.push_str("</body></html>\n");
+    s
+}
