@@ -1,6 +1,6 @@
 //! Discovery: a session with one effect the model lacks; `diagnose` must name it.
 
-use crosscal::diagnose::{diagnose, Diagnosis, Verdict};
+use crosscal::diagnose::{channel_reports, diagnose, residuals, Diagnosis, Verdict};
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
 use crosscal::motion::DerivativeConfig;
@@ -65,9 +65,19 @@ fn discovers(effect: &str, values: &[(&str, f64)]) {
             a.residual_rms
         );
     }
+    // Against the paper's own model (eqs. 3-4) on the same runs.
+    let paper = Model::paper();
+    let tr = tracks(&s, &DerivativeConfig::default());
+    let runs = fit_runs(&s, &tr);
+    let motions: Vec<&MotionSpec> = s.runs.iter().map(|r| &r.spec.motion).collect();
+    let pf = crosscal::estimate::fit(&paper, &runs, &FitOptions::default()).unwrap();
+    let paper_channels = channel_reports(&residuals(&paper, &pf, &runs, &motions), &motions);
+    let sys_paper: f64 =
+        paper_channels.iter().filter(|c| c.sensor == sensor).map(|c| c.systematic_rms).fold(0.0, f64::max);
     let sys_before: f64 = before.iter().map(|c| c.systematic_rms).fold(0.0, f64::max);
+    assert!(sys_paper >= sys_before * 0.99, "{effect}: the default model should not be worse than the paper's");
     let sys_after: f64 = after.iter().map(|c| c.systematic_rms).fold(0.0, f64::max);
-    assert!(sys_after * 10.0 <= sys_before, "{effect}: systematic {sys_before} -> {sys_after}");
+    assert!(sys_after * 10.0 <= sys_paper, "{effect}: systematic {sys_paper} (paper model) -> {sys_after}");
     // Coefficients of the added effect within 4 standard errors of truth.
     let mut m = Model::default_model();
     m.add_effect(effect).unwrap();
@@ -142,6 +152,7 @@ fn clean_sessions_are_adequate_over_20_seeds() {
         let d = run_diagnose(&s);
         assert_eq!(d.verdict, Verdict::Adequate, "seed {seed}: {:#?}", d.steps);
         assert!(d.proposal.is_empty());
+        assert!(d.disagreements.is_empty(), "seed {seed}: {:?}", d.disagreements);
     }
 }
 

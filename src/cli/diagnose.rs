@@ -17,8 +17,12 @@ pub struct Args {
     /// The session manifest (session.json).
     session: PathBuf,
     /// Model to start from: `default` or `paper`.
-    #[arg(long, default_value = "default")]
+    #[arg(long, default_value = "default", conflicts_with = "profile")]
     model: String,
+    /// Start from a unit's profile instead: its coefficients are held, nothing is refitted,
+    /// and candidates are tried on top of it (is the calibration still adequate on new data?).
+    #[arg(long)]
+    profile: Option<PathBuf>,
     /// Effects already in the model (repeatable).
     #[arg(long = "effect")]
     effects: Vec<String>,
@@ -66,8 +70,19 @@ fn channel_table(c: &[ChannelReport]) -> String {
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
-    let model = build_model(&a.model, &a.effects, &[])?;
     let session = Session::load(&a.session).with_context(|| format!("reading session {}", a.session.display()))?;
+    let model = match &a.profile {
+        Some(p) => {
+            let prof = crosscal::profile::Profile::read(p)?;
+            prof.ensure_unit(p, &session.manifest.serial)?;
+            let mut m = prof.model().with_context(|| format!("using profile {}", p.display()))?;
+            for e in &a.effects {
+                m.add_effect(e)?;
+            }
+            m
+        }
+        None => build_model(&a.model, &a.effects, &[])?,
+    };
     let tr = tracks(&session, &DerivativeConfig::default());
     let runs = fit_runs(&session, &tr);
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
@@ -107,6 +122,23 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 "  {:<28} {:>6} {:>11.2}% {:>11.2e} {:>12.1}",
                 c.effect, c.added_params, change, c.p_value, c.delta_bic
             );
+        }
+    }
+    if !d.disagreements.is_empty() {
+        println!("\ncoefficients that differ between runs (single-run fit vs all runs; something depends on rate, direction, cone angle or mount):");
+        for x in d.disagreements.iter().take(12) {
+            println!(
+                "  {:<14} run {:<18} {:>12} ± {:<10} vs {:>12}  (z = {:.1})",
+                x.coefficient,
+                x.run,
+                format::num(x.run_value),
+                format::num(x.run_std_error),
+                format::num(x.all_value),
+                x.z
+            );
+        }
+        if d.disagreements.len() > 12 {
+            println!("  … {} more", d.disagreements.len() - 12);
         }
     }
     for (i, s) in d.steps.iter().enumerate() {

@@ -5,6 +5,7 @@ mod compare;
 mod correct;
 mod demo;
 mod diagnose;
+mod effects;
 mod fit;
 mod format;
 mod simulate;
@@ -83,6 +84,8 @@ enum Command {
     Diagnose(diagnose::Args),
     /// The model ladder: paper model, default, then each effect diagnose adds.
     Compare(compare::Args),
+    /// List the effects catalogue with coefficients, units and physical explanations.
+    Effects(effects::Args),
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -110,6 +113,7 @@ pub fn main() -> ExitCode {
         Command::Demo(a) => demo::run(a),
         Command::Diagnose(a) => diagnose::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Effects(a) => effects::run(a),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,
