@@ -8,8 +8,8 @@
 //! of the cone phase θ (plus a constant), for other runs block means. The reduction of the
 //! systematic part is what the pass/fail decision uses; on noiseless data it equals the
 //! raw reduction. An axis whose corrected error has no systematic part distinguishable
-//! from its white noise in any run (χ² test at 0.1 %) is reported as noise-limited and
-//! passes: the data cannot show a remaining error.
+//! from its white noise (one χ² test pooled over all runs, at 0.001 %) is reported as
+//! noise-limited and passes: the data cannot show a remaining error.
 
 pub mod harmonics;
 pub mod paper;
@@ -59,6 +59,12 @@ pub struct ErrorStats {
     pub sys_max_abs: f64,
     /// Whether the systematic part is significant against the series' white noise.
     pub sys_significant: bool,
+    /// χ² statistic of the systematic fit (explained sum of squares / noise variance).
+    #[serde(default)]
+    pub sys_chi2: f64,
+    /// Its degrees of freedom.
+    #[serde(default)]
+    pub sys_dof: usize,
 }
 
 /// One axis of one sensor in one run.
@@ -113,8 +119,8 @@ pub struct AxisSummary {
     pub after_sys_pct: Option<f64>,
     /// before / after (systematic): the pass criterion.
     pub reduction_sys: Option<f64>,
-    /// No run's corrected error has a systematic part distinguishable from its noise: the
-    /// check cannot resolve any remaining error, so the axis passes whatever the ratio.
+    /// The corrected error has no systematic part distinguishable from its noise (pooled χ²
+    /// over runs): the check cannot resolve any remaining error, so the axis passes.
     pub noise_limited: bool,
     /// Reduction needed.
     pub threshold: f64,
@@ -143,37 +149,57 @@ fn stats(err: &[f64], t_s: &[f64], motion: &MotionSpec) -> ErrorStats {
         rms: (err.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
         sys_max_abs: sys.max_abs(),
         sys_significant: sys.significant(),
+        sys_chi2: if sys.sigma2 > 0.0 { sys.explained / sys.sigma2 } else { 0.0 },
+        sys_dof: sys.params,
     }
 }
 
 /// Checks one run: `corrected` is the correction of `run`'s outputs, `track` its true motion.
-/// The corrector's warm-up samples (streaming) are left out of both before and after.
+/// The corrector's warm-up samples (streaming) and flagged samples (inside a dead band, or
+/// beyond the ends after a time-delay shift) are left out of both before and after.
 pub fn check_run(run: &Run, track: &Track, corrected: &Corrected, raw_units: [bool; 2]) -> RunCheck {
     let mut axes = Vec::with_capacity(6);
     let skip = corrected.warmup.min(track.t_s.len());
-    let t_s = &track.t_s[skip..];
-    let n = t_s.len();
-    let mut before = vec![0.0; n];
-    let mut after = vec![0.0; n];
+    // Streaming output with a time delay estimates the truth at t − offset.
+    let shifted;
+    let truth_after = if corrected.time_offset_s != 0.0 {
+        use crate::model::NonlinearEffect;
+        shifted = crate::model::TimeDelay.transform(&[corrected.time_offset_s], track);
+        &shifted
+    } else {
+        track
+    };
+    let n = track.t_s.len();
+    let mut t_s = Vec::with_capacity(n);
+    let mut before = Vec::with_capacity(n);
+    let mut after = Vec::with_capacity(n);
     for (si, sensor) in SensorKind::BOTH.iter().enumerate() {
-        let (truth, out, corr) = match sensor {
-            SensorKind::Gyro => (&track.w_rad_s, &run.rec.gyro, &corrected.w_rad_s),
-            SensorKind::Accel => (&track.a_m_s2, &run.rec.accel, &corrected.a_m_s2),
+        let (truth, truth_a, out, corr) = match sensor {
+            SensorKind::Gyro => (&track.w_rad_s, &truth_after.w_rad_s, &run.rec.gyro, &corrected.w_rad_s),
+            SensorKind::Accel => (&track.a_m_s2, &truth_after.a_m_s2, &run.rec.accel, &corrected.a_m_s2),
         };
         for i in 0..3 {
+            let bit = 1u8 << (3 * si + i);
             let mut amp = 0.0_f64;
-            for k in 0..n {
-                let kk = k + skip;
-                amp = amp.max(truth[kk][i].abs());
-                before[k] = out[kk][i] - truth[kk][i];
-                after[k] = corr[kk][i] - truth[kk][i];
+            t_s.clear();
+            before.clear();
+            after.clear();
+            for k in skip..n {
+                // Samples the correction flagged (inside a dead band) are unknown, not errors.
+                if corrected.flags.get(k).is_some_and(|f| f & bit != 0) {
+                    continue;
+                }
+                amp = amp.max(truth[k][i].abs());
+                t_s.push(track.t_s[k]);
+                before.push(out[k][i] - truth[k][i]);
+                after.push(corr[k][i] - truth_a[k][i]);
             }
             axes.push(AxisCheck {
                 sensor: *sensor,
                 axis: AXES[i],
                 amplitude: amp,
-                before: (!raw_units[si]).then(|| stats(&before, t_s, &run.spec.motion)),
-                after: stats(&after, t_s, &run.spec.motion),
+                before: (!raw_units[si]).then(|| stats(&before, &t_s, &run.spec.motion)),
+                after: stats(&after, &t_s, &run.spec.motion),
             });
         }
     }
@@ -208,7 +234,11 @@ pub fn summarize(runs: Vec<RunCheck>, thresholds: Thresholds) -> CheckReport {
         let reduction = ratio(before_pct, after_pct);
         let reduction_sys = ratio(before_sys_pct, after_sys_pct);
         let threshold = thresholds.for_sensor(sensor);
-        let noise_limited = runs.iter().all(|r| !r.axes[idx].after.sys_significant);
+        // One χ² test pooled over runs (0.001 %), so that many runs do not multiply false alarms.
+        let (chi, dof) = runs
+            .iter()
+            .fold((0.0, 0usize), |(c, d), r| (c + r.axes[idx].after.sys_chi2, d + r.axes[idx].after.sys_dof));
+        let noise_limited = dof > 0 && chi <= harmonics::chi2_upper(dof, 4.265);
         let pass = noise_limited || reduction_sys.is_none_or(|r| r >= threshold);
         summary.push(AxisSummary {
             sensor,

@@ -53,6 +53,10 @@ pub struct Args {
     /// Gaps in t are errors instead of warnings.
     #[arg(long)]
     strict: bool,
+    /// With a time delay in the profile: interpolate the output back onto the input's time
+    /// stamps (offline only) instead of re-stamping it.
+    #[arg(long)]
+    resample: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
@@ -90,7 +94,13 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         path: a.input.clone(),
         rec,
     };
-    let corrected = correct_run(&cal, &run, a.mode.into())?;
+    let mut corrected = correct_run(&cal, &run, a.mode.into())?;
+    if a.resample {
+        if matches!(a.mode, ModeArg::Streaming) {
+            anyhow::bail!("--resample needs the whole record: use it with --mode offline");
+        }
+        corrected = crosscal::correct::resample_to_stamps(&corrected, &run.rec.t_s);
+    }
     // Output in the input's units (raw inputs come out in deg/s and g: the calibration
     // supplies the physical unit).
     let out_units = Units {
@@ -102,15 +112,22 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let ka = 1.0 / out_units.accel.to_m_s2(profile.g_m_s2);
     let kt = 1.0 / units.time.to_s();
     let has_temp = run.rec.temp_c.is_some();
+    let has_flags = !corrected.flags.is_empty();
+    let offset = corrected.time_offset_s;
     crosscal::atomic::write_atomic(&a.output, a.force, |w| {
-        writeln!(w, "t,gx,gy,gz,ax,ay,az{}", if has_temp { ",temp" } else { "" })?;
+        writeln!(
+            w,
+            "t,gx,gy,gz,ax,ay,az{}{}",
+            if has_temp { ",temp" } else { "" },
+            if has_flags { ",flags" } else { "" }
+        )?;
         for k in 0..run.rec.len() {
             let g = corrected.w_rad_s[k];
             let ac = corrected.a_m_s2[k];
             write!(
                 w,
                 "{},{},{},{},{},{},{}",
-                run.rec.t_s[k] * kt,
+                (run.rec.t_s[k] - offset) * kt,
                 g[0] * kg,
                 g[1] * kg,
                 g[2] * kg,
@@ -118,14 +135,26 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 ac[1] * ka,
                 ac[2] * ka
             )?;
-            match &run.rec.temp_c {
-                Some(t) => writeln!(w, ",{}", t[k])?,
-                None => writeln!(w)?,
+            if let Some(t) = &run.rec.temp_c {
+                write!(w, ",{}", t[k])?;
             }
+            if has_flags {
+                write!(w, ",{}", corrected.flags[k])?;
+            }
+            writeln!(w)?;
         }
         Ok(())
     })
     .with_context(|| format!("writing {}", a.output.display()))?;
+    if has_flags {
+        let n = corrected.flags.iter().filter(|f| **f != 0).count();
+        eprintln!("note: {n} samples could not be inverted (inside a dead band or past the record's ends after a delay shift): their 'flags' column is non-zero (bits 0-2 gyro x,y,z; 3-5 accel x,y,z) and their values are 0, not estimates");
+    }
+    if offset != 0.0 {
+        eprintln!(
+            "note: the profile has a time delay: the t column is shifted by -{offset} s to the time each sample describes (--resample puts it back on the input stamps)"
+        );
+    }
     eprintln!(
         "corrected {} samples ({} mode{}) with profile of unit {} -> {} (gyro {}, accel {})",
         run.rec.len(),

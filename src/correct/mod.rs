@@ -18,6 +18,12 @@
 //!   `(A + w₀ E) x_k = u − b − E p − g` exactly. On uniform sampling w₀ and the inverse are
 //!   computed once. The causal slope lags the centred one by a bias of order (ω·N·dt)²,
 //!   which is why offline correction is more accurate on fast motion.
+//!
+//! Nonlinear effects carry their own inverse ([`crate::model::NonlinearEffect`]): a dead
+//! zone is undone per sample (x = z + d·sign z) and samples inside the band are flagged,
+//! not invented; a time delay τ is undone by re-stamping: sample k is the truth at t_k − τ
+//! ([`Corrected::time_offset_s`], the same offline and streaming), and offline output can be
+//! put back on the input stamps by cubic interpolation ([`resample_to_stamps`]).
 
 use crate::model::{Effect, Model, Role, SensorKind, State};
 use crate::motion::{derivative_offline, DerivativeConfig, SlopeWeights};
@@ -120,6 +126,15 @@ impl SensorInverse {
     }
 }
 
+/// A nonlinear effect of the calibration with its parameter values.
+#[derive(Debug, Clone)]
+pub struct NonlinearPart {
+    /// The effect.
+    pub effect: Arc<dyn crate::model::NonlinearEffect>,
+    /// Its parameters.
+    pub params: Vec<f64>,
+}
+
 /// Everything needed to correct a unit.
 #[derive(Debug, Clone)]
 pub struct Calibration {
@@ -129,25 +144,54 @@ pub struct Calibration {
     pub accel: SensorInverse,
     /// Derivative settings.
     pub settings: CorrectionSettings,
+    /// Nonlinear effects (time delay, dead zone).
+    pub nonlinear: Vec<NonlinearPart>,
+    /// Noise standard deviation per channel (gyro, accel), SI: the dead-band flag threshold.
+    pub noise: [[f64; 3]; 2],
 }
 
 impl Calibration {
     /// From a model whose coefficients are all fixed at their calibrated values.
     pub fn from_model(model: &Model, settings: CorrectionSettings) -> Result<Self, CorrectError> {
-        if let Some(e) = model.nonlinear().first() {
-            return Err(CorrectError::Unsupported(e.effect.id().to_string()));
-        }
         Ok(Self {
             gyro: SensorInverse::build(model, SensorKind::Gyro)?,
             accel: SensorInverse::build(model, SensorKind::Accel)?,
             settings,
+            nonlinear: model
+                .nonlinear()
+                .iter()
+                .map(|e| NonlinearPart { effect: Arc::clone(&e.effect), params: e.values.clone() })
+                .collect(),
+            noise: [[0.0; 3]; 2],
         })
     }
 
-    /// From a profile.
+    /// From a profile (its channel σ set the dead-band flag thresholds).
     pub fn from_profile(p: &Profile) -> Result<Self, CorrectError> {
         let model = p.model().map_err(|e| CorrectError::Model(e.to_string()))?;
-        Self::from_model(&model, p.correction)
+        let mut c = Self::from_model(&model, p.correction)?;
+        for (si, sf) in [&p.gyro, &p.accel].iter().enumerate() {
+            for (i, ch) in sf.channels.iter().enumerate().take(3) {
+                c.noise[si][i] = ch.sigma;
+            }
+        }
+        Ok(c)
+    }
+
+    /// Total lag of the sensor's stamps behind the truth, s.
+    pub fn lag_s(&self) -> f64 {
+        self.nonlinear.iter().map(|n| n.effect.lag_s(&n.params)).sum()
+    }
+
+    /// Applies the nonlinear inverses to one sample; returns the flag bits (gyro 0-2, accel 3-5).
+    #[inline]
+    fn invert_nonlinear(&self, w: &mut [f64; 3], a: &mut [f64; 3]) -> u8 {
+        let mut flags = 0;
+        for n in &self.nonlinear {
+            flags |= n.effect.invert_sample(&n.params, SensorKind::Gyro, w, &self.noise[0]);
+            flags |= n.effect.invert_sample(&n.params, SensorKind::Accel, a, &self.noise[1]) << 3;
+        }
+        flags
     }
 }
 
@@ -165,6 +209,12 @@ pub struct Corrected {
     /// Leading samples corrected before the causal derivative window was full (streaming
     /// warm-up: their ε̂ rests on fewer samples; the first has none). 0 offline.
     pub warmup: usize,
+    /// Per sample, channels that could not be inverted (inside a dead band): bits 0-2 gyro
+    /// x, y, z, bits 3-5 accel x, y, z. Their values are 0 and unknown. Empty when none.
+    pub flags: Vec<u8>,
+    /// Sample k estimates the truth at `t_k − time_offset_s` (the profile's time delay; see
+    /// [`resample_to_stamps`] to put the output back on the input stamps).
+    pub time_offset_s: f64,
 }
 
 #[inline]
@@ -190,7 +240,18 @@ pub fn correct_offline(
     let sub = |u: [f64; 3], b: [f64; 3]| [u[0] - b[0], u[1] - b[1], u[2] - b[2]];
     let mut w: Vec<[f64; 3]> = gyro.iter().map(|u| mv(&g.scale_inv, sub(*u, g.bias))).collect();
     let mut acc: Vec<[f64; 3]> = accel.iter().map(|u| mv(&a.scale_inv, sub(*u, a.bias))).collect();
-    let needs_eps = g.eps.iter().any(|v| *v != 0.0) || g.has_other_terms() || a.has_other_terms();
+    let mut flags: Vec<u8> = Vec::new();
+    if !cal.nonlinear.is_empty() {
+        for k in 0..n {
+            let f = cal.invert_nonlinear(&mut w[k], &mut acc[k]);
+            if f != 0 {
+                flags.resize(n, 0);
+                flags[k] = f;
+            }
+        }
+    }
+    let needs_eps =
+        g.eps.iter().any(|v| *v != 0.0) || g.has_other_terms() || a.has_other_terms() || !cal.nonlinear.is_empty();
     let deriv =
         DerivativeConfig { half_window: cal.settings.derivative_half_window, degree: cal.settings.derivative_degree };
     let mut e = vec![[0.0; 3]; n];
@@ -212,7 +273,18 @@ pub fn correct_offline(
                 [u[0] - g.bias[0] - ee[0] - og[0], u[1] - g.bias[1] - ee[1] - og[1], u[2] - g.bias[2] - ee[2] - og[2]],
             );
             let u = accel[k];
-            let an = mv(&a.scale_inv, [u[0] - a.bias[0] - oa[0], u[1] - a.bias[1] - oa[1], u[2] - a.bias[2] - oa[2]]);
+            let mut an =
+                mv(&a.scale_inv, [u[0] - a.bias[0] - oa[0], u[1] - a.bias[1] - oa[1], u[2] - a.bias[2] - oa[2]]);
+            let mut wn = wn;
+            if !cal.nonlinear.is_empty() {
+                let f = cal.invert_nonlinear(&mut wn, &mut an);
+                if f != 0 {
+                    flags.resize(n, 0);
+                    flags[k] = f;
+                } else if !flags.is_empty() {
+                    flags[k] = 0;
+                }
+            }
             for i in 0..3 {
                 change_w = change_w.max((wn[i] - w[k][i]).abs());
                 size_w = size_w.max(wn[i].abs());
@@ -227,7 +299,37 @@ pub fn correct_offline(
             break;
         }
     }
-    Ok(Corrected { w_rad_s: w, a_m_s2: acc, iterations, converged, warmup: 0 })
+    Ok(Corrected { w_rad_s: w, a_m_s2: acc, iterations, converged, warmup: 0, flags, time_offset_s: cal.lag_s() })
+}
+
+/// Resamples a correction with a time offset onto the input stamps (cubic interpolation):
+/// sample k then estimates the truth at t_k. Stamps whose source time falls outside the
+/// record are flagged (all channels). Interpolation colours the noise (it averages
+/// neighbours), so statistics that assume white noise should use the unshifted output.
+pub fn resample_to_stamps(c: &Corrected, t_s: &[f64]) -> Corrected {
+    let lag = c.time_offset_s;
+    if lag == 0.0 || t_s.is_empty() {
+        return c.clone();
+    }
+    let n = t_s.len();
+    let mut flags = c.flags.clone();
+    let (first, last) = (t_s[0], t_s[n - 1]);
+    for (k, &t) in t_s.iter().enumerate() {
+        if t + lag < first || t + lag > last {
+            flags.resize(n, 0);
+            flags[k] = 0x3f;
+        }
+    }
+    let (mut h1, mut h2) = (0, 0);
+    Corrected {
+        w_rad_s: t_s.iter().map(|&t| crate::model::nonlinear::interpolate(t_s, &c.w_rad_s, t + lag, &mut h1)).collect(),
+        a_m_s2: t_s.iter().map(|&t| crate::model::nonlinear::interpolate(t_s, &c.a_m_s2, t + lag, &mut h2)).collect(),
+        iterations: c.iterations,
+        converged: c.converged,
+        warmup: c.warmup,
+        flags,
+        time_offset_s: 0.0,
+    }
 }
 
 /// Causal sample-by-sample corrector with fixed memory.
@@ -242,6 +344,7 @@ pub struct Streaming {
     cached_w0: f64,
     cached_inv: Matrix3<f64>,
     t_first: Option<f64>,
+    last_flags: u8,
 }
 
 impl Streaming {
@@ -260,7 +363,13 @@ impl Streaming {
             cached_w0: 0.0,
             cached_inv: inv,
             t_first: None,
+            last_flags: 0,
         }
+    }
+
+    /// Flag bits of the last sample (see [`Corrected::flags`]).
+    pub fn last_flags(&self) -> u8 {
+        self.last_flags
     }
 
     /// Samples after a reset before the derivative window is full.
@@ -333,6 +442,9 @@ impl Streaming {
                 );
             }
         }
+        if !self.cal.nonlinear.is_empty() {
+            self.last_flags = self.cal.invert_nonlinear(&mut w, &mut acc);
+        }
         self.past_w[len - 1] = w;
         self.filled = len;
         (w, acc)
@@ -358,11 +470,17 @@ pub fn correct_streaming(
         iterations: 1,
         converged: true,
         warmup: s.warmup_samples().min(n),
+        flags: Vec::new(),
+        time_offset_s: cal.lag_s(),
     };
     for k in 0..n {
         let (w, a) = s.push(t_s[k], gyro[k], accel[k], temp_c.map_or(f64::NAN, |t| t[k]));
         out.w_rad_s.push(w);
         out.a_m_s2.push(a);
+        if s.last_flags() != 0 {
+            out.flags.resize(n, 0);
+            out.flags[k] = s.last_flags();
+        }
     }
     Ok(out)
 }

@@ -55,6 +55,28 @@ impl NonlinearEffect for DeadZone {
             .collect()
     }
 
+    /// x = z + d·sign(z) outside the band; inside it (|z| ≤ 3σ of the noise, or exactly 0)
+    /// the input is anywhere in [−d, d]: flagged, returned as 0.
+    fn invert_sample(&self, p: &[f64], sensor: SensorKind, z: &mut [f64; 3], noise: &[f64; 3]) -> u8 {
+        if sensor != self.sensor {
+            return 0;
+        }
+        let mut flags = 0;
+        for i in 0..3 {
+            let d = p.get(i).copied().unwrap_or(0.0).abs();
+            if d == 0.0 {
+                continue;
+            }
+            if z[i].abs() <= 3.0 * noise[i] || z[i] == 0.0 {
+                z[i] = 0.0;
+                flags |= 1 << i;
+            } else {
+                z[i] += d * z[i].signum();
+            }
+        }
+        flags
+    }
+
     fn transform(&self, p: &[f64], tr: &Track) -> Track {
         let mut out = tr.clone();
         let xs = match self.sensor {

@@ -36,6 +36,17 @@ pub trait NonlinearEffect: Send + Sync + fmt::Debug {
     fn params(&self) -> Vec<ParamDef>;
     /// The true motion as the sensor sees it, for parameter values `p`.
     fn transform(&self, p: &[f64], track: &Track) -> Track;
+    /// Inverse on one corrected sample of `sensor`: `z` (the linear inverse's output, i.e.
+    /// the input as the sensor saw it) is turned into the true input in place. Returns a
+    /// bitmask of the axes that cannot be inverted at this sample (their value is then 0 and
+    /// must be treated as unknown). `noise` is each axis's noise standard deviation.
+    fn invert_sample(&self, _p: &[f64], _sensor: SensorKind, _z: &mut [f64; 3], _noise: &[f64; 3]) -> u8 {
+        0
+    }
+    /// How much later than the truth the sensor's samples are stamped, s (time delay).
+    fn lag_s(&self, _p: &[f64]) -> f64 {
+        0.0
+    }
 }
 
 /// Value at time `t` of a sampled series by Catmull–Rom cubic interpolation on the

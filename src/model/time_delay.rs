@@ -30,6 +30,10 @@ impl NonlinearEffect for TimeDelay {
         vec![ParamDef { name: "time_delay".into(), unit: "s", nominal: 0.0, scale: 1e-3, min: -1.0, max: 1.0 }]
     }
 
+    fn lag_s(&self, p: &[f64]) -> f64 {
+        p.first().copied().unwrap_or(0.0)
+    }
+
     fn transform(&self, p: &[f64], tr: &Track) -> Track {
         let tau = p.first().copied().unwrap_or(0.0);
         let n = tr.t_s.len();

@@ -141,11 +141,12 @@ pub enum ProfileError {
         found: String,
     },
     /// The profile names an effect this version does not know.
-    #[error("{path}: {source}")]
+    #[error("{path}: cannot rebuild the profile's model")]
     Model {
         /// File.
         path: PathBuf,
         /// Cause.
+        #[source]
         source: ModelError,
     },
     /// Serial cannot be used as a folder name.
@@ -213,15 +214,23 @@ impl Profile {
     /// Rebuilds the model with every coefficient held at its stored value (for correction).
     pub fn model(&self) -> Result<Model, ModelError> {
         let mut effects = Vec::with_capacity(self.effects.len());
+        let mut nonlinear = Vec::new();
         for id in &self.effects {
-            effects.push(
-                find_effect(id)
-                    .ok_or_else(|| ModelError::UnknownEffect(id.clone(), "(this crosscal's catalogue)".into()))?,
-            );
+            match (find_effect(id), crate::model::find_nonlinear(id)) {
+                (Some(e), _) => effects.push(e),
+                (None, Some(_)) => nonlinear.push(id.as_str()),
+                (None, None) => {
+                    return Err(ModelError::UnknownEffect(id.clone(), crate::model::all_effect_ids().join(", ")))
+                }
+            }
         }
         let mut m = Model::from_effects(&self.model, effects);
         for c in self.gyro.coefficients.iter().chain(&self.accel.coefficients) {
             m.fix(&c.name, c.value)?;
+        }
+        for id in nonlinear {
+            let values = self.nonlinear.iter().filter(|p| p.effect == id).map(|p| p.value).collect();
+            m.fix_nonlinear(id, values)?;
         }
         Ok(m)
     }
