@@ -70,3 +70,92 @@ pub fn check_session(
     }
     Ok(summarize(runs, thresholds))
 }
+
+/// A session restricted to some of its runs (by name).
+pub fn subset(session: &Session, keep: impl Fn(&str) -> bool) -> Session {
+    let runs: Vec<Run> = session.runs.iter().filter(|r| keep(&r.spec.name)).cloned().collect();
+    let mut manifest = session.manifest.clone();
+    manifest.runs = runs.iter().map(|r| r.spec.clone()).collect();
+    Session { manifest_path: session.manifest_path.clone(), manifest, runs }
+}
+
+/// Errors of validation on held-out runs.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ValidateError {
+    /// A named run is not in the session.
+    #[error("no run named '{0}' in the session (runs: {1})")]
+    UnknownRun(String, String),
+    /// Nothing would be left to fit, or nothing to validate.
+    #[error("{0}")]
+    Empty(String),
+    /// Fitting failed.
+    #[error(transparent)]
+    Fit(#[from] EstimateError),
+    /// Correction failed.
+    #[error(transparent)]
+    Correct(#[from] CorrectError),
+}
+
+/// Fits `model` on every run except `holdout` and checks the held-out runs only.
+/// Returns the check and the fit.
+pub fn holdout_check(
+    session: &Session,
+    model: &Model,
+    holdout: &[String],
+    mode: Mode,
+    thresholds: Thresholds,
+) -> Result<(CheckReport, Fit), ValidateError> {
+    for h in holdout {
+        if !session.runs.iter().any(|r| &r.spec.name == h) {
+            let names: Vec<&str> = session.runs.iter().map(|r| r.spec.name.as_str()).collect();
+            return Err(ValidateError::UnknownRun(h.clone(), names.join(", ")));
+        }
+    }
+    let train = subset(session, |n| !holdout.iter().any(|h| h == n));
+    let test = subset(session, |n| holdout.iter().any(|h| h == n));
+    if train.runs.is_empty() || test.runs.is_empty() {
+        return Err(ValidateError::Empty("hold out at least one run and keep at least one to fit".into()));
+    }
+    let fit = fit_session(&train, model, &FitOptions::default())?;
+    let cal = calibration_of(model, &fit)?;
+    Ok((check_session(&test, &cal, mode, thresholds)?, fit))
+}
+
+/// The calibration a fit implies (the model with every coefficient held at its estimate).
+pub fn calibration_of(model: &Model, fit: &Fit) -> Result<Calibration, CorrectError> {
+    let mut m = model.clone();
+    for c in fit.gyro.coefficients.iter().chain(&fit.accel.coefficients) {
+        m.fix(&c.name, c.value).map_err(|e| CorrectError::Model(e.to_string()))?;
+    }
+    for e in model.nonlinear() {
+        let values = fit.nonlinear.iter().filter(|p| p.effect == e.effect.id()).map(|p| p.value).collect();
+        m.fix_nonlinear(e.effect.id(), values).map_err(|e| CorrectError::Model(e.to_string()))?;
+    }
+    let mut cal = Calibration::from_model(&m, Default::default())?;
+    for (si, sf) in [&fit.gyro, &fit.accel].iter().enumerate() {
+        for (i, ch) in sf.channels.iter().enumerate().take(3) {
+            cal.noise[si][i] = ch.sigma;
+        }
+    }
+    Ok(cal)
+}
+
+/// Leave-one-run-out: each run is checked with a model fitted on all the others; the
+/// per-run checks are summarised together.
+pub fn cross_validate(
+    session: &Session,
+    model: &Model,
+    mode: Mode,
+    thresholds: Thresholds,
+) -> Result<CheckReport, ValidateError> {
+    if session.runs.len() < 2 {
+        return Err(ValidateError::Empty("cross-validation needs at least two runs".into()));
+    }
+    let mut runs = Vec::with_capacity(session.runs.len());
+    for r in &session.runs {
+        let (rep, _) = holdout_check(session, model, std::slice::from_ref(&r.spec.name), mode, thresholds)?;
+        runs.extend(rep.runs);
+    }
+    Ok(summarize(runs, thresholds))
+}

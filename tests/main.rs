@@ -12,3 +12,4 @@ mod paper;
 mod profile_store;
 mod reference;
 mod robust;
+mod validate;

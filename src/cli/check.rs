@@ -3,9 +3,9 @@
 use super::correct::ModeArg;
 use super::{format, Outcome};
 use anyhow::Context;
-use crosscal::check::Thresholds;
+use crosscal::check::{CheckReport, Thresholds};
 use crosscal::correct::Calibration;
-use crosscal::pipeline::check_session;
+use crosscal::pipeline::{check_session, cross_validate, holdout_check};
 use crosscal::profile::Profile;
 use crosscal::session::Session;
 use std::path::PathBuf;
@@ -13,11 +13,24 @@ use std::path::PathBuf;
 /// Options of `check`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Calibration profile (JSON).
-    #[arg(long)]
-    profile: PathBuf,
+    /// Calibration profile (JSON). Without it, use --holdout or --cross-validate, which fit
+    /// the model on the session's other runs.
+    #[arg(long, required_unless_present_any = ["holdout", "cross_validate"])]
+    profile: Option<PathBuf>,
     /// Session with reference motion (session.json).
     session: PathBuf,
+    /// Fit on all runs but these and check only these (repeatable).
+    #[arg(long, conflicts_with_all = ["profile", "cross_validate"])]
+    holdout: Vec<String>,
+    /// Leave-one-run-out: check each run with a model fitted on all the others.
+    #[arg(long, conflicts_with = "profile")]
+    cross_validate: bool,
+    /// Model for --holdout / --cross-validate: `default` or `paper`.
+    #[arg(long, default_value = "default")]
+    model: String,
+    /// Effects added to that model (repeatable).
+    #[arg(long = "effect")]
+    effects: Vec<String>,
     /// Offline (default) or streaming correction.
     #[arg(long, value_enum, default_value = "offline")]
     mode: ModeArg,
@@ -39,12 +52,25 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
-    let profile = Profile::read(&a.profile)?;
+    let thresholds =
+        Thresholds { gyro_min_reduction: a.gyro_min_reduction, accel_min_reduction: a.accel_min_reduction };
     let session =
         Session::load_with(&a.session, a.strict).with_context(|| format!("reading session {}", a.session.display()))?;
+    let Some(profile_path) = &a.profile else {
+        let model = super::fit::build_model(&a.model, &a.effects, &[])?;
+        let (report, what) = if a.cross_validate {
+            let r = cross_validate(&session, &model, a.mode.into(), thresholds)?;
+            (r, "leave-one-run-out: each run checked with a model fitted on the others".to_string())
+        } else {
+            let (r, _) = holdout_check(&session, &model, &a.holdout, a.mode.into(), thresholds)?;
+            (r, format!("model fitted on the other runs, checked on {}", a.holdout.join(", ")))
+        };
+        return print_report(&session, &report, &what, a.json);
+    };
+    let profile = Profile::read(profile_path)?;
     if !a.allow_other_unit {
         profile
-            .ensure_unit(&a.profile, &session.manifest.serial)
+            .ensure_unit(profile_path, &session.manifest.serial)
             .context("checking a unit against another unit's profile (pass --allow-other-unit to do it anyway)")?;
     }
     if profile.input_units != session.manifest.units {
@@ -53,14 +79,16 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         );
     }
     let cal = Calibration::from_profile(&profile)?;
-    let thresholds =
-        Thresholds { gyro_min_reduction: a.gyro_min_reduction, accel_min_reduction: a.accel_min_reduction };
     let report = check_session(&session, &cal, a.mode.into(), thresholds)?;
-    if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+    print_report(&session, &report, &format!("profile {}", profile_path.display()), a.json)
+}
+
+fn print_report(session: &Session, report: &CheckReport, what: &str, json: bool) -> anyhow::Result<Outcome> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(report)?);
     } else {
-        println!("unit {}: {} runs checked", session.manifest.serial, report.runs.len());
-        print!("{}", format::check_summary(&report));
+        println!("unit {}: {} runs checked ({what})", session.manifest.serial, report.runs.len());
+        print!("{}", format::check_summary(report));
         println!("{}", if report.pass { "PASS" } else { "FAIL" });
     }
     Ok(if report.pass { Outcome::Ok } else { Outcome::CheckFailed })

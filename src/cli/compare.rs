@@ -20,6 +20,10 @@ pub struct Args {
     /// Print the ladder as JSON.
     #[arg(long)]
     json: bool,
+    /// Add a rung with these effects (comma-separated ids, or `all` for the whole catalogue);
+    /// repeatable.
+    #[arg(long = "with")]
+    with: Vec<String>,
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
@@ -27,7 +31,30 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let tr = tracks(&session, &DerivativeConfig::default());
     let runs = fit_runs(&session, &tr);
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
-    let (rungs, d) = compare(&runs, &motions, &FitOptions::default())?;
+    let extra: Vec<Vec<String>> = a
+        .with
+        .iter()
+        .map(|w| {
+            if w == "all" {
+                let has_temp = session.runs.iter().all(|r| r.rec.temp_c.is_some() || r.spec.temperature_c.is_some());
+                let needs_temp: Vec<&str> =
+                    crosscal::model::catalog().iter().filter(|e| e.needs_temperature()).map(|e| e.id()).collect();
+                crosscal::model::all_effect_ids()
+                    .into_iter()
+                    .filter(|id| has_temp || !needs_temp.contains(id))
+                    .map(str::to_string)
+                    .collect()
+            } else {
+                w.split(',').map(|s| s.trim().to_string()).collect()
+            }
+        })
+        .collect();
+    for e in extra.iter().flatten() {
+        if !crosscal::model::all_effect_ids().contains(&e.as_str()) {
+            anyhow::bail!("--with {e}: unknown effect (see `crosscal effects`)");
+        }
+    }
+    let (rungs, d) = compare(&runs, &motions, &FitOptions::default(), &extra)?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&rungs)?);
     } else {
@@ -37,15 +64,23 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             session.runs.len()
         );
         println!(
-            "{:<30} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>14} {:>11} {:>11}",
-            "model", "params", "gx", "gy", "gz", "ax", "ay", "az", "BIC", "gyro red.", "accel red."
+            "{:<30} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>14} {:>11} {:>11} {:>9}",
+            "model", "params", "gx", "gy", "gz", "ax", "ay", "az", "BIC", "gyro red.", "accel red.", "held-out"
         );
         for r in &rungs {
             let rel: Vec<String> =
                 (0..6).map(|c| format!("{:.2}", r.rms[c] / r.noise_floor[c].max(f64::MIN_POSITIVE))).collect();
+            let held = if r.heldout_rms.is_empty() {
+                "-".to_string()
+            } else {
+                let worst =
+                    (0..6).map(|c| r.heldout_rms[c] / r.noise_floor[c].max(f64::MIN_POSITIVE)).fold(0.0, f64::max);
+                format!("{worst:.4}")
+            };
+            let name = if r.model.len() > 30 { format!("{}…", &r.model[..29]) } else { r.model.clone() };
             println!(
-                "{:<30} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>14.1} {:>10.1}x {:>10.1}x",
-                r.model,
+                "{:<30} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>14.1} {:>10.1}x {:>10.1}x {:>9}",
+                name,
                 r.params,
                 rel[0],
                 rel[1],
@@ -55,8 +90,13 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 rel[5],
                 r.bic,
                 r.reduction[0],
-                r.reduction[1]
+                r.reduction[1],
+                held
             );
+        }
+        println!("(channels: in-sample residual RMS / noise floor; held-out: worst channel's leave-one-run-out RMS / noise floor)");
+        for r in rungs.iter().skip(1).filter(|r| !r.heldout_gain) {
+            println!("no held-out gain: '{}' does not predict left-out runs better than the rung before it: its extra terms fit noise", r.model);
         }
         println!(
             "verdict: {:?}{}",

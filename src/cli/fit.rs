@@ -39,6 +39,10 @@ pub struct Args {
     /// Gaps in t and unidentifiable coefficients are errors instead of warnings.
     #[arg(long)]
     strict: bool,
+    /// Leave these runs out of the fit and validate the profile on them (repeatable); the
+    /// held-out errors and reduction factors are stored in the profile.
+    #[arg(long)]
+    holdout: Vec<String>,
 }
 
 /// Builds the model from the command line.
@@ -55,8 +59,14 @@ pub fn build_model(preset: &str, effects: &[String], disable: &[String]) -> anyh
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let model = build_model(&a.model, &a.effects, &a.disable)?;
-    let session =
+    let full =
         Session::load_with(&a.session, a.strict).with_context(|| format!("reading session {}", a.session.display()))?;
+    for h in &a.holdout {
+        if !full.runs.iter().any(|r| &r.spec.name == h) {
+            anyhow::bail!("--holdout {h}: no such run in {}", a.session.display());
+        }
+    }
+    let session = crosscal::pipeline::subset(&full, |n| !a.holdout.iter().any(|h| h == n));
     let deriv = DerivativeConfig::default();
     let tr = tracks(&session, &deriv);
     let opts = FitOptions { robust: a.robust, ..FitOptions::default() };
@@ -72,7 +82,26 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     for u in fit.gyro.unidentifiable.iter().chain(&fit.accel.unidentifiable) {
         notes.push(format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy));
     }
-    let profile = Profile::from_fit(&session, &model, fit, notes);
+    let mut profile = Profile::from_fit(&session, &model, fit, notes);
+    if !a.holdout.is_empty() {
+        let held = crosscal::pipeline::subset(&full, |n| a.holdout.iter().any(|h| h == n));
+        let cal = crosscal::correct::Calibration::from_profile(&profile)?;
+        let report = crosscal::pipeline::check_session(
+            &held,
+            &cal,
+            crosscal::pipeline::Mode::Offline,
+            crosscal::check::Thresholds::default(),
+        )?;
+        profile.validation = Some(crosscal::profile::Validation {
+            runs: crosscal::profile::runs_used(&held),
+            summary: report.summary.clone(),
+            pass: report.pass,
+        });
+        if !a.json {
+            println!("validation on held-out run(s) {}:", a.holdout.join(", "));
+            print!("{}", format::check_summary(&report));
+        }
+    }
     if a.json {
         print!("{}", profile.to_json());
     } else {

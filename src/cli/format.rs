@@ -9,12 +9,11 @@ const RAD2DEG: f64 = 180.0 / std::f64::consts::PI;
 
 /// A coefficient value in the unit users read: gyro biases and residuals in deg/s,
 /// accelerometer ones in m/s² (as stored) — scale and coupling dimensionless.
-fn display_unit(unit: &str) -> (&'static str, f64) {
+fn display_unit(unit: &str) -> (&str, f64) {
     match unit {
         "rad/s" => ("deg/s", RAD2DEG),
-        "m/s^2" => ("m/s^2", 1.0),
-        "s" => ("s", 1.0),
-        _ => ("", 1.0),
+        "1" => ("", 1.0),
+        other => (other, 1.0),
     }
 }
 
@@ -100,7 +99,6 @@ pub fn nonlinear(params: &[crosscal::estimate::NonlinearParam]) -> String {
     let _ = writeln!(s, "nonlinear parameters (value ± 2σ):");
     for p in params {
         let (u, k) = display_unit(&p.unit);
-        let u = if u.is_empty() { p.unit.as_str() } else { u };
         let se = match (p.fitted, p.std_error) {
             (false, _) => "(fixed)".to_string(),
             (true, Some(se)) => num(2.0 * se * k),

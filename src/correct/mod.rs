@@ -178,6 +178,53 @@ impl Calibration {
         Ok(c)
     }
 
+    /// Inverts one sample exactly, given the true angular acceleration ε (rad/s²): the
+    /// fixed point x = A⁻¹(u − b − E ε − g(x)) iterated from the linear solution, then the
+    /// nonlinear inverses. Returns (ω, a, flags) or None if it does not converge in 100
+    /// passes (coefficients too large for the effects to be a perturbation).
+    pub fn invert_state(
+        &self,
+        gyro: [f64; 3],
+        accel: [f64; 3],
+        e: [f64; 3],
+        t_s: f64,
+        temp_c: f64,
+    ) -> Option<([f64; 3], [f64; 3], u8)> {
+        let (g, a) = (&self.gyro, &self.accel);
+        let ee = mv(&g.eps, e);
+        let mut w =
+            mv(&g.scale_inv, [gyro[0] - g.bias[0] - ee[0], gyro[1] - g.bias[1] - ee[1], gyro[2] - g.bias[2] - ee[2]]);
+        let mut acc = mv(&a.scale_inv, [accel[0] - a.bias[0], accel[1] - a.bias[1], accel[2] - a.bias[2]]);
+        for _ in 0..100 {
+            // The effects' regressors see the input as the sensor saw it (before the inverses
+            // of the nonlinear effects), exactly as in the forward model.
+            let s = State { t_s, w, e, a: acc, temp_c };
+            let og = g.other(&s);
+            let oa = a.other(&s);
+            let wn = mv(
+                &g.scale_inv,
+                [
+                    gyro[0] - g.bias[0] - ee[0] - og[0],
+                    gyro[1] - g.bias[1] - ee[1] - og[1],
+                    gyro[2] - g.bias[2] - ee[2] - og[2],
+                ],
+            );
+            let an = mv(
+                &a.scale_inv,
+                [accel[0] - a.bias[0] - oa[0], accel[1] - a.bias[1] - oa[1], accel[2] - a.bias[2] - oa[2]],
+            );
+            let change = (0..3).map(|i| (wn[i] - w[i]).abs().max((an[i] - acc[i]).abs())).fold(0.0, f64::max);
+            let size = (0..3).map(|i| wn[i].abs().max(an[i].abs())).fold(f64::MIN_POSITIVE, f64::max);
+            w = wn;
+            acc = an;
+            if change <= 1e-15 * size {
+                let flags = self.invert_nonlinear(&mut w, &mut acc);
+                return Some((w, acc, flags));
+            }
+        }
+        None
+    }
+
     /// Total lag of the sensor's stamps behind the truth, s.
     pub fn lag_s(&self) -> f64 {
         self.nonlinear.iter().map(|n| n.effect.lag_s(&n.params)).sum()

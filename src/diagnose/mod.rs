@@ -492,6 +492,11 @@ pub struct Rung {
     pub bic: f64,
     /// Worst-channel residual RMS of the paper model over this model's, per sensor (gyro, accel).
     pub reduction: Vec<f64>,
+    /// Leave-one-run-out residual RMS per channel, SI: each run predicted by the model
+    /// fitted on the others (nonlinear parameters held at their all-run values).
+    pub heldout_rms: Vec<f64>,
+    /// This rung improves the held-out residual over the previous rung (by more than 0.1 %).
+    pub heldout_gain: bool,
 }
 
 fn rung(name: &str, f: &Fit, res: &[RunResiduals], motions: &RunMotions<'_>) -> Rung {
@@ -517,15 +522,48 @@ fn rung(name: &str, f: &Fit, res: &[RunResiduals], motions: &RunMotions<'_>) -> 
         noise_floor: ch.iter().map(|c| c.noise_floor).collect(),
         bic,
         reduction: Vec::new(),
+        heldout_rms: Vec::new(),
+        heldout_gain: true,
     }
 }
 
-/// The model ladder: the paper's model, the default model, then each effect `diagnose` adds,
-/// with residuals, BIC and the reduction against the paper's model.
+/// Leave-one-run-out residual RMS per channel of a model (nonlinear parameters of `all`
+/// held, so each fold is a linear fit).
+pub fn heldout_rms(
+    model: &Model,
+    all: &Fit,
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    opts: &FitOptions,
+) -> Vec<f64> {
+    let mut held = model.clone();
+    for e in model.nonlinear() {
+        let values = all.nonlinear.iter().filter(|p| p.effect == e.effect.id()).map(|p| p.value).collect();
+        let _ = held.fix_nonlinear(e.effect.id(), values);
+    }
+    let mut ss = [0.0; 6];
+    let mut n = 0usize;
+    for i in 0..runs.len() {
+        let train: Vec<FitRun<'_>> = runs.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, r)| *r).collect();
+        let Ok(f) = fit(&held, &train, opts) else { continue };
+        let res = residuals(&held, &f, std::slice::from_ref(&runs[i]), &motions[i..=i]);
+        for c in 0..6 {
+            ss[c] += res[0].r[c].iter().map(|v| v * v).sum::<f64>();
+        }
+        n += runs[i].len();
+    }
+    ss.iter().map(|s| (s / n.max(1) as f64).sqrt()).collect()
+}
+
+/// The model ladder: the paper's model, the default model, then each effect `diagnose` adds
+/// (and any `extra` sets of effects), with residuals, BIC, the reduction against the paper's
+/// model and the leave-one-run-out residual, so that an effect that only fits noise shows
+/// no held-out gain.
 pub fn compare(
     runs: &[FitRun<'_>],
     motions: &RunMotions<'_>,
     opts: &FitOptions,
+    extra: &[Vec<String>],
 ) -> Result<(Vec<Rung>, Diagnosis), EstimateError> {
     let paper = Model::paper();
     let base = Model::default_model();
@@ -536,10 +574,32 @@ pub fn compare(
     let mut m = base.clone();
     let f = fit(&m, runs, opts)?;
     rungs.push(rung("default", &f, &residuals(&m, &f, runs, motions), motions));
+    let mut models = vec![paper.clone(), m.clone()];
     for st in &d.steps {
         let _ = m.add_effect(&st.effect);
         let f = fit(&m, runs, opts)?;
         rungs.push(rung(&format!("+ {}", st.effect), &f, &residuals(&m, &f, runs, motions), motions));
+        models.push(m.clone());
+    }
+    for effects in extra {
+        for e in effects {
+            let _ = m.add_effect(e);
+        }
+        let f = fit(&m, runs, opts)?;
+        rungs.push(rung(&format!("+ {}", effects.join(" + ")), &f, &residuals(&m, &f, runs, motions), motions));
+        models.push(m.clone());
+    }
+    if runs.len() > 1 {
+        for (r, model) in rungs.iter_mut().zip(&models) {
+            let all = fit(model, runs, opts)?;
+            r.heldout_rms = heldout_rms(model, &all, runs, motions, opts);
+        }
+        let total = |r: &Rung| -> f64 {
+            (0..6).map(|c| (r.heldout_rms[c] / r.noise_floor[c].max(f64::MIN_POSITIVE)).powi(2)).sum()
+        };
+        for i in 1..rungs.len() {
+            rungs[i].heldout_gain = total(&rungs[i]) < total(&rungs[i - 1]) * 0.999;
+        }
     }
     let worst = |r: &Rung, s: usize| r.rms[3 * s..3 * s + 3].iter().copied().fold(0.0, f64::max);
     let paper_worst = [worst(&rungs[0], 0), worst(&rungs[0], 1)];

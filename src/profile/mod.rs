@@ -52,6 +52,17 @@ pub struct RunUsed {
     pub samples: usize,
 }
 
+/// Validation of a profile on runs the fit never saw.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Validation {
+    /// The held-out runs.
+    pub runs: Vec<RunUsed>,
+    /// Errors before/after and reduction factors on those runs, per sensor axis.
+    pub summary: Vec<crate::check::AxisSummary>,
+    /// Whether the held-out check passed.
+    pub pass: bool,
+}
+
 /// Settings the correction needs besides coefficients.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CorrectionSettings {
@@ -101,6 +112,9 @@ pub struct Profile {
     pub nonlinear: Vec<crate::estimate::NonlinearParam>,
     /// Runs used to fit.
     pub runs: Vec<RunUsed>,
+    /// Check on runs left out of the fit (`fit --holdout`), if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub validation: Option<Validation>,
     /// Correction settings.
     pub correction: CorrectionSettings,
     /// Findings recorded at fit time (unidentifiable terms, gaps, ε source).
@@ -188,17 +202,9 @@ impl Profile {
             gyro: fit.gyro,
             accel: fit.accel,
             nonlinear: fit.nonlinear,
-            runs: session
-                .runs
-                .iter()
-                .map(|r| RunUsed {
-                    name: r.spec.name.clone(),
-                    file: r.spec.file.clone(),
-                    sha256: r.rec.sha256.clone(),
-                    samples: r.rec.len(),
-                })
-                .collect(),
+            runs: runs_used(session),
             correction: CorrectionSettings::default(),
+            validation: None,
             notes,
         }
     }
@@ -303,6 +309,20 @@ impl Profile {
     pub fn file_stem(&self) -> String {
         self.created_utc.replace(':', "-")
     }
+}
+
+/// The runs of a session as recorded in a profile (name, file, SHA-256, samples).
+pub fn runs_used(session: &Session) -> Vec<RunUsed> {
+    session
+        .runs
+        .iter()
+        .map(|r| RunUsed {
+            name: r.spec.name.clone(),
+            file: r.spec.file.clone(),
+            sha256: r.rec.sha256.clone(),
+            samples: r.rec.len(),
+        })
+        .collect()
 }
 
 /// Saves a profile under `root/<serial>/<timestamp>.json` atomically, never overwriting:
