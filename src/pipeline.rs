@@ -47,7 +47,10 @@ pub enum Mode {
 
 /// Corrects one run of a session.
 pub fn correct_run(cal: &Calibration, run: &Run, mode: Mode) -> Result<Corrected, CorrectError> {
-    let temp = run.rec.temp_c.as_deref();
+    // A run's constant temperature stands in for a missing temp column.
+    let constant: Option<Vec<f64>> =
+        run.rec.temp_c.is_none().then_some(run.spec.temperature_c).flatten().map(|t| vec![t; run.rec.len()]);
+    let temp = run.rec.temp_c.as_deref().or(constant.as_deref());
     match mode {
         Mode::Offline => correct_offline(cal, &run.rec.t_s, &run.rec.gyro, &run.rec.accel, temp),
         Mode::Streaming => correct_streaming(cal, &run.rec.t_s, &run.rec.gyro, &run.rec.accel, temp),

@@ -44,6 +44,9 @@ pub enum CorrectError {
     /// The profile has an effect the correction cannot invert yet.
     #[error("the profile contains '{0}', whose correction is not implemented yet; refit without it to correct")]
     Unsupported(String),
+    /// The profile has a temperature effect but the data have no temperature.
+    #[error("the profile's effect '{0}' needs temperatures: the recording has no temp column")]
+    MissingTemperature(String),
     /// Input arrays disagree in length.
     #[error("input lengths differ: t has {t}, gyro {g}, accel {a}")]
     Length {
@@ -225,6 +228,11 @@ impl Calibration {
         None
     }
 
+    /// The first effect that needs a temperature, if any.
+    pub fn needs_temperature(&self) -> Option<&'static str> {
+        self.gyro.others.iter().chain(&self.accel.others).find(|o| o.effect.needs_temperature()).map(|o| o.effect.id())
+    }
+
     /// Total lag of the sensor's stamps behind the truth, s.
     pub fn lag_s(&self) -> f64 {
         self.nonlinear.iter().map(|n| n.effect.lag_s(&n.params)).sum()
@@ -281,6 +289,11 @@ pub fn correct_offline(
     let n = t_s.len();
     if gyro.len() != n || accel.len() != n {
         return Err(CorrectError::Length { t: n, g: gyro.len(), a: accel.len() });
+    }
+    if temp_c.is_none() {
+        if let Some(id) = cal.needs_temperature() {
+            return Err(CorrectError::MissingTemperature(id.to_string()));
+        }
     }
     let g = &cal.gyro;
     let a = &cal.accel;
@@ -509,6 +522,11 @@ pub fn correct_streaming(
     let n = t_s.len();
     if gyro.len() != n || accel.len() != n {
         return Err(CorrectError::Length { t: n, g: gyro.len(), a: accel.len() });
+    }
+    if temp_c.is_none() {
+        if let Some(id) = cal.needs_temperature() {
+            return Err(CorrectError::MissingTemperature(id.to_string()));
+        }
     }
     let mut s = Streaming::new(cal.clone());
     let mut out = Corrected {
