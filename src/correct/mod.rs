@@ -278,6 +278,23 @@ fn mv(m: &Matrix3<f64>, v: [f64; 3]) -> [f64; 3] {
     [r[0], r[1], r[2]]
 }
 
+/// Checks that a record can be corrected: equal lengths, temperatures where needed.
+fn check_inputs(
+    cal: &Calibration,
+    n: usize,
+    gyro: &[[f64; 3]],
+    accel: &[[f64; 3]],
+    temp_c: Option<&[f64]>,
+) -> Result<(), CorrectError> {
+    if gyro.len() != n || accel.len() != n || temp_c.is_some_and(|t| t.len() != n) {
+        return Err(CorrectError::Length { t: n, g: gyro.len(), a: accel.len() });
+    }
+    match (temp_c, cal.needs_temperature()) {
+        (None, Some(id)) => Err(CorrectError::MissingTemperature(id.to_string())),
+        _ => Ok(()),
+    }
+}
+
 /// Offline correction of a whole record (SI inputs; temperature optional).
 pub fn correct_offline(
     cal: &Calibration,
@@ -287,14 +304,7 @@ pub fn correct_offline(
     temp_c: Option<&[f64]>,
 ) -> Result<Corrected, CorrectError> {
     let n = t_s.len();
-    if gyro.len() != n || accel.len() != n {
-        return Err(CorrectError::Length { t: n, g: gyro.len(), a: accel.len() });
-    }
-    if temp_c.is_none() {
-        if let Some(id) = cal.needs_temperature() {
-            return Err(CorrectError::MissingTemperature(id.to_string()));
-        }
-    }
+    check_inputs(cal, n, gyro, accel, temp_c)?;
     let g = &cal.gyro;
     let a = &cal.accel;
     let sub = |u: [f64; 3], b: [f64; 3]| [u[0] - b[0], u[1] - b[1], u[2] - b[2]];
@@ -520,14 +530,7 @@ pub fn correct_streaming(
     temp_c: Option<&[f64]>,
 ) -> Result<Corrected, CorrectError> {
     let n = t_s.len();
-    if gyro.len() != n || accel.len() != n {
-        return Err(CorrectError::Length { t: n, g: gyro.len(), a: accel.len() });
-    }
-    if temp_c.is_none() {
-        if let Some(id) = cal.needs_temperature() {
-            return Err(CorrectError::MissingTemperature(id.to_string()));
-        }
-    }
+    check_inputs(cal, n, gyro, accel, temp_c)?;
     let mut s = Streaming::new(cal.clone());
     let mut out = Corrected {
         w_rad_s: Vec::with_capacity(n),

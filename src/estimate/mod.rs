@@ -306,6 +306,23 @@ impl Columns {
     pub(crate) fn len(&self) -> usize {
         self.source.len()
     }
+
+    /// Design row of sample k: the regressor columns, then the sensor's three outputs.
+    #[inline]
+    pub(crate) fn fill_row(
+        &self,
+        terms: &[crate::model::TermRef<'_>],
+        run: &FitRun<'_>,
+        sensor: SensorKind,
+        k: usize,
+        row: &mut [f64],
+    ) {
+        let s = run.state(k);
+        for (c, &ti) in self.source.iter().enumerate() {
+            row[c] = terms[ti].regressor(&s);
+        }
+        row[self.source.len()..].copy_from_slice(&run.output(sensor, k));
+    }
 }
 
 fn fit_sensor(
@@ -322,11 +339,7 @@ fn fit_sensor(
     let mut row = vec![0.0; width];
     for run in runs {
         for k in 0..run.len() {
-            let s = run.state(k);
-            for (c, &ti) in cols.source.iter().enumerate() {
-                row[c] = terms[ti].regressor(&s);
-            }
-            row[p..].copy_from_slice(&run.output(sensor, k));
+            cols.fill_row(&terms, run, sensor, k, &mut row);
             acc.push(&row);
         }
     }
@@ -623,11 +636,7 @@ fn robust_refit(
         let mut idx = 0;
         for run in runs {
             for k in 0..run.len() {
-                let s = run.state(k);
-                for (c, &ti) in cols.source.iter().enumerate() {
-                    row[c] = terms[ti].regressor(&s);
-                }
-                row[p..].copy_from_slice(&run.output(sensor, k));
+                cols.fill_row(terms, run, sensor, k, &mut row);
                 for ch in 0..3 {
                     let r = resid[idx][ch].abs();
                     let cut = HUBER_K * scale[ch];
