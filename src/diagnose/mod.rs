@@ -568,32 +568,29 @@ pub fn compare(
     let paper = Model::paper();
     let base = Model::default_model();
     let d = diagnose(&base, runs, motions, opts)?;
-    let mut rungs = Vec::new();
-    let pf = fit(&paper, runs, opts)?;
-    rungs.push(rung("paper (eqs. 3-4)", &pf, &residuals(&paper, &pf, runs, motions), motions));
-    let mut m = base.clone();
-    let f = fit(&m, runs, opts)?;
-    rungs.push(rung("default", &f, &residuals(&m, &f, runs, motions), motions));
-    let mut models = vec![paper.clone(), m.clone()];
+    // The ladder's models, each fitted once.
+    let mut models = vec![("paper (eqs. 3-4)".to_string(), paper), ("default".to_string(), base.clone())];
+    let mut m = base;
     for st in &d.steps {
         let _ = m.add_effect(&st.effect);
-        let f = fit(&m, runs, opts)?;
-        rungs.push(rung(&format!("+ {}", st.effect), &f, &residuals(&m, &f, runs, motions), motions));
-        models.push(m.clone());
+        models.push((format!("+ {}", st.effect), m.clone()));
     }
     for effects in extra {
         for e in effects {
             let _ = m.add_effect(e);
         }
-        let f = fit(&m, runs, opts)?;
-        rungs.push(rung(&format!("+ {}", effects.join(" + ")), &f, &residuals(&m, &f, runs, motions), motions));
-        models.push(m.clone());
+        models.push((format!("+ {}", effects.join(" + ")), m.clone()));
+    }
+    let mut rungs = Vec::with_capacity(models.len());
+    for (name, model) in &models {
+        let f = fit(model, runs, opts)?;
+        let mut r = rung(name, &f, &residuals(model, &f, runs, motions), motions);
+        if runs.len() > 1 {
+            r.heldout_rms = heldout_rms(model, &f, runs, motions, opts);
+        }
+        rungs.push(r);
     }
     if runs.len() > 1 {
-        for (r, model) in rungs.iter_mut().zip(&models) {
-            let all = fit(model, runs, opts)?;
-            r.heldout_rms = heldout_rms(model, &all, runs, motions, opts);
-        }
         let total = |r: &Rung| -> f64 {
             (0..6).map(|c| (r.heldout_rms[c] / r.noise_floor[c].max(f64::MIN_POSITIVE)).powi(2)).sum()
         };
