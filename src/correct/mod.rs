@@ -195,27 +195,16 @@ impl Calibration {
     ) -> Option<([f64; 3], [f64; 3], u8)> {
         let (g, a) = (&self.gyro, &self.accel);
         let ee = mv(&g.eps, e);
-        let mut w =
-            mv(&g.scale_inv, [gyro[0] - g.bias[0] - ee[0], gyro[1] - g.bias[1] - ee[1], gyro[2] - g.bias[2] - ee[2]]);
-        let mut acc = mv(&a.scale_inv, [accel[0] - a.bias[0], accel[1] - a.bias[1], accel[2] - a.bias[2]]);
+        let mut w = solve(&g.scale_inv, gyro, g.bias, ee, [0.0; 3]);
+        let mut acc = solve(&a.scale_inv, accel, a.bias, [0.0; 3], [0.0; 3]);
         for _ in 0..100 {
             // The effects' regressors see the input as the sensor saw it (before the inverses
             // of the nonlinear effects), exactly as in the forward model.
             let s = State { t_s, w, e, a: acc, temp_c };
             let og = g.other(&s);
             let oa = a.other(&s);
-            let wn = mv(
-                &g.scale_inv,
-                [
-                    gyro[0] - g.bias[0] - ee[0] - og[0],
-                    gyro[1] - g.bias[1] - ee[1] - og[1],
-                    gyro[2] - g.bias[2] - ee[2] - og[2],
-                ],
-            );
-            let an = mv(
-                &a.scale_inv,
-                [accel[0] - a.bias[0] - oa[0], accel[1] - a.bias[1] - oa[1], accel[2] - a.bias[2] - oa[2]],
-            );
+            let wn = solve(&g.scale_inv, gyro, g.bias, ee, og);
+            let an = solve(&a.scale_inv, accel, a.bias, oa, [0.0; 3]);
             let change = (0..3).map(|i| (wn[i] - w[i]).abs().max((an[i] - acc[i]).abs())).fold(0.0, f64::max);
             let size = (0..3).map(|i| wn[i].abs().max(an[i].abs())).fold(f64::MIN_POSITIVE, f64::max);
             w = wn;
@@ -278,6 +267,13 @@ fn mv(m: &Matrix3<f64>, v: [f64; 3]) -> [f64; 3] {
     [r[0], r[1], r[2]]
 }
 
+/// `M (u − b − p − q)`: the linear inverse of one sample with two known contributions
+/// (angular-acceleration and other-effect terms) removed.
+#[inline]
+fn solve(m: &Matrix3<f64>, u: [f64; 3], b: [f64; 3], p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
+    mv(m, [u[0] - b[0] - p[0] - q[0], u[1] - b[1] - p[1] - q[1], u[2] - b[2] - p[2] - q[2]])
+}
+
 /// Checks that a record can be corrected: equal lengths, temperatures where needed.
 fn check_inputs(
     cal: &Calibration,
@@ -307,9 +303,9 @@ pub fn correct_offline(
     check_inputs(cal, n, gyro, accel, temp_c)?;
     let g = &cal.gyro;
     let a = &cal.accel;
-    let sub = |u: [f64; 3], b: [f64; 3]| [u[0] - b[0], u[1] - b[1], u[2] - b[2]];
-    let mut w: Vec<[f64; 3]> = gyro.iter().map(|u| mv(&g.scale_inv, sub(*u, g.bias))).collect();
-    let mut acc: Vec<[f64; 3]> = accel.iter().map(|u| mv(&a.scale_inv, sub(*u, a.bias))).collect();
+    const Z: [f64; 3] = [0.0; 3];
+    let mut w: Vec<[f64; 3]> = gyro.iter().map(|u| solve(&g.scale_inv, *u, g.bias, Z, Z)).collect();
+    let mut acc: Vec<[f64; 3]> = accel.iter().map(|u| solve(&a.scale_inv, *u, a.bias, Z, Z)).collect();
     let mut flags: Vec<u8> = Vec::new();
     if !cal.nonlinear.is_empty() {
         for k in 0..n {
@@ -337,14 +333,8 @@ pub fn correct_offline(
             let ee = mv(&g.eps, e[k]);
             let og = g.other(&s);
             let oa = a.other(&s);
-            let u = gyro[k];
-            let wn = mv(
-                &g.scale_inv,
-                [u[0] - g.bias[0] - ee[0] - og[0], u[1] - g.bias[1] - ee[1] - og[1], u[2] - g.bias[2] - ee[2] - og[2]],
-            );
-            let u = accel[k];
-            let mut an =
-                mv(&a.scale_inv, [u[0] - a.bias[0] - oa[0], u[1] - a.bias[1] - oa[1], u[2] - a.bias[2] - oa[2]]);
+            let wn = solve(&g.scale_inv, gyro[k], g.bias, ee, og);
+            let mut an = solve(&a.scale_inv, accel[k], a.bias, oa, [0.0; 3]);
             let mut wn = wn;
             if !cal.nonlinear.is_empty() {
                 let f = cal.invert_nonlinear(&mut wn, &mut an);
@@ -485,9 +475,8 @@ impl Streaming {
             self.cached_inv = (g.scale + g.eps * w0).try_inverse().unwrap_or(g.scale_inv);
         }
         let ep = mv(&g.eps, p);
-        let mut rhs = [gyro[0] - g.bias[0] - ep[0], gyro[1] - g.bias[1] - ep[1], gyro[2] - g.bias[2] - ep[2]];
-        let mut w = mv(&self.cached_inv, rhs);
-        let mut acc = mv(&a.scale_inv, [accel[0] - a.bias[0], accel[1] - a.bias[1], accel[2] - a.bias[2]]);
+        let mut w = solve(&self.cached_inv, gyro, g.bias, ep, [0.0; 3]);
+        let mut acc = solve(&a.scale_inv, accel, a.bias, [0.0; 3], [0.0; 3]);
         if g.has_other_terms() || a.has_other_terms() {
             // Fixed-point passes for the remaining effects, from the linear solution.
             for _ in 0..4 {
@@ -500,16 +489,8 @@ impl Streaming {
                 };
                 let og = g.other(&s);
                 let oa = a.other(&s);
-                rhs = [
-                    gyro[0] - g.bias[0] - ep[0] - og[0],
-                    gyro[1] - g.bias[1] - ep[1] - og[1],
-                    gyro[2] - g.bias[2] - ep[2] - og[2],
-                ];
-                w = mv(&self.cached_inv, rhs);
-                acc = mv(
-                    &a.scale_inv,
-                    [accel[0] - a.bias[0] - oa[0], accel[1] - a.bias[1] - oa[1], accel[2] - a.bias[2] - oa[2]],
-                );
+                w = solve(&self.cached_inv, gyro, g.bias, ep, og);
+                acc = solve(&a.scale_inv, accel, a.bias, oa, [0.0; 3]);
             }
         }
         if !self.cal.nonlinear.is_empty() {
