@@ -274,6 +274,17 @@ fn solve(m: &Matrix3<f64>, u: [f64; 3], b: [f64; 3], p: [f64; 3], q: [f64; 3]) -
     mv(m, [u[0] - b[0] - p[0] - q[0], u[1] - b[1] - p[1] - q[1], u[2] - b[2] - p[2] - q[2]])
 }
 
+/// Records sample k's flag bits, allocating the flag vector only when a first flag appears.
+#[inline]
+fn set_flags(flags: &mut Vec<u8>, n: usize, k: usize, f: u8) {
+    if f != 0 {
+        flags.resize(n, 0);
+    }
+    if let Some(x) = flags.get_mut(k) {
+        *x = f;
+    }
+}
+
 /// Checks that a record can be corrected: equal lengths, temperatures where needed.
 fn check_inputs(
     cal: &Calibration,
@@ -306,18 +317,20 @@ pub fn correct_offline(
     const Z: [f64; 3] = [0.0; 3];
     let mut w: Vec<[f64; 3]> = gyro.iter().map(|u| solve(&g.scale_inv, *u, g.bias, Z, Z)).collect();
     let mut acc: Vec<[f64; 3]> = accel.iter().map(|u| solve(&a.scale_inv, *u, a.bias, Z, Z)).collect();
+    // With nonlinear effects, `seen` keeps the linear inverse's output (the input as the sensor
+    // saw it), which is what the other effects' regressors take, as in the forward model;
+    // `w`, `acc` hold the true input after the nonlinear inverses.
+    let nonlinear = !cal.nonlinear.is_empty();
+    let mut seen: Vec<([f64; 3], [f64; 3])> =
+        if nonlinear { w.iter().copied().zip(acc.iter().copied()).collect() } else { Vec::new() };
     let mut flags: Vec<u8> = Vec::new();
-    if !cal.nonlinear.is_empty() {
+    if nonlinear {
         for k in 0..n {
             let f = cal.invert_nonlinear(&mut w[k], &mut acc[k]);
-            if f != 0 {
-                flags.resize(n, 0);
-                flags[k] = f;
-            }
+            set_flags(&mut flags, n, k, f);
         }
     }
-    let needs_eps =
-        g.eps.iter().any(|v| *v != 0.0) || g.has_other_terms() || a.has_other_terms() || !cal.nonlinear.is_empty();
+    let needs_eps = g.eps.iter().any(|v| *v != 0.0) || g.has_other_terms() || a.has_other_terms() || nonlinear;
     let deriv =
         DerivativeConfig { half_window: cal.settings.derivative_half_window, degree: cal.settings.derivative_degree };
     let mut e = vec![[0.0; 3]; n];
@@ -329,21 +342,17 @@ pub fn correct_offline(
         derivative_offline(t_s, &w, &deriv, &mut e);
         let (mut change_w, mut size_w, mut change_a, mut size_a) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
         for k in 0..n {
-            let s = State { t_s: t_s[k] - t0, w: w[k], e: e[k], a: acc[k], temp_c: temp_c.map_or(f64::NAN, |t| t[k]) };
+            let (sw, sa) = if nonlinear { seen[k] } else { (w[k], acc[k]) };
+            let s = State { t_s: t_s[k] - t0, w: sw, e: e[k], a: sa, temp_c: temp_c.map_or(f64::NAN, |t| t[k]) };
             let ee = mv(&g.eps, e[k]);
             let og = g.other(&s);
             let oa = a.other(&s);
-            let wn = solve(&g.scale_inv, gyro[k], g.bias, ee, og);
-            let mut an = solve(&a.scale_inv, accel[k], a.bias, oa, [0.0; 3]);
-            let mut wn = wn;
-            if !cal.nonlinear.is_empty() {
+            let mut wn = solve(&g.scale_inv, gyro[k], g.bias, ee, og);
+            let mut an = solve(&a.scale_inv, accel[k], a.bias, oa, Z);
+            if nonlinear {
+                seen[k] = (wn, an);
                 let f = cal.invert_nonlinear(&mut wn, &mut an);
-                if f != 0 {
-                    flags.resize(n, 0);
-                    flags[k] = f;
-                } else if !flags.is_empty() {
-                    flags[k] = 0;
-                }
+                set_flags(&mut flags, n, k, f);
             }
             for i in 0..3 {
                 change_w = change_w.max((wn[i] - w[k][i]).abs());
@@ -376,8 +385,7 @@ pub fn resample_to_stamps(c: &Corrected, t_s: &[f64]) -> Corrected {
     let (first, last) = (t_s[0], t_s[n - 1]);
     for (k, &t) in t_s.iter().enumerate() {
         if t + lag < first || t + lag > last {
-            flags.resize(n, 0);
-            flags[k] = 0x3f;
+            set_flags(&mut flags, n, k, 0x3f);
         }
     }
     let (mut h1, mut h2) = (0, 0);
@@ -526,10 +534,7 @@ pub fn correct_streaming(
         let (w, a) = s.push(t_s[k], gyro[k], accel[k], temp_c.map_or(f64::NAN, |t| t[k]));
         out.w_rad_s.push(w);
         out.a_m_s2.push(a);
-        if s.last_flags() != 0 {
-            out.flags.resize(n, 0);
-            out.flags[k] = s.last_flags();
-        }
+        set_flags(&mut out.flags, n, k, s.last_flags());
     }
     Ok(out)
 }

@@ -21,7 +21,7 @@ pub use identify::{Correlation, Unidentifiable};
 pub use nonlinear::NonlinearParam;
 pub use qr::QrAccumulator;
 
-use crate::model::{Model, Role, SensorKind, State, TermStatus, AXES};
+use crate::model::{Model, SensorKind, State, TermStatus, AXES};
 use crate::motion::Track;
 use faer::Mat;
 use nalgebra::DMatrix;
@@ -544,11 +544,6 @@ fn reduce(
     // Keep the diagonal of R_s positive so that the residual norm sits in out[(q, q)].
     out[(q, q)] = out[(q, q)].abs();
     out
-}
-
-/// Convenience: the role of a coefficient, for correction.
-pub fn role_of(model: &Model, name: &str) -> Option<Role> {
-    SensorKind::BOTH.iter().flat_map(|s| model.terms(*s)).find(|t| t.term.name == name).map(|t| t.term.role)
 }
 
 /// Solves the reduced problem `[R_s | z; 0 | ρ]`: θ by back substitution, the covariance
