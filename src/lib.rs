@@ -16,6 +16,7 @@ pub mod diagnose;
 pub mod estimate;
 pub mod model;
 pub mod motion;
+pub mod noise;
 pub mod pipeline;
 pub mod profile;
 pub mod session;

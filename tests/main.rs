@@ -1,5 +1,6 @@
 //! crosscal's integration tests: one test binary (links once), modules mirror the product.
 
+mod allan;
 mod bad_input;
 mod cli;
 mod common;

@@ -100,3 +100,57 @@ pub fn bars(title: &str, x_label: &str, y_label: &str, values: &[(String, f64)])
     }
     buf
 }
+
+/// A log-log chart as an SVG string: `measured` points with vertical interval bars
+/// (x, low, y, high) and named line series (e.g. a fitted curve and slope lines).
+pub fn loglog(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    measured: &[(f64, f64, f64, f64)],
+    series: &[(String, Vec<(f64, f64)>)],
+) -> String {
+    let mut buf = String::new();
+    let positive = |v: &f64| v.is_finite() && *v > 0.0;
+    let xs = measured.iter().map(|p| p.0).chain(series.iter().flat_map(|s| s.1.iter().map(|p| p.0)));
+    let ys = measured.iter().flat_map(|p| [p.1, p.2, p.3]).chain(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
+    let (x0, x1) = range(xs.filter(positive).map(f64::log10));
+    let (y0, y1) = range(ys.filter(positive).map(f64::log10));
+    let (x0, x1, y0, y1) = (10f64.powf(x0), 10f64.powf(x1), 10f64.powf(y0), 10f64.powf(y1));
+    {
+        let root = SVGBackend::with_string(&mut buf, (720, 420)).into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let Ok(mut chart) = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 15))
+            .margin(8)
+            .x_label_area_size(32)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+        else {
+            return String::new();
+        };
+        let _ =
+            chart.configure_mesh().x_desc(x_label).y_desc(y_label).y_label_formatter(&|v| format!("{v:.1e}")).draw();
+        let c0 = COLORS[0];
+        let inside = |y: f64| y.clamp(y0, y1);
+        if let Ok(s) = chart.draw_series(
+            measured
+                .iter()
+                .filter(|p| positive(&p.0) && positive(&p.2))
+                .map(|p| ErrorBar::new_vertical(p.0, inside(p.1.max(y0)), p.2, inside(p.3), c0.filled(), 4)),
+        ) {
+            s.label("measured (68 % interval)").legend(move |(x, y)| Circle::new((x + 7, y), 3, c0.filled()));
+        }
+        for (i, (name, pts)) in series.iter().enumerate() {
+            let c = COLORS[(i + 1) % COLORS.len()];
+            let pts: Vec<(f64, f64)> =
+                pts.iter().copied().filter(|p| positive(&p.0) && p.1 >= y0 && p.1 <= y1).collect();
+            if let Ok(s) = chart.draw_series(LineSeries::new(pts, c.stroke_width(1))) {
+                s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
+            }
+        }
+        let _ = chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw();
+        let _ = root.present();
+    }
+    buf
+}

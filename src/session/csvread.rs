@@ -62,8 +62,11 @@ const REF_EPS: [&str; 3] = ["ex_ref", "ey_ref", "ez_ref"];
 
 /// Hex SHA-256 of bytes.
 pub fn sha256_hex(bytes: &[u8]) -> String {
-    let digest = Sha256::digest(bytes);
-    let mut s = String::with_capacity(64);
+    hex(&Sha256::digest(bytes))
+}
+
+fn hex(digest: &[u8]) -> String {
+    let mut s = String::with_capacity(2 * digest.len());
     for b in digest {
         s.push_str(&format!("{b:02x}"));
     }
@@ -86,6 +89,286 @@ pub fn read_recording(path: &Path, units: &Units, g_m_s2: f64, opts: ReadOptions
     parse_recording(path, &bytes, units, g_m_s2, opts)
 }
 
+/// One CSV row converted to SI (stand-frame reference columns when requested).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Row {
+    /// Time stamp, s.
+    pub t_s: f64,
+    /// Gyro output, sensor frame.
+    pub gyro: [f64; 3],
+    /// Accelerometer output, sensor frame.
+    pub accel: [f64; 3],
+    /// Temperature, °C (NaN without a `temp` column).
+    pub temp_c: f64,
+    /// Reference angular rate, rad/s (reference columns only).
+    pub w_ref: [f64; 3],
+    /// Reference specific force, m/s² (reference columns only).
+    pub a_ref: [f64; 3],
+    /// Reference angular acceleration, rad/s² (when `ex_ref..ez_ref` are present).
+    pub e_ref: [f64; 3],
+}
+
+/// A reader that hashes (SHA-256) every byte it passes on.
+struct Hashing<R> {
+    inner: R,
+    hash: Sha256,
+}
+
+impl<R: std::io::Read> std::io::Read for Hashing<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.hash.update(&buf[..n]);
+        Ok(n)
+    }
+}
+
+/// Streams the rows of a recording: one reused record, no allocation per row; every row
+/// is validated (numbers, finite values, strictly increasing time) with errors naming
+/// file, line and column.
+pub struct RowReader<R: std::io::Read> {
+    rdr: csv::Reader<Hashing<R>>,
+    rec: csv::ByteRecord,
+    path: PathBuf,
+    names: Vec<String>,
+    idx: [usize; 7],
+    temp_idx: Option<usize>,
+    ref_idx: Option<[usize; 6]>,
+    eps_idx: Option<[usize; 3]>,
+    width: usize,
+    header_line: u64,
+    factors: [f64; 5],
+    last_line: u64,
+    last_t: f64,
+}
+
+impl<R: std::io::Read> RowReader<R> {
+    /// Reads the header of `input` (named `path` in messages) and maps its columns.
+    pub fn new(path: &Path, input: R, units: &Units, g_m_s2: f64, opts: ReadOptions) -> Result<Self, SessionError> {
+        let path: PathBuf = path.to_path_buf();
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .comment(Some(b'#'))
+            .flexible(true)
+            .trim(csv::Trim::All)
+            .buffer_capacity(1 << 16)
+            .from_reader(Hashing { inner: input, hash: Sha256::new() });
+        let mut rec = csv::ByteRecord::new();
+
+        // Header: the first record that is not empty/comment.
+        let header_line;
+        let mut names: Vec<String> = Vec::new();
+        loop {
+            match rdr.read_byte_record(&mut rec) {
+                Ok(false) => {
+                    return Err(csv_err(
+                        Problem::Header,
+                        &path,
+                        1,
+                        "-",
+                        "no header line found: expected 't,gx,gy,gz,ax,ay,az[,temp]'",
+                    ));
+                }
+                Ok(true) => {
+                    if rec.len() == 1 && rec.get(0).is_some_and(|f| f.is_empty()) {
+                        continue;
+                    }
+                    header_line = rec.position().map_or(1, |p| p.line());
+                    for f in rec.iter() {
+                        names.push(String::from_utf8_lossy(f).trim().to_string());
+                    }
+                    break;
+                }
+                Err(e) => return Err(map_csv_error(&path, &e)),
+            }
+        }
+        let find = |name: &str| names.iter().position(|n| n == name);
+        let mut idx = [0usize; 7];
+        for (k, name) in REQUIRED.iter().enumerate() {
+            idx[k] = find(name).ok_or_else(|| {
+                let first_is_number = names.first().is_some_and(|n| n.parse::<f64>().is_ok());
+                let why = if first_is_number {
+                    format!("the header line is missing (line {header_line} starts with a number); expected a first line 't,gx,gy,gz,ax,ay,az[,temp]'")
+                } else {
+                    format!(
+                        "required column '{name}' is absent: the header has [{}]; expected t,gx,gy,gz,ax,ay,az (any order)",
+                        names.join(",")
+                    )
+                };
+                csv_err(Problem::Header, &path, header_line, "-", why)
+            })?;
+        }
+        let temp_idx = find("temp");
+        let mut ref_idx = None;
+        let mut eps_idx: Option<[usize; 3]> = None;
+        if opts.reference {
+            let mut r = [0usize; 6];
+            for (k, name) in REF_REQUIRED.iter().enumerate() {
+                r[k] = find(name).ok_or_else(|| {
+                    csv_err(Problem::Header,
+                        &path,
+                        header_line,
+                        "-",
+                        format!(
+                            "motion kind 'reference' needs column '{name}': the header has [{}]; expected wx_ref,wy_ref,wz_ref,ax_ref,ay_ref,az_ref",
+                            names.join(",")
+                        ),
+                    )
+                })?;
+            }
+            ref_idx = Some(r);
+            let e: Vec<Option<usize>> = REF_EPS.iter().map(|n| find(n)).collect();
+            match (e[0], e[1], e[2]) {
+                (Some(a), Some(b), Some(c)) => eps_idx = Some([a, b, c]),
+                (None, None, None) => {}
+                _ => {
+                    return Err(csv_err(
+                        Problem::Header,
+                        &path,
+                        header_line,
+                        "-",
+                        "give all three of ex_ref,ey_ref,ez_ref or none of them",
+                    ));
+                }
+            }
+        }
+        let width = names.len();
+        let kg = units.gyro.to_rad_s();
+        let ka = units.accel.to_m_s2(g_m_s2);
+        // Reference columns of a raw session are read as deg/s and g.
+        let kwr = if units.gyro == super::units::GyroUnit::Raw { std::f64::consts::PI / 180.0 } else { kg };
+        let kar = if units.accel == super::units::AccelUnit::Raw { g_m_s2 } else { ka };
+        Ok(Self {
+            rdr,
+            rec,
+            path,
+            names,
+            idx,
+            temp_idx,
+            ref_idx,
+            eps_idx,
+            width,
+            header_line,
+            factors: [units.time.to_s(), kg, ka, kwr, kar],
+            last_line: header_line,
+            last_t: f64::NEG_INFINITY,
+        })
+    }
+
+    /// Line of the header.
+    pub fn header_line(&self) -> u64 {
+        self.header_line
+    }
+
+    /// Whether the file has a `temp` column.
+    pub fn has_temp(&self) -> bool {
+        self.temp_idx.is_some()
+    }
+
+    /// Whether the file has `ex_ref..ez_ref` (read only with reference columns).
+    pub fn has_eps(&self) -> bool {
+        self.eps_idx.is_some()
+    }
+
+    /// 1-based column of `t`.
+    pub fn t_column(&self) -> usize {
+        self.idx[0] + 1
+    }
+
+    /// Line of the last row read.
+    pub fn line(&self) -> u64 {
+        self.last_line
+    }
+
+    fn field(&self, k: usize, line: u64) -> Result<f64, SessionError> {
+        let field = self.rec.get(k).unwrap_or(b"");
+        let parsed = std::str::from_utf8(field).ok().and_then(|s| s.parse::<f64>().ok());
+        match parsed {
+            Some(v) if v.is_finite() => Ok(v),
+            Some(v) => Err(csv_err(
+                Problem::Value,
+                &self.path,
+                line,
+                format!("{} ({})", k + 1, self.names[k]),
+                format!("expected a finite number, found '{v}' (NaN or infinite values are not accepted)"),
+            )),
+            None => Err(csv_err(
+                Problem::Value,
+                &self.path,
+                line,
+                format!("{} ({})", k + 1, self.names[k]),
+                format!("expected a number, found '{}'", String::from_utf8_lossy(field)),
+            )),
+        }
+    }
+
+    fn triple(&self, idx: &[usize], k: f64, line: u64) -> Result<[f64; 3], SessionError> {
+        Ok([self.field(idx[0], line)? * k, self.field(idx[1], line)? * k, self.field(idx[2], line)? * k])
+    }
+
+    /// Reads the next sample into `row`; false at the end of the file.
+    pub fn read_row(&mut self, row: &mut Row) -> Result<bool, SessionError> {
+        loop {
+            match self.rdr.read_byte_record(&mut self.rec) {
+                Ok(false) => return Ok(false),
+                Ok(true) => {}
+                Err(e) => return Err(map_csv_error(&self.path, &e)),
+            }
+            let line = self.rec.position().map_or(self.last_line + 1, |p| p.line());
+            self.last_line = line;
+            if self.rec.len() == 1 && self.rec.get(0).is_some_and(|f| f.is_empty()) {
+                continue;
+            }
+            if self.rec.len() < self.width {
+                let n = self.rec.len();
+                return Err(csv_err(
+                    Problem::Truncated,
+                    &self.path,
+                    line,
+                    format!("{} ({})", n + 1, self.names[n]),
+                    format!("the row has {n} fields, the header has {}: a truncated or incomplete row", self.width),
+                ));
+            }
+            let [kt, kg, ka, kwr, kar] = self.factors;
+            let t = self.field(self.idx[0], line)? * kt;
+            if t <= self.last_t {
+                let what = if t >= self.last_t { "duplicate" } else { "decreasing" };
+                return Err(csv_err(
+                    Problem::Time,
+                    &self.path,
+                    line,
+                    format!("{} (t)", self.idx[0] + 1),
+                    format!(
+                        "{what} time stamp {}: t must be strictly increasing (previous sample had {})",
+                        t / kt,
+                        self.last_t / kt
+                    ),
+                ));
+            }
+            self.last_t = t;
+            row.t_s = t;
+            row.gyro = self.triple(&self.idx[1..4], kg, line)?;
+            row.accel = self.triple(&self.idx[4..7], ka, line)?;
+            row.temp_c = match self.temp_idx {
+                Some(k) => self.field(k, line)?,
+                None => f64::NAN,
+            };
+            if let Some(r) = self.ref_idx {
+                row.w_ref = self.triple(&r[0..3], kwr, line)?;
+                row.a_ref = self.triple(&r[3..6], kar, line)?;
+                if let Some(e) = self.eps_idx {
+                    row.e_ref = self.triple(&e, kwr, line)?;
+                }
+            }
+            return Ok(true);
+        }
+    }
+
+    /// The SHA-256 (hex) of every byte read so far; of the whole file once it is read.
+    pub fn sha256(&self) -> String {
+        hex(&self.rdr.get_ref().hash.clone().finalize())
+    }
+}
+
 /// Parses recording bytes (the file name is used in messages only).
 pub fn parse_recording(
     path: &Path,
@@ -94,208 +377,58 @@ pub fn parse_recording(
     g_m_s2: f64,
     opts: ReadOptions,
 ) -> Result<Recording, SessionError> {
-    let path: PathBuf = path.to_path_buf();
     if bytes.iter().all(|b| b.is_ascii_whitespace()) {
         return Err(csv_err(
             Problem::Empty,
-            &path,
+            path,
             1,
             "-",
             "the file is empty: expected a header line 't,gx,gy,gz,ax,ay,az[,temp]' and samples",
         ));
     }
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(false)
-        .comment(Some(b'#'))
-        .flexible(true)
-        .trim(csv::Trim::All)
-        .from_reader(bytes);
-    let mut rec = csv::ByteRecord::new();
-
-    // Header: the first record that is not empty/comment.
-    let header_line;
-    let mut names: Vec<String> = Vec::new();
-    loop {
-        match rdr.read_byte_record(&mut rec) {
-            Ok(false) => {
-                return Err(csv_err(
-                    Problem::Header,
-                    &path,
-                    1,
-                    "-",
-                    "no header line found: expected 't,gx,gy,gz,ax,ay,az[,temp]'",
-                ));
-            }
-            Ok(true) => {
-                if rec.len() == 1 && rec.get(0).is_some_and(|f| f.is_empty()) {
-                    continue;
-                }
-                header_line = rec.position().map_or(1, |p| p.line());
-                for f in rec.iter() {
-                    names.push(String::from_utf8_lossy(f).trim().to_string());
-                }
-                break;
-            }
-            Err(e) => return Err(map_csv_error(&path, &e)),
-        }
-    }
-    let find = |name: &str| names.iter().position(|n| n == name);
-    let mut idx = [0usize; 7];
-    for (k, name) in REQUIRED.iter().enumerate() {
-        idx[k] = find(name).ok_or_else(|| {
-            let first_is_number = names.first().is_some_and(|n| n.parse::<f64>().is_ok());
-            let why = if first_is_number {
-                format!("the header line is missing (line {header_line} starts with a number); expected a first line 't,gx,gy,gz,ax,ay,az[,temp]'")
-            } else {
-                format!(
-                    "required column '{name}' is absent: the header has [{}]; expected t,gx,gy,gz,ax,ay,az (any order)",
-                    names.join(",")
-                )
-            };
-            csv_err(Problem::Header, &path, header_line, "-", why)
-        })?;
-    }
-    let temp_idx = find("temp");
-    let mut ref_idx = [0usize; 6];
-    let mut eps_idx: Option<[usize; 3]> = None;
-    if opts.reference {
-        for (k, name) in REF_REQUIRED.iter().enumerate() {
-            ref_idx[k] = find(name).ok_or_else(|| {
-                csv_err(Problem::Header,
-                    &path,
-                    header_line,
-                    "-",
-                    format!(
-                        "motion kind 'reference' needs column '{name}': the header has [{}]; expected wx_ref,wy_ref,wz_ref,ax_ref,ay_ref,az_ref",
-                        names.join(",")
-                    ),
-                )
-            })?;
-        }
-        let e: Vec<Option<usize>> = REF_EPS.iter().map(|n| find(n)).collect();
-        match (e[0], e[1], e[2]) {
-            (Some(a), Some(b), Some(c)) => eps_idx = Some([a, b, c]),
-            (None, None, None) => {}
-            _ => {
-                return Err(csv_err(
-                    Problem::Header,
-                    &path,
-                    header_line,
-                    "-",
-                    "give all three of ex_ref,ey_ref,ez_ref or none of them",
-                ));
-            }
-        }
-    }
-    let width = names.len();
-
-    let kt = units.time.to_s();
-    let kg = units.gyro.to_rad_s();
-    let ka = units.accel.to_m_s2(g_m_s2);
-    // Reference columns of a raw session are read as deg/s and g.
-    let kwr = if units.gyro == super::units::GyroUnit::Raw { std::f64::consts::PI / 180.0 } else { kg };
-    let kar = if units.accel == super::units::AccelUnit::Raw { g_m_s2 } else { ka };
-
+    let mut rows = RowReader::new(path, bytes, units, g_m_s2, opts)?;
     let cap = bytes.len() / 64;
     let mut out = Recording {
         t_s: Vec::with_capacity(cap),
         gyro: Vec::with_capacity(cap),
         accel: Vec::with_capacity(cap),
-        temp_c: temp_idx.map(|_| Vec::with_capacity(cap)),
+        temp_c: rows.has_temp().then(|| Vec::with_capacity(cap)),
         ..Default::default()
     };
-    let mut refc = if opts.reference {
-        Some(ReferenceColumns { e_rad_s2: eps_idx.map(|_| Vec::new()), ..Default::default() })
-    } else {
-        None
-    };
-    let mut last_line = header_line;
-    let mut last_t = f64::NEG_INFINITY;
-    loop {
-        match rdr.read_byte_record(&mut rec) {
-            Ok(false) => break,
-            Ok(true) => {}
-            Err(e) => return Err(map_csv_error(&path, &e)),
-        }
-        let line = rec.position().map_or(last_line + 1, |p| p.line());
-        last_line = line;
-        if rec.len() == 1 && rec.get(0).is_some_and(|f| f.is_empty()) {
-            continue;
-        }
-        if rec.len() < width {
-            return Err(csv_err(
-                Problem::Truncated,
-                &path,
-                line,
-                format!("{} ({})", rec.len() + 1, names[rec.len()]),
-                format!("the row has {} fields, the header has {}: a truncated or incomplete row", rec.len(), width),
-            ));
-        }
-        let get = |k: usize| -> Result<f64, SessionError> {
-            let field = rec.get(k).unwrap_or(b"");
-            let parsed = std::str::from_utf8(field).ok().and_then(|s| s.parse::<f64>().ok());
-            match parsed {
-                Some(v) if v.is_finite() => Ok(v),
-                Some(v) => Err(csv_err(
-                    Problem::Value,
-                    &path,
-                    line,
-                    format!("{} ({})", k + 1, names[k]),
-                    format!("expected a finite number, found '{v}' (NaN or infinite values are not accepted)"),
-                )),
-                None => Err(csv_err(
-                    Problem::Value,
-                    &path,
-                    line,
-                    format!("{} ({})", k + 1, names[k]),
-                    format!("expected a number, found '{}'", String::from_utf8_lossy(field)),
-                )),
-            }
-        };
-        let t = get(idx[0])? * kt;
-        if t <= last_t {
-            let what = if t >= last_t { "duplicate" } else { "decreasing" };
-            return Err(csv_err(
-                Problem::Time,
-                &path,
-                line,
-                format!("{} (t)", idx[0] + 1),
-                format!(
-                    "{what} time stamp {}: t must be strictly increasing (previous sample had {})",
-                    t / kt,
-                    last_t / kt
-                ),
-            ));
-        }
-        last_t = t;
-        out.t_s.push(t);
-        out.gyro.push([get(idx[1])? * kg, get(idx[2])? * kg, get(idx[3])? * kg]);
-        out.accel.push([get(idx[4])? * ka, get(idx[5])? * ka, get(idx[6])? * ka]);
-        if let (Some(k), Some(v)) = (temp_idx, out.temp_c.as_mut()) {
-            v.push(get(k)?);
+    let mut refc =
+        opts.reference.then(|| ReferenceColumns { e_rad_s2: rows.has_eps().then(Vec::new), ..Default::default() });
+    let mut row = Row::default();
+    while rows.read_row(&mut row)? {
+        out.t_s.push(row.t_s);
+        out.gyro.push(row.gyro);
+        out.accel.push(row.accel);
+        if let Some(v) = out.temp_c.as_mut() {
+            v.push(row.temp_c);
         }
         if let Some(r) = refc.as_mut() {
-            r.w_rad_s.push([get(ref_idx[0])? * kwr, get(ref_idx[1])? * kwr, get(ref_idx[2])? * kwr]);
-            r.a_m_s2.push([get(ref_idx[3])? * kar, get(ref_idx[4])? * kar, get(ref_idx[5])? * kar]);
-            if let (Some(e), Some(ev)) = (eps_idx, r.e_rad_s2.as_mut()) {
-                ev.push([get(e[0])? * kwr, get(e[1])? * kwr, get(e[2])? * kwr]);
+            r.w_rad_s.push(row.w_ref);
+            r.a_m_s2.push(row.a_ref);
+            if let Some(ev) = r.e_rad_s2.as_mut() {
+                ev.push(row.e_ref);
             }
         }
     }
+    let header_line = rows.header_line();
     if out.t_s.is_empty() {
-        return Err(csv_err(Problem::Empty, &path, header_line, "-", "the file has a header but no samples"));
+        return Err(csv_err(Problem::Empty, path, header_line, "-", "the file has a header but no samples"));
     }
     out.reference = refc;
     out.sha256 = sha256_hex(bytes);
-    let gaps = find_gaps(&out.t_s, kt, &path);
+    let kt = units.time.to_s();
+    let gaps = find_gaps(&out.t_s, kt, path);
     if opts.strict {
         if let Some((k, first)) = gaps.first() {
             let line = line_of_sample(bytes, *k).unwrap_or(header_line);
             return Err(csv_err(
                 Problem::Gap,
-                &path,
+                path,
                 line,
-                format!("{} (t)", idx[0] + 1),
+                format!("{} (t)", rows.t_column()),
                 format!("{first}; expected a gap of at most 5 sample periods (strict mode; without --strict gaps are warnings)"),
             ));
         }

@@ -10,7 +10,9 @@ mod error;
 pub mod sanity;
 pub mod units;
 
-pub use csvread::{parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns};
+pub use csvread::{
+    parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
+};
 pub use error::{Problem, SessionError};
 pub use units::{AccelUnit, GyroUnit, TimeUnit, Units};
 

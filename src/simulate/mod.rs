@@ -4,6 +4,8 @@
 //! The simulator evaluates the same effect regressors as the fit (model forward,
 //! `u = f(true)`), so any catalogue effect can be hidden in the data by giving it a value.
 
+pub mod noise;
+
 use crate::atomic::write_new;
 use crate::model::{forward, Model, SensorKind, State};
 use crate::motion::{track_for, DerivativeConfig, Mount};
@@ -108,6 +110,10 @@ pub struct SimConfig {
     /// Temperature ramp over the whole session (start, end), °C: when set, every run gets a
     /// `temp` column.
     pub temperature_c: Option<(f64, f64)>,
+    /// Coloured noise added to each gyro axis (rad/s), on top of the white per-sample noise.
+    pub gyro_process: noise::NoiseProcess,
+    /// Coloured noise added to each accelerometer axis (m/s²).
+    pub accel_process: noise::NoiseProcess,
 }
 
 /// The cyclic mounts used for re-mounted runs: nominal, then x→y→z→x twice.
@@ -157,6 +163,20 @@ impl SimConfig {
             g_m_s2: 9.80665,
             seed: 1,
             temperature_c: None,
+            gyro_process: Default::default(),
+            accel_process: Default::default(),
+        }
+    }
+
+    /// The paper's unit at rest (up = +z) for one static run named `static` of
+    /// `duration_s`: the recording an engineer characterises noise on.
+    pub fn static_recording(duration_s: f64, sample_rate_hz: f64) -> Self {
+        let still = MotionSpec::Static { up_stand: [0.0, 0.0, 1.0], earth_rate_rad_s: [0.0; 3] };
+        let mount = cyclic_mounts(1).remove(0);
+        Self {
+            runs: vec![RunPlan { name: "static".into(), motion: still, mount, duration_s }],
+            sample_rate_hz,
+            ..Self::paper()
         }
     }
 
@@ -200,6 +220,14 @@ impl SimConfig {
                 t
             };
             let (tg, ta) = (seen(SensorKind::Gyro), seen(SensorKind::Accel));
+            // Coloured noise draws from its own stream, so sessions without it are unchanged.
+            let mut prng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x5eed_c0105 ^ runs.len() as u64);
+            let dt = 1.0 / self.sample_rate_hz;
+            let mut gens: Vec<noise::NoiseGenerator> = (0..6)
+                .map(|c| if c < 3 { &self.gyro_process } else { &self.accel_process })
+                .map(|p| p.generator(dt, plan.duration_s))
+                .collect();
+            let coloured = !(self.gyro_process.is_zero() && self.accel_process.is_zero());
             rec.gyro.reserve(n);
             rec.accel.reserve(n);
             if let Some((t0, t1)) = self.temperature_c {
@@ -224,6 +252,12 @@ impl SimConfig {
                     let na = an.map_or(0.0, |d| d.sample(&mut rng));
                     g[i] = (ug[i] * to_deg + ng) * kg;
                     a[i] = (ua[i] / self.g_m_s2 + na) * ka;
+                }
+                if coloured {
+                    for i in 0..3 {
+                        g[i] += gens[i].next_sample(&mut prng);
+                        a[i] += gens[3 + i].next_sample(&mut prng);
+                    }
                 }
                 rec.gyro.push(g);
                 rec.accel.push(a);

@@ -1,0 +1,160 @@
+//! Overlapping Allan variance from the cumulative sum of the rate samples, O(n) per
+//! cluster time (NIST SP 1065, eq. 14), with its equivalent degrees of freedom
+//! (SP 1065, Table 5) and chi-squared confidence intervals (SP 1065, eq. 41).
+//!
+//! With rate samples y_1..y_n at interval τ₀ and phase x_k = τ₀ Σ_{i≤k} (y_i − ȳ), x_0 = 0:
+//!
+//! σ²(mτ₀) = Σ_{k=0}^{n−2m} (x_{k+2m} − 2x_{k+m} + x_k)² / (2 (mτ₀)² (n − 2m + 1)).
+//!
+//! Removing the mean ȳ does not change σ² (it cancels in the second difference) and keeps
+//! the phase small, so the cumulative sum stays accurate for long recordings.
+
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+/// Power-law noise type of the rate, by the exponent α of its spectrum S_y(f) ∝ f^α
+/// (SP 1065 Table 1); selects the degrees-of-freedom formula.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoiseType {
+    /// α = 2, white phase: quantisation noise (σ ∝ τ⁻¹).
+    WhitePhase,
+    /// α = 0, white rate: angle/velocity random walk (σ ∝ τ^−½).
+    WhiteRate,
+    /// α = −1, flicker rate: bias instability (σ flat).
+    FlickerRate,
+    /// α = −2, random walk of the rate (σ ∝ τ^½); also used for a rate ramp.
+    RandomWalkRate,
+}
+
+/// Log-spaced cluster sizes m (in samples) for `n` rate samples: `per_decade` per decade
+/// from 1 up to ⌊(n − 1)/3⌋, so that the largest cluster time still averages ≥ n/3 terms.
+pub fn cluster_sizes(n: usize, per_decade: usize) -> Vec<usize> {
+    let max = n.saturating_sub(1) / 3;
+    let mut out: Vec<usize> = Vec::new();
+    let per = per_decade.max(1) as f64;
+    let mut k = 0.0;
+    loop {
+        let m = 10f64.powf(k / per).round() as usize;
+        if m > max {
+            break;
+        }
+        if out.last() != Some(&m) {
+            out.push(m);
+        }
+        k += 1.0;
+    }
+    out
+}
+
+/// Turns rate samples into the phase x_1..x_n (x_0 = 0 implied) in place: subtracts the
+/// mean, then takes the cumulative sum times τ₀. No allocation.
+pub fn rate_to_phase(y: &mut [f64], tau0_s: f64) {
+    if y.is_empty() {
+        return;
+    }
+    let mean = y.iter().sum::<f64>() / y.len() as f64;
+    let mut acc = 0.0;
+    for v in y.iter_mut() {
+        acc += (*v - mean) * tau0_s;
+        *v = acc;
+    }
+}
+
+/// Overlapping Allan variance at cluster size `m` from the phase written by
+/// [`rate_to_phase`] (`x[k-1]` holds x_k). Returns None when fewer than 2m + 1 samples.
+pub fn avar_from_phase(x: &[f64], tau0_s: f64, m: usize) -> Option<f64> {
+    let n = x.len();
+    if m == 0 || n < 2 * m + 1 {
+        return None;
+    }
+    // k = 0 uses x_0 = 0: x_{2m} − 2 x_m.
+    let d0 = x[2 * m - 1] - 2.0 * x[m - 1];
+    let mut sum = d0 * d0;
+    // k = 1..=n−2m: x_{k+2m} − 2x_{k+m} + x_k with x_k = x[k − 1].
+    let len = n - 2 * m;
+    let (a, b, c) = (&x[..len], &x[m..m + len], &x[2 * m..2 * m + len]);
+    const LANES: usize = 8;
+    let mut acc = [0.0f64; LANES];
+    let (ca, cb, cc) = (a.chunks_exact(LANES), b.chunks_exact(LANES), c.chunks_exact(LANES));
+    let (ra, rb, rc) = (ca.remainder(), cb.remainder(), cc.remainder());
+    for ((pa, pb), pc) in ca.zip(cb).zip(cc) {
+        for i in 0..LANES {
+            let d = pc[i] - 2.0 * pb[i] + pa[i];
+            acc[i] += d * d;
+        }
+    }
+    for ((va, vb), vc) in ra.iter().zip(rb).zip(rc) {
+        let d = vc - 2.0 * vb + va;
+        sum += d * d;
+    }
+    sum += acc.iter().sum::<f64>();
+    let tau = m as f64 * tau0_s;
+    Some(sum / (2.0 * tau * tau * (len + 1) as f64))
+}
+
+/// Equivalent degrees of freedom of the overlapping Allan variance for `n` rate samples at
+/// cluster size `m` and noise type `kind` (SP 1065 Table 5, with N = n + 1 phase points),
+/// limited to [1, number of terms].
+pub fn edf(n: usize, m: usize, kind: NoiseType) -> f64 {
+    let big_n = (n + 1) as f64;
+    let mf = m as f64;
+    let terms = (n + 1).saturating_sub(2 * m).max(1) as f64;
+    let v = match kind {
+        NoiseType::WhitePhase => (big_n + 1.0) * (big_n - 2.0 * mf) / (2.0 * (big_n - mf)),
+        NoiseType::WhiteRate => {
+            (3.0 * (big_n - 1.0) / (2.0 * mf) - 2.0 * (big_n - 2.0) / big_n) * 4.0 * mf * mf / (4.0 * mf * mf + 5.0)
+        }
+        NoiseType::FlickerRate => {
+            if m == 1 {
+                2.0 * (big_n - 2.0).powi(2) / (2.3 * big_n - 4.9)
+            } else {
+                5.0 * big_n * big_n / (4.0 * mf * (big_n + 3.0 * mf))
+            }
+        }
+        NoiseType::RandomWalkRate => {
+            (big_n - 2.0) / mf * ((big_n - 1.0).powi(2) - 3.0 * mf * (big_n - 1.0) + 4.0 * mf * mf)
+                / (big_n - 3.0).powi(2)
+        }
+    };
+    if v.is_finite() {
+        v.clamp(1.0, terms)
+    } else {
+        1.0
+    }
+}
+
+/// Chi-squared confidence interval of a deviation σ estimated with `edf` degrees of
+/// freedom at two-sided level `level` (e.g. 0.683): (low, high) (SP 1065 eq. 41).
+pub fn interval(sigma: f64, edf: f64, level: f64) -> (f64, f64) {
+    let Ok(chi) = ChiSquared::new(edf.max(1e-3)) else {
+        return (0.0, f64::INFINITY);
+    };
+    let p = (1.0 - level) / 2.0;
+    let hi_q = chi.inverse_cdf(1.0 - p);
+    let lo_q = chi.inverse_cdf(p);
+    let var = sigma * sigma;
+    let low = (var * edf / hi_q).sqrt();
+    let high = if lo_q > 0.0 { (var * edf / lo_q).sqrt() } else { f64::INFINITY };
+    (low, high)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cluster_sizes_are_increasing_and_bounded() {
+        let m = cluster_sizes(1000, 5);
+        assert_eq!(m.first(), Some(&1));
+        assert!(m.windows(2).all(|w| w[1] > w[0]));
+        assert!(*m.last().unwrap() <= 333);
+        assert!(cluster_sizes(3, 5).is_empty());
+    }
+
+    #[test]
+    fn interval_brackets_the_estimate() {
+        let (lo, hi) = interval(2.0, 10.0, 0.683);
+        assert!(lo < 2.0 && hi > 2.0, "{lo} {hi}");
+        let (lo2, hi2) = interval(2.0, 1000.0, 0.683);
+        assert!(hi2 - lo2 < hi - lo);
+    }
+}

@@ -1,0 +1,100 @@
+//! Noise characterisation against known truth (issue: Allan deviation).
+
+use crosscal::noise::{allan, analyse_channel, NoiseOptions};
+use crosscal::simulate::noise::NoiseProcess;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+const DT: f64 = 0.01;
+
+fn series(p: &NoiseProcess, n: usize, seed: u64) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut g = p.generator(DT, n as f64 * DT);
+    (0..n).map(|_| g.next_sample(&mut rng)).collect()
+}
+
+/// The overlapping Allan variance straight from its definition: averages over m samples,
+/// half the mean squared difference of averages m apart (O(n·m)).
+fn naive_avar(y: &[f64], m: usize) -> f64 {
+    let avg: Vec<f64> = (0..=y.len() - m).map(|k| y[k..k + m].iter().sum::<f64>() / m as f64).collect();
+    let d: Vec<f64> = (0..avg.len() - m).map(|k| avg[k + m] - avg[k]).collect();
+    d.iter().map(|v| v * v).sum::<f64>() / (2.0 * d.len() as f64)
+}
+
+#[test]
+fn allan_variance_matches_the_definition() {
+    let p = NoiseProcess { white_density: 0.3, bias_instability: 0.05, random_walk: 0.02, ar1: None };
+    let y: Vec<f64> = series(&p, 3000, 1).iter().map(|v| v + 7.5).collect();
+    let mut x = y.clone();
+    allan::rate_to_phase(&mut x, DT);
+    for m in allan::cluster_sizes(y.len(), 8) {
+        let fast = allan::avar_from_phase(&x, DT, m).unwrap();
+        let slow = naive_avar(&y, m);
+        assert!((fast / slow - 1.0).abs() < 1e-12, "m = {m}: {fast} vs {slow}");
+    }
+}
+
+#[test]
+fn white_noise_density_within_3_percent() {
+    for (seed, n_density) in [(2, 0.004), (3, 1.7e-3)] {
+        let p = NoiseProcess { white_density: n_density, ..Default::default() };
+        let mut y = series(&p, 1_000_000, seed);
+        let c = analyse_channel("gx", "rad/s", &mut y, DT, NoiseOptions::default()).unwrap();
+        let got = c.white_density.unwrap();
+        assert!((got / n_density - 1.0).abs() < 0.03, "N = {got} vs {n_density}");
+        assert!(c.bias_instability.is_none() && c.random_walk.is_none(), "{c:?}");
+    }
+}
+
+#[test]
+fn random_walk_within_10_percent() {
+    let k = 2e-4;
+    let p = NoiseProcess { white_density: 1e-3, random_walk: k, ..Default::default() };
+    let mut y = series(&p, 1_000_000, 4);
+    let c = analyse_channel("ax", "m/s^2", &mut y, DT, NoiseOptions::default()).unwrap();
+    let got = c.random_walk.unwrap();
+    assert!((got / k - 1.0).abs() < 0.10, "K = {got} vs {k}");
+    let nw = c.white_density.unwrap();
+    assert!((nw / 1e-3 - 1.0).abs() < 0.03, "N = {nw}");
+}
+
+#[test]
+fn bias_instability_of_flicker_lies_within_its_known_range() {
+    let (n, b) = (1_000_000usize, 2e-4);
+    let p = NoiseProcess { white_density: 2e-4, bias_instability: b, ..Default::default() };
+    let duration = n as f64 * DT;
+    let mut y = series(&p, n, 5);
+    let c = analyse_channel("gz", "rad/s", &mut y, DT, NoiseOptions::default()).unwrap();
+    let got = c.bias_instability.unwrap();
+    let tau = c.bias_instability_tau_s.unwrap();
+    // The generated process's own Allan deviation around that cluster time (one decade
+    // each side), divided by 0.664, is the range of bias instability it shows.
+    let known: Vec<f64> = (0..=20)
+        .map(|i| tau * 10f64.powf(-1.0 + i as f64 / 10.0))
+        .filter(|&t| t < duration / 3.0)
+        .map(|t| p.allan_variance(t, DT, duration).sqrt() / 0.664)
+        .collect();
+    let lo = known.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = known.iter().copied().fold(0.0, f64::max);
+    println!("B = {got} at τ = {tau}; known {lo}..{hi}; design {b}");
+    assert!(got >= lo * 0.95 && got <= hi * 1.05, "B = {got} outside {lo}..{hi}");
+    assert!((got / b - 1.0).abs() < 0.25, "B = {got} vs design {b}");
+}
+
+#[test]
+fn confidence_intervals_cover_the_truth() {
+    // 1σ (68 %) intervals of white noise over the cluster times: about two thirds cover.
+    let p = NoiseProcess { white_density: 0.01, ..Default::default() };
+    let (mut inside, mut total) = (0, 0);
+    for seed in 0..20 {
+        let mut y = series(&p, 20_000, 100 + seed);
+        let c = analyse_channel("gx", "rad/s", &mut y, DT, NoiseOptions::default()).unwrap();
+        for pt in &c.points {
+            let truth = p.allan_variance(pt.tau_s, DT, 200.0).sqrt();
+            total += 1;
+            inside += usize::from(pt.low <= truth && truth <= pt.high);
+        }
+    }
+    let frac = inside as f64 / total as f64;
+    assert!((0.55..0.82).contains(&frac), "coverage {frac} over {total}");
+}
