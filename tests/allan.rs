@@ -98,3 +98,61 @@ fn confidence_intervals_cover_the_truth() {
     let frac = inside as f64 / total as f64;
     assert!((0.55..0.82).contains(&frac), "coverage {frac} over {total}");
 }
+
+#[test]
+fn noise_command_reads_a_static_session_and_stores_the_result_in_a_new_profile_revision() {
+    use crate::common::run_in;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Gyro ARW 0.3 °/√h with 5 °/h bias instability; accelerometer VRW 0.05 m/s/√h.
+    let (code, _, err) = run_in(
+        d,
+        &["simulate", "--preset", "static", "-o", "still", "--duration", "1200", "--arw", "0.3"]
+            .into_iter()
+            .chain(["--gyro-bias-instability", "5", "--vrw", "0.05", "--seed", "3"])
+            .collect::<Vec<_>>(),
+    );
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err) = run_in(d, &["noise", "still/session.json", "--save", "n.json", "--report", "n.html"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("gx") && out.contains("ARW"), "{out}");
+    let r: crosscal::noise::NoiseReport =
+        serde_json::from_str(&std::fs::read_to_string(d.join("n.json")).unwrap()).unwrap();
+    for c in ["gx", "gy", "gz"] {
+        let (_, arw) = r.channel(c).unwrap().white_display(9.80665).unwrap();
+        assert!((arw / 0.3 - 1.0).abs() < 0.05, "{c}: ARW {arw} °/√h");
+    }
+    for c in ["ax", "ay", "az"] {
+        let (_, vrw) = r.channel(c).unwrap().white_display(9.80665).unwrap();
+        assert!((vrw / 0.05 - 1.0).abs() < 0.05, "{c}: VRW {vrw} m/s/√h");
+    }
+    let html = std::fs::read_to_string(d.join("n.html")).unwrap();
+    assert_eq!(html.matches("<svg").count(), 6);
+    // --save never overwrites.
+    let (code, _, err) = run_in(d, &["noise", "still/session.json", "--save", "n.json"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("never overwritten"), "{err}");
+
+    // Into a profile: at fit time, and as a new revision of the latest one.
+    let (code, _, err) = run_in(d, &["simulate", "-o", "stand", "--duration", "12", "--rate-hz", "50"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = run_in(d, &["fit", "stand/session.json", "--noise", "n.json"]);
+    assert_eq!(code, 0, "{err}");
+    let serial_dir = d.join("calib-profiles/I1426-0042");
+    let first: Vec<_> = std::fs::read_dir(&serial_dir).unwrap().map(|e| e.unwrap().path()).collect();
+    assert_eq!(first.len(), 1);
+    let p = crosscal::profile::Profile::read(&first[0]).unwrap();
+    assert_eq!(p.noise.as_ref(), Some(&r));
+    let before = std::fs::read(&first[0]).unwrap();
+    let (code, _, err) = run_in(d, &["noise", "still/session.json", "--channels", "gz", "--store", "calib-profiles"]);
+    assert_eq!(code, 0, "{err}");
+    let (_, latest) = crosscal::profile::latest(&d.join("calib-profiles"), "I1426-0042", None).unwrap();
+    assert_eq!(latest.noise.as_ref().unwrap().channels.len(), 1);
+    assert_eq!(latest.gyro, p.gyro);
+    assert_eq!(std::fs::read(&first[0]).unwrap(), before, "the earlier revision is kept unchanged");
+
+    // A session without a static run is refused with the reason.
+    let (code, _, err) = run_in(d, &["noise", "stand/session.json"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("no static run"), "{err}");
+}

@@ -43,6 +43,9 @@ pub struct Args {
     /// held-out errors and reduction factors are stored in the profile.
     #[arg(long)]
     holdout: Vec<String>,
+    /// Store this noise characterisation (JSON from `crosscal noise --save`) in the profile.
+    #[arg(long)]
+    noise: Option<PathBuf>,
 }
 
 /// Builds the model from the command line.
@@ -83,6 +86,13 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         notes.push(format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy));
     }
     let mut profile = Profile::from_fit(&session, &model, fit, notes);
+    if let Some(path) = &a.noise {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let r: crosscal::noise::NoiseReport = serde_json::from_str(&text).with_context(|| {
+            format!("{}: not a noise report (write one with `crosscal noise --save`)", path.display())
+        })?;
+        profile.noise = Some(r);
+    }
     if !a.holdout.is_empty() {
         let held = crosscal::pipeline::subset(&full, |n| a.holdout.iter().any(|h| h == n));
         let cal = crosscal::correct::Calibration::from_profile(&profile)?;

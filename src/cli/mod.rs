@@ -8,6 +8,7 @@ mod diagnose;
 mod effects;
 mod fit;
 mod format;
+mod noise;
 mod simulate;
 
 use clap::{Parser, Subcommand};
@@ -86,6 +87,8 @@ enum Command {
     Compare(compare::Args),
     /// List the effects catalogue with coefficients, units and physical explanations.
     Effects(effects::Args),
+    /// Allan deviation and noise terms (white noise, bias instability, random walk) of a static recording.
+    Noise(noise::Args),
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -114,6 +117,7 @@ pub fn main() -> ExitCode {
         Command::Diagnose(a) => diagnose::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Effects(a) => effects::run(a),
+        Command::Noise(a) => noise::run(a),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

@@ -9,7 +9,8 @@ use std::path::PathBuf;
 /// Options of `simulate`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Preset: `paper` (the paper's unit, spec values).
+    /// Preset: `paper` (the paper's unit on its conic session) or `static` (the same unit at
+    /// rest for --duration: a recording for `crosscal noise`).
     #[arg(long, default_value = "paper")]
     preset: String,
     /// Output folder (must not already hold a session).
@@ -57,6 +58,24 @@ pub struct Args {
     /// Temperature ramp over the session, START,END in °C (adds a temp column).
     #[arg(long, value_parser = parse_list, allow_hyphen_values = true)]
     temperature: Option<List>,
+    /// Gyro angle random walk (white noise), °/√h.
+    #[arg(long, default_value_t = 0.0)]
+    arw: f64,
+    /// Gyro bias instability (flicker), °/h.
+    #[arg(long, default_value_t = 0.0)]
+    gyro_bias_instability: f64,
+    /// Gyro rate random walk, °/h/√h.
+    #[arg(long, default_value_t = 0.0)]
+    rrw: f64,
+    /// Accelerometer velocity random walk (white noise), m/s/√h.
+    #[arg(long, default_value_t = 0.0)]
+    vrw: f64,
+    /// Accelerometer bias instability (flicker), µg.
+    #[arg(long, default_value_t = 0.0)]
+    accel_bias_instability: f64,
+    /// Accelerometer random walk, m/s²/√s.
+    #[arg(long, default_value_t = 0.0)]
+    accel_random_walk: f64,
 }
 
 fn parse_set(s: &str) -> Result<(String, f64), String> {
@@ -69,8 +88,8 @@ fn parse_set(s: &str) -> Result<(String, f64), String> {
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
-    if a.preset != "paper" {
-        anyhow::bail!("unknown preset '{}': expected 'paper'", a.preset);
+    if a.preset != "paper" && a.preset != "static" {
+        anyhow::bail!("unknown preset '{}': expected 'paper' or 'static'", a.preset);
     }
     if !(a.duration > 0.0 && a.rate_hz > 0.0 && a.gyro_noise >= 0.0 && a.accel_noise >= 0.0) {
         anyhow::bail!("--duration and --rate-hz must be positive and noise levels non-negative");
@@ -81,6 +100,22 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     cfg.seed = a.seed;
     cfg.sample_rate_hz = a.rate_hz;
     cfg.runs = conic_plan(&a.rates.0, &a.cone_angles.0, &cyclic_mounts(a.mounts as usize), a.duration);
+    if a.preset == "static" {
+        cfg.runs = SimConfig::static_recording(a.duration, a.rate_hz).runs;
+    }
+    let deg = std::f64::consts::PI / 180.0;
+    let coloured = [a.arw, a.gyro_bias_instability, a.rrw, a.vrw, a.accel_bias_instability, a.accel_random_walk];
+    if coloured.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+        anyhow::bail!("noise densities must be finite and non-negative");
+    }
+    // Display units to SI: °/√h → rad/s/√Hz; °/h → rad/s; °/h/√h → rad/s/√s; m/s/√h →
+    // m/s²/√Hz; µg → m/s²; m/s²/√s stays.
+    cfg.gyro_process.white_density = a.arw * deg / 60.0;
+    cfg.gyro_process.bias_instability = a.gyro_bias_instability * deg / 3600.0;
+    cfg.gyro_process.random_walk = a.rrw * deg / 3600.0 / 60.0;
+    cfg.accel_process.white_density = a.vrw / 60.0;
+    cfg.accel_process.bias_instability = a.accel_bias_instability * 1e-6 * cfg.g_m_s2;
+    cfg.accel_process.random_walk = a.accel_random_walk;
     if let Some(s) = a.serial {
         cfg.serial = s;
     }

@@ -279,33 +279,84 @@ pub fn analyse_channel(
     Ok(out)
 }
 
-/// Median time step of stamps, s.
-pub fn median_interval(t_s: &[f64]) -> f64 {
-    let mut d: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
-    if d.is_empty() {
+/// Median of up to the first 100,000 time steps, s.
+fn median_step(steps: &mut [f64]) -> f64 {
+    if steps.is_empty() {
         return f64::NAN;
     }
-    let mid = d.len() / 2;
-    d.select_nth_unstable_by(mid, f64::total_cmp);
-    d[mid]
+    let mid = steps.len() / 2;
+    steps.select_nth_unstable_by(mid, f64::total_cmp);
+    steps[mid]
 }
 
-/// Analyses the chosen channels (indices into [`CHANNELS`]) of a static recording given as
-/// time stamps and per-channel columns (SI). Each column is consumed (turned into phase).
-pub fn analyse(
-    source: &str,
-    t_s: &[f64],
-    columns: Vec<(usize, Vec<f64>)>,
-    opts: NoiseOptions,
-) -> Result<NoiseReport, NoiseError> {
-    let tau0 = median_interval(t_s);
-    let n = t_s.len();
-    let mut channels = Vec::with_capacity(columns.len());
-    for (c, mut col) in columns {
-        let unit = if c < 3 { "rad/s" } else { "m/s^2" };
-        channels.push(analyse_channel(CHANNELS[c], unit, &mut col, tau0, opts)?);
+/// The chosen channels of a static recording, read as a stream.
+#[derive(Debug, Clone)]
+pub struct StaticData {
+    /// (channel index into [`CHANNELS`], samples in SI).
+    pub columns: Vec<(usize, Vec<f64>)>,
+    /// Sample interval τ₀, s: the median time step.
+    pub tau0_s: f64,
+    /// Number of samples.
+    pub n: usize,
+    /// Findings (irregular time stamps).
+    pub warnings: Vec<String>,
+}
+
+/// Reads channels `channels` (indices into [`CHANNELS`]) of a recording CSV without holding
+/// anything but those columns: rows are streamed and validated like every recording.
+pub fn read_channels(
+    path: &std::path::Path,
+    units: &crate::session::Units,
+    g_m_s2: f64,
+    channels: &[usize],
+) -> Result<StaticData, crate::session::SessionError> {
+    use crate::session::{ReadOptions, Row, RowReader, SessionError};
+    let file = std::fs::File::open(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
+    let mut rows =
+        RowReader::new(path, std::io::BufReader::with_capacity(1 << 20, file), units, g_m_s2, ReadOptions::default())?;
+    let mut columns: Vec<(usize, Vec<f64>)> = channels.iter().map(|&c| (c, Vec::new())).collect();
+    let mut row = Row::default();
+    let mut steps = Vec::with_capacity(100_000);
+    let (mut first, mut last, mut n) = (f64::NAN, f64::NAN, 0usize);
+    while rows.read_row(&mut row)? {
+        if n == 0 {
+            first = row.t_s;
+        } else if steps.len() < 100_000 {
+            steps.push(row.t_s - last);
+        }
+        last = row.t_s;
+        n += 1;
+        for (c, col) in &mut columns {
+            col.push(if *c < 3 { row.gyro[*c] } else { row.accel[*c - 3] });
+        }
     }
-    Ok(NoiseReport { source: source.to_string(), sample_interval_s: tau0, n_samples: n, level: LEVEL, channels })
+    let tau0_s = median_step(&mut steps);
+    let mut warnings = Vec::new();
+    let mean = (last - first) / (n.max(2) - 1) as f64;
+    if n > 2 && (mean / tau0_s - 1.0).abs() > 0.01 {
+        warnings.push(format!(
+            "{}: the mean time step {mean:.6} s differs from the median {tau0_s:.6} s by more than 1 %: gaps or an irregular clock bias the Allan deviation",
+            path.display()
+        ));
+    }
+    Ok(StaticData { columns, tau0_s, n, warnings })
+}
+
+/// Analyses the columns of a static recording (SI) sampled every `tau0_s`. Each column is
+/// consumed (turned into phase in place).
+pub fn analyse(source: &str, data: StaticData, opts: NoiseOptions) -> Result<NoiseReport, NoiseError> {
+    let mut channels = Vec::with_capacity(data.columns.len());
+    for (c, mut col) in data.columns {
+        let unit = if c < 3 { "rad/s" } else { "m/s^2" };
+        channels.push(analyse_channel(CHANNELS[c], unit, &mut col, data.tau0_s, opts)?);
+    }
+    Ok(NoiseReport {
+        source: source.to_string(),
+        sample_interval_s: data.tau0_s,
+        n_samples: data.n,
+        level: LEVEL,
+        channels,
+    })
 }
 
 impl NoiseReport {

@@ -120,6 +120,9 @@ pub struct Profile {
     /// Findings recorded at fit time (unidentifiable terms, gaps, ε source).
     #[serde(default)]
     pub notes: Vec<String>,
+    /// Noise characterisation (Allan deviation) of a static recording of the unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<crate::noise::NoiseReport>,
 }
 
 /// Profile errors.
@@ -163,6 +166,9 @@ pub enum ProfileError {
         #[source]
         source: ModelError,
     },
+    /// A time that is neither RFC 3339 nor a date.
+    #[error("'{0}' is not a time: expected RFC 3339 (2026-11-23T12:00:00Z) or a date (2026-11-23)")]
+    BadTime(String),
     /// Serial cannot be used as a folder name.
     #[error("serial '{0}' cannot name a profile folder")]
     BadSerial(String),
@@ -184,10 +190,7 @@ impl Profile {
         Self {
             format: PROFILE_FORMAT.into(),
             serial: session.manifest.serial.clone(),
-            created_utc: jiff::Timestamp::now()
-                .round(jiff::Unit::Millisecond)
-                .unwrap_or_else(|_| jiff::Timestamp::now())
-                .to_string(),
+            created_utc: now_utc(),
             tool: format!("crosscal {}", env!("CARGO_PKG_VERSION")),
             input_units: session.manifest.units,
             g_m_s2: session.manifest.g_m_s2,
@@ -206,6 +209,7 @@ impl Profile {
             correction: CorrectionSettings::default(),
             validation: None,
             notes,
+            noise: None,
         }
     }
 
@@ -305,10 +309,78 @@ impl Profile {
         Self::from_json(path, &text)
     }
 
+    /// The same profile as a new revision created now (for `save`, which never overwrites).
+    pub fn revised(&self, note: impl Into<String>) -> Self {
+        let mut p = self.clone();
+        p.created_utc = now_utc();
+        p.tool = format!("crosscal {}", env!("CARGO_PKG_VERSION"));
+        p.notes.push(note.into());
+        p
+    }
+
     /// File name for this profile: the creation time with `:` replaced by `-`.
     pub fn file_stem(&self) -> String {
         self.created_utc.replace(':', "-")
     }
+}
+
+/// The current UTC time, RFC 3339 to the millisecond.
+fn now_utc() -> String {
+    let now = jiff::Timestamp::now();
+    now.round(jiff::Unit::Millisecond).unwrap_or(now).to_string()
+}
+
+/// Every readable profile of unit `serial` in the store `root`, oldest first (by creation
+/// time, then file name). Files that are not profiles are returned as errors, in order.
+pub fn history(root: &Path, serial: &str) -> Result<Vec<(PathBuf, Result<Profile, ProfileError>)>, ProfileError> {
+    let dir = root.join(serial);
+    let rd = std::fs::read_dir(&dir).map_err(|source| ProfileError::Io { path: dir.clone(), source })?;
+    let mut files: Vec<PathBuf> =
+        rd.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "json")).collect();
+    files.sort();
+    let mut out: Vec<(PathBuf, Result<Profile, ProfileError>)> =
+        files.into_iter().map(|p| (p.clone(), Profile::read(&p))).collect();
+    out.sort_by(|a, b| {
+        let key = |x: &(PathBuf, Result<Profile, ProfileError>)| x.1.as_ref().map(|p| p.created_utc.clone()).ok();
+        key(a).cmp(&key(b)).then_with(|| a.0.cmp(&b.0))
+    });
+    Ok(out)
+}
+
+/// The newest readable profile of unit `serial` in `root` created at or before `at` (RFC 3339;
+/// None = now).
+pub fn latest(root: &Path, serial: &str, at: Option<&str>) -> Result<(PathBuf, Profile), ProfileError> {
+    let cutoff = match at {
+        Some(a) => Some(parse_time(a)?),
+        None => None,
+    };
+    let found = history(root, serial)?.into_iter().rev().find_map(|(path, p)| {
+        let p = p.ok()?;
+        let t = p.created_utc.parse::<jiff::Timestamp>().ok()?;
+        cutoff.is_none_or(|c| t <= c).then_some((path, p))
+    });
+    found.ok_or_else(|| ProfileError::Io {
+        path: root.join(serial),
+        source: std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            match at {
+                Some(a) => format!("no profile of unit '{serial}' created at or before {a}"),
+                None => format!("no profile of unit '{serial}'"),
+            },
+        ),
+    })
+}
+
+/// Parses a UTC time: RFC 3339 (`2026-11-23T12:00:00Z`) or a date (`2026-11-23`, end of day).
+pub fn parse_time(s: &str) -> Result<jiff::Timestamp, ProfileError> {
+    if let Ok(t) = s.parse::<jiff::Timestamp>() {
+        return Ok(t);
+    }
+    s.parse::<jiff::civil::Date>()
+        .ok()
+        .and_then(|d| d.at(23, 59, 59, 999_000_000).to_zoned(jiff::tz::TimeZone::UTC).ok())
+        .map(|z| z.timestamp())
+        .ok_or_else(|| ProfileError::BadTime(s.to_string()))
 }
 
 /// The runs of a session as recorded in a profile (name, file, SHA-256, samples).

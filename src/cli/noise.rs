@@ -1,0 +1,126 @@
+//! `crosscal noise`: Allan deviation and noise terms of a static recording.
+
+use super::Outcome;
+use anyhow::Context;
+use crosscal::noise::{analyse, read_channels, report, NoiseOptions, NoiseReport, CHANNELS};
+use crosscal::profile::{latest, save};
+use crosscal::session::{read_manifest, AccelUnit, GyroUnit, MotionSpec, Units};
+use std::path::{Path, PathBuf};
+
+/// Options of `noise`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A session manifest (its static run, or the run given by --run) or a plain CSV
+    /// (t,gx,gy,gz,ax,ay,az).
+    recording: PathBuf,
+    /// Run of the session to analyse (default: its first static run).
+    #[arg(long)]
+    run: Option<String>,
+    /// Channels to analyse, comma-separated (default: all six).
+    #[arg(long, value_delimiter = ',', default_value = "gx,gy,gz,ax,ay,az")]
+    channels: Vec<String>,
+    /// Gyro unit of a plain CSV: deg/s, rad/s.
+    #[arg(long, default_value = "deg/s")]
+    gyro_unit: String,
+    /// Accelerometer unit of a plain CSV: g, m/s^2.
+    #[arg(long, default_value = "g")]
+    accel_unit: String,
+    /// Local gravity of a plain CSV, m/s².
+    #[arg(long, default_value_t = 9.80665)]
+    g: f64,
+    /// Cluster times per decade.
+    #[arg(long, default_value_t = 6)]
+    per_decade: usize,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
+    /// Write a self-contained HTML report with the Allan deviation plots.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Write the result as JSON to this file (for `fit --noise`).
+    #[arg(long)]
+    save: Option<PathBuf>,
+    /// Add the result to the unit's latest profile in this store as a new revision.
+    #[arg(long)]
+    store: Option<PathBuf>,
+    /// Serial of the unit (a plain CSV has none; a session's manifest gives it).
+    #[arg(long)]
+    serial: Option<String>,
+}
+
+/// The CSV, units, gravity, serial and a label of what is analysed.
+fn locate(a: &Args) -> anyhow::Result<(PathBuf, Units, f64, Option<String>, String)> {
+    if a.recording.extension().is_some_and(|x| x == "json") {
+        let m = read_manifest(&a.recording)?;
+        let run = match &a.run {
+            Some(name) => m
+                .runs
+                .iter()
+                .find(|r| &r.name == name)
+                .ok_or_else(|| anyhow::anyhow!("--run {name}: no such run in {}", a.recording.display()))?,
+            None => m.runs.iter().find(|r| matches!(r.motion, MotionSpec::Static { .. })).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{} has no static run: record the unit at rest, or name a run with --run",
+                    a.recording.display()
+                )
+            })?,
+        };
+        let dir = a.recording.parent().unwrap_or(Path::new("."));
+        let label = format!("{} run {}", a.recording.display(), run.name);
+        Ok((dir.join(&run.file), m.units, m.g_m_s2, a.serial.clone().or(Some(m.serial)), label))
+    } else {
+        let gyro = GyroUnit::parse(&a.gyro_unit)
+            .filter(|u| *u != GyroUnit::Raw)
+            .ok_or_else(|| anyhow::anyhow!("--gyro-unit '{}': expected deg/s or rad/s", a.gyro_unit))?;
+        let accel = AccelUnit::parse(&a.accel_unit)
+            .filter(|u| *u != AccelUnit::Raw)
+            .ok_or_else(|| anyhow::anyhow!("--accel-unit '{}': expected g or m/s^2", a.accel_unit))?;
+        let units = Units { gyro, accel, ..Units::default() };
+        Ok((a.recording.clone(), units, a.g, a.serial.clone(), a.recording.display().to_string()))
+    }
+}
+
+pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    let mut chans = Vec::new();
+    for c in &a.channels {
+        let k = CHANNELS.iter().position(|n| n == c).ok_or_else(|| {
+            anyhow::anyhow!("--channels: unknown channel '{c}'; expected some of {}", CHANNELS.join(","))
+        })?;
+        chans.push(k);
+    }
+    let (csv, units, g, serial, label) = locate(&a)?;
+    if units.gyro == GyroUnit::Raw || units.accel == AccelUnit::Raw {
+        anyhow::bail!("{label}: raw (uncalibrated) units have no physical noise density; record in deg/s and g");
+    }
+    let data = read_channels(&csv, &units, g, &chans).with_context(|| format!("reading {}", csv.display()))?;
+    for w in &data.warnings {
+        eprintln!("warning: {w}");
+    }
+    let r: NoiseReport = analyse(&label, data, NoiseOptions { per_decade: a.per_decade.max(1) })?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+    } else {
+        print!("{}", report::table(&r, g));
+    }
+    if let Some(path) = &a.report {
+        let html = report::html(&r, g);
+        crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, html.as_bytes()))
+            .with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("report: {}", path.display());
+    }
+    if let Some(path) = &a.save {
+        let json = serde_json::to_string_pretty(&r)? + "\n";
+        crosscal::atomic::write_new(path, json.as_bytes())
+            .with_context(|| format!("writing {} (never overwritten)", path.display()))?;
+        eprintln!("saved: {}", path.display());
+    }
+    if let Some(root) = &a.store {
+        let serial = serial.ok_or_else(|| anyhow::anyhow!("--store needs --serial for a plain CSV"))?;
+        let (from, p) = latest(root, &serial, None)?;
+        let mut next = p.revised(format!("noise from {label} added to {}", from.display()));
+        next.noise = Some(r);
+        let path = save(&next, root)?;
+        eprintln!("profile: {} (previous revision kept: {})", path.display(), from.display());
+    }
+    Ok(Outcome::Ok)
+}
