@@ -330,18 +330,20 @@ fn now_utc() -> String {
     now.round(jiff::Unit::Millisecond).unwrap_or(now).to_string()
 }
 
+/// A file in the profile store and what reading it gave.
+pub type StoredProfile = (PathBuf, Result<Profile, ProfileError>);
+
 /// Every readable profile of unit `serial` in the store `root`, oldest first (by creation
 /// time, then file name). Files that are not profiles are returned as errors, in order.
-pub fn history(root: &Path, serial: &str) -> Result<Vec<(PathBuf, Result<Profile, ProfileError>)>, ProfileError> {
+pub fn history(root: &Path, serial: &str) -> Result<Vec<StoredProfile>, ProfileError> {
     let dir = root.join(serial);
     let rd = std::fs::read_dir(&dir).map_err(|source| ProfileError::Io { path: dir.clone(), source })?;
     let mut files: Vec<PathBuf> =
         rd.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "json")).collect();
     files.sort();
-    let mut out: Vec<(PathBuf, Result<Profile, ProfileError>)> =
-        files.into_iter().map(|p| (p.clone(), Profile::read(&p))).collect();
+    let mut out: Vec<StoredProfile> = files.into_iter().map(|p| (p.clone(), Profile::read(&p))).collect();
     out.sort_by(|a, b| {
-        let key = |x: &(PathBuf, Result<Profile, ProfileError>)| x.1.as_ref().map(|p| p.created_utc.clone()).ok();
+        let key = |x: &StoredProfile| x.1.as_ref().map(|p| p.created_utc.clone()).ok();
         key(a).cmp(&key(b)).then_with(|| a.0.cmp(&b.0))
     });
     Ok(out)
