@@ -87,11 +87,14 @@ pub struct FitOptions {
     pub rcond: f64,
     /// Huber IRLS instead of plain least squares (outliers and spikes lose weight).
     pub robust: bool,
+    /// Known per-sample noise σ of each channel (gx, gy, gz in rad/s; ax, ay, az in m/s²):
+    /// the covariance is then σ²(ΦᵀΦ)⁻¹, the Cramér–Rao bound, instead of using the residual.
+    pub known_sigma: Option<[f64; 6]>,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { chunk: 4096, rcond: 1e-9, robust: false }
+        Self { chunk: 4096, rcond: 1e-9, robust: false, known_sigma: None }
     }
 }
 
@@ -185,6 +188,17 @@ pub struct ChannelFit {
     /// Samples the robust (Huber) fit gave less than full weight (0 without `--robust`).
     #[serde(default)]
     pub downweighted: u64,
+    /// Variance inflation for a coloured (autocorrelated) residual: the residual's long-run
+    /// variance over its variance (1 for white noise); the covariance includes it.
+    #[serde(default = "one")]
+    pub coloured_inflation: f64,
+    /// Lag-1 autocorrelation of the residual (pooled over runs).
+    #[serde(default)]
+    pub residual_lag1: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// The fit of one sensor.
@@ -415,7 +429,8 @@ fn fit_sensor(
         if n <= q as u64 {
             return Err(EstimateError::TooFewSamples { sensor, axis: AXES[ch], n, q });
         }
-        let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n);
+        let known = opts.known_sigma.map(|k| k[3 * sensor.index() + ch]);
+        let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n, known);
         for (a, &ti) in fitted.iter().enumerate() {
             values[ti] = theta[a];
             std_errors[ti] = Some(cov[a][a].sqrt());
@@ -444,6 +459,8 @@ fn fit_sensor(
             covariance_names: fitted.iter().map(|&ti| terms[ti].term.name.clone()).collect(),
             covariance: cov,
             downweighted: 0,
+            coloured_inflation: 1.0,
+            residual_lag1: 0.0,
         });
     }
 
@@ -462,9 +479,12 @@ fn fit_sensor(
         );
     }
 
-    // Second pass: largest residual per channel.
+    // Second pass: largest residual and residual autocovariances per channel.
     let mut pred = [0.0; 3];
+    let mut lrv = [LongRunVariance::default(), LongRunVariance::default(), LongRunVariance::default()];
     for run in runs {
+        let lags = newey_west_lags(run.len());
+        let mut acov: [AutoCov; 3] = std::array::from_fn(|_| AutoCov::new(lags + 1));
         for k in 0..run.len() {
             let s = run.state(k);
             pred.fill(0.0);
@@ -475,11 +495,25 @@ fn fit_sensor(
             }
             let u = run.output(sensor, k);
             for ch in 0..3 {
-                let e = (u[ch] - pred[ch]).abs();
-                if e > channels[ch].residual_max {
-                    channels[ch].residual_max = e;
+                let e = u[ch] - pred[ch];
+                acov[ch].push(e);
+                if e.abs() > channels[ch].residual_max {
+                    channels[ch].residual_max = e.abs();
                 }
             }
+        }
+        for ch in 0..3 {
+            lrv[ch].add(&acov[ch], lags);
+        }
+    }
+    for ch in 0..3 {
+        let c = &mut channels[ch];
+        c.residual_lag1 = lrv[ch].lag1();
+        // With a known σ the covariance is already the Cramér–Rao bound σ²(ΦᵀΦ)⁻¹.
+        if opts.known_sigma.is_none() {
+            let f = lrv[ch].inflation();
+            c.coloured_inflation = f;
+            rescale(c, &fitted_sets[ch], &mut std_errors, f);
         }
     }
 
@@ -497,6 +531,101 @@ fn fit_sensor(
         })
         .collect();
     Ok(SensorFit { sensor, coefficients, channels, unidentifiable, correlated })
+}
+
+/// Multiplies a channel's covariance by `scale` and updates its standard errors.
+fn rescale(c: &mut ChannelFit, fitted: &[usize], std_errors: &mut [Option<f64>], scale: f64) {
+    for row in &mut c.covariance {
+        for v in row.iter_mut() {
+            *v *= scale;
+        }
+    }
+    for (a, &ti) in fitted.iter().enumerate() {
+        std_errors[ti] = Some(c.covariance[a][a].max(0.0).sqrt());
+    }
+}
+
+/// Newey–West bandwidth ⌊4 (n/100)^{2/9}⌋ for a run of n samples.
+fn newey_west_lags(n: usize) -> usize {
+    ((4.0 * (n as f64 / 100.0).powf(2.0 / 9.0)) as usize).clamp(1, (n / 4).max(1))
+}
+
+/// Autocovariance sums Σ r_k r_{k−l} of a residual stream for lags 0..=L+1, from a ring
+/// buffer of the last L + 2 values (no allocation per sample).
+struct AutoCov {
+    ring: Vec<f64>,
+    sums: Vec<f64>,
+    n: usize,
+}
+
+impl AutoCov {
+    fn new(max_lag: usize) -> Self {
+        Self { ring: vec![0.0; max_lag + 1], sums: vec![0.0; max_lag + 1], n: 0 }
+    }
+
+    #[inline]
+    fn push(&mut self, r: f64) {
+        let len = self.ring.len();
+        let pos = self.n % len;
+        self.ring[pos] = r;
+        for l in 0..len.min(self.n + 1) {
+            self.sums[l] += r * self.ring[(pos + len - l) % len];
+        }
+        self.n += 1;
+    }
+}
+
+/// Pooled long-run variance of residuals over runs, by AR(1) prewhitening followed by a
+/// Bartlett (Newey–West) kernel on the whitened residual (Andrews & Monahan 1992): with
+/// ρ = γ₁/γ₀ per run, the whitened autocovariances are γᵉ_l = (1+ρ²)γ_l − ρ(γ_{l−1}+γ_{l+1}),
+/// LRV(e) = γᵉ₀ + 2Σ_{l≤L}(1 − l/(L+1))γᵉ_l and LRV(r) = LRV(e)/(1−ρ)². The ratio
+/// LRV/γ₀ inflates the white-noise covariance; it is exact for regressors that vary slowly
+/// over the noise's correlation time (the cone period is seconds, sensor noise
+/// correlation milliseconds).
+#[derive(Default)]
+struct LongRunVariance {
+    lrv: f64,
+    var: f64,
+    lag1: f64,
+}
+
+impl LongRunVariance {
+    fn add(&mut self, a: &AutoCov, lags: usize) {
+        if a.n < 4 || a.sums[0] <= 0.0 {
+            return;
+        }
+        let n = a.n as f64;
+        let g = |l: usize| a.sums.get(l).copied().unwrap_or(0.0) / n;
+        let rho = (g(1) / g(0)).clamp(-0.995, 0.995);
+        let ge = |l: usize| {
+            let prev = if l == 0 { g(1) } else { g(l - 1) };
+            (1.0 + rho * rho) * g(l) - rho * (prev + g(l + 1))
+        };
+        let mut le = ge(0);
+        for l in 1..lags.min(a.sums.len().saturating_sub(2)) + 1 {
+            le += 2.0 * (1.0 - l as f64 / (lags + 1) as f64) * ge(l);
+        }
+        let lr = (le / (1.0 - rho).powi(2)).max(0.0);
+        self.lrv += lr * n;
+        self.var += g(0) * n;
+        self.lag1 += g(1) * n;
+    }
+
+    fn inflation(&self) -> f64 {
+        if self.var > 0.0 && self.lrv > 0.0 {
+            self.lrv / self.var
+        } else {
+            1.0
+        }
+    }
+
+    fn lag1(&self) -> f64 {
+        if self.var > 0.0 {
+            self.lag1 / self.var
+        } else {
+            0.0
+        }
+    }
 }
 
 /// The channel's reduced problem `[R_s | z; 0 | ρ]` ((q+1) × (q+1)) from the accumulated R:
@@ -548,7 +677,7 @@ fn reduce(
 
 /// Solves the reduced problem `[R_s | z; 0 | ρ]`: θ by back substitution, the covariance
 /// `σ² R_s⁻¹ R_s⁻ᵀ` with `σ² = ρ²/(n − q)`. Returns (θ, covariance, RSS, σ²).
-fn solve_reduced(rs: &Mat<f64>, q: usize, n: u64) -> (Vec<f64>, Vec<Vec<f64>>, f64, f64) {
+fn solve_reduced(rs: &Mat<f64>, q: usize, n: u64, known_sigma: Option<f64>) -> (Vec<f64>, Vec<Vec<f64>>, f64, f64) {
     let mut theta = vec![0.0; q];
     for i in (0..q).rev() {
         let mut acc = rs[(i, q)];
@@ -576,7 +705,7 @@ fn solve_reduced(rs: &Mat<f64>, q: usize, n: u64) -> (Vec<f64>, Vec<Vec<f64>>, f
             for k in i.max(j)..q {
                 acc += rinv[i][k] * rinv[j][k];
             }
-            cov[i][j] = sigma2 * acc;
+            cov[i][j] = known_sigma.map_or(sigma2, |s| s * s) * acc;
         }
     }
     (theta, cov, rss, sigma2)
@@ -654,7 +783,8 @@ fn robust_refit(
             let q = fitted.len();
             let r = accs[ch].r();
             let rs = reduce(&r, cols, terms, values, status, fitted, ch, p);
-            let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n as u64);
+            let known = opts.known_sigma.map(|k| k[3 * sensor.index() + ch]);
+            let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n as u64, known);
             for (a, &ti) in fitted.iter().enumerate() {
                 let se = cov[a][a].sqrt();
                 if se > 0.0 {

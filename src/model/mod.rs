@@ -75,6 +75,14 @@ impl SensorKind {
             Self::Accel => "accel",
         }
     }
+
+    /// 0 for the gyro, 1 for the accelerometer (channels gx..gz are 0..3, ax..az 3..6).
+    pub fn index(self) -> usize {
+        match self {
+            Self::Gyro => 0,
+            Self::Accel => 1,
+        }
+    }
 }
 
 impl fmt::Display for SensorKind {
