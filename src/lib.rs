@@ -18,6 +18,7 @@ pub mod model;
 pub mod motion;
 pub mod noise;
 pub mod pipeline;
+pub mod plan;
 pub mod profile;
 pub mod session;
 pub mod simulate;

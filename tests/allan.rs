@@ -151,6 +151,16 @@ fn noise_command_reads_a_static_session_and_stores_the_result_in_a_new_profile_r
     assert_eq!(latest.gyro, p.gyro);
     assert_eq!(std::fs::read(&first[0]).unwrap(), before, "the earlier revision is kept unchanged");
 
+    // The stored noise feeds `plan`: its σ per sample is the measured density × √rate.
+    let (code, out, err) = run_in(d, &["plan", "--noise-from", "n.json", "--json", "--no-suggest"]);
+    assert_eq!(code, 0, "{err}");
+    let plan: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let sigma_gyro = plan["sigma"][0].as_f64().unwrap();
+    let worst_density = r.channels[..3].iter().map(|c| c.white_density.unwrap()).fold(0.0, f64::max);
+    assert!((sigma_gyro / (worst_density * 10.0) - 1.0).abs() < 1e-12, "{sigma_gyro}");
+    let (code, _, err) = run_in(d, &["plan", "--noise-from", first[0].to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+
     // A session without a static run is refused with the reason.
     let (code, _, err) = run_in(d, &["noise", "stand/session.json"]);
     assert_ne!(code, 0);

@@ -13,4 +13,5 @@ mod paper;
 mod profile_store;
 mod reference;
 mod robust;
+mod uncertainty;
 mod validate;

@@ -9,6 +9,7 @@ mod effects;
 mod fit;
 mod format;
 mod noise;
+mod plan;
 mod simulate;
 
 use clap::{Parser, Subcommand};
@@ -89,6 +90,8 @@ enum Command {
     Effects(effects::Args),
     /// Allan deviation and noise terms (white noise, bias instability, random walk) of a static recording.
     Noise(noise::Args),
+    /// Predicted uncertainty of every coefficient for proposed runs, before recording; suggests a run.
+    Plan(plan::Args),
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -118,6 +121,7 @@ pub fn main() -> ExitCode {
         Command::Compare(a) => compare::run(a),
         Command::Effects(a) => effects::run(a),
         Command::Noise(a) => noise::run(a),
+        Command::Plan(a) => plan::run(a),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

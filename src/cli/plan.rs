@@ -1,0 +1,135 @@
+//! `crosscal plan`: predicted uncertainties of a proposed calibration, before recording.
+
+use super::fit::build_model;
+use super::{format, parse_list, List, Outcome};
+use anyhow::Context;
+use crosscal::estimate::CoefStatus;
+use crosscal::model::SensorKind;
+use crosscal::noise::NoiseReport;
+use crosscal::plan::{default_candidates, plan, PlanSpec};
+use crosscal::simulate::{conic_plan, cyclic_mounts};
+use std::path::PathBuf;
+
+/// Options of `plan`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Stand rates ω_s, deg/s (sign = direction), comma-separated.
+    #[arg(long, value_parser = parse_list, allow_hyphen_values = true, default_value = "10,-10,20")]
+    rates: List,
+    /// Cone angles α, degrees, comma-separated.
+    #[arg(long, value_parser = parse_list, default_value = "10,20")]
+    cone_angles: List,
+    /// Number of cyclic mounts (1 = nominal only, 2 adds [+y,+z,+x], 3 adds [+z,+x,+y]).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+    mounts: u8,
+    /// Duration of each run, s.
+    #[arg(long, default_value_t = 36.0)]
+    duration: f64,
+    /// Sample rate, Hz.
+    #[arg(long, default_value_t = 100.0)]
+    rate_hz: f64,
+    /// Model preset: `default` or `paper`.
+    #[arg(long, default_value = "default")]
+    model: String,
+    /// Add a catalogue effect to the model (repeatable).
+    #[arg(long = "effect")]
+    effects: Vec<String>,
+    /// Gyro angle random walk (white-noise density), °/√h.
+    #[arg(long, default_value_t = 0.15)]
+    arw: f64,
+    /// Accelerometer velocity random walk (white-noise density), m/s/√h.
+    #[arg(long, default_value_t = 0.02)]
+    vrw: f64,
+    /// Take the white-noise densities (worst axis per sensor) from a profile with a noise
+    /// section or from a `crosscal noise --save` file, instead of --arw/--vrw.
+    #[arg(long)]
+    noise_from: Option<PathBuf>,
+    /// Do not search for an extra run.
+    #[arg(long)]
+    no_suggest: bool,
+    /// Print the plan as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The worst white-noise density of each sensor in a noise report (rad/s/√Hz, m/s²/√Hz).
+fn densities(r: &NoiseReport) -> (Option<f64>, Option<f64>) {
+    let worst =
+        |s: SensorKind| r.channels.iter().filter(|c| c.sensor() == s).filter_map(|c| c.white_density).reduce(f64::max);
+    (worst(SensorKind::Gyro), worst(SensorKind::Accel))
+}
+
+pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    if !(a.duration > 0.0 && a.rate_hz > 0.0 && a.arw > 0.0 && a.vrw > 0.0) {
+        anyhow::bail!("--duration, --rate-hz, --arw and --vrw must be positive");
+    }
+    let model = build_model(&a.model, &a.effects, &[])?;
+    let mut spec = PlanSpec {
+        runs: conic_plan(&a.rates.0, &a.cone_angles.0, &cyclic_mounts(a.mounts as usize), a.duration),
+        sample_rate_hz: a.rate_hz,
+        gyro_density: a.arw.to_radians() / 60.0,
+        accel_density: a.vrw / 60.0,
+    };
+    if let Some(path) = &a.noise_from {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let report: NoiseReport = match serde_json::from_str::<crosscal::profile::Profile>(&text) {
+            Ok(p) => p.noise.ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: the profile has no noise section (add one with `crosscal noise --store`)",
+                    path.display()
+                )
+            })?,
+            Err(_) => serde_json::from_str(&text)
+                .with_context(|| format!("{}: neither a profile nor a noise report", path.display()))?,
+        };
+        let (g, acc) = densities(&report);
+        spec.gyro_density = g.ok_or_else(|| anyhow::anyhow!("{}: no gyro white noise in it", path.display()))?;
+        spec.accel_density =
+            acc.ok_or_else(|| anyhow::anyhow!("{}: no accelerometer white noise in it", path.display()))?;
+    }
+    let candidates = if a.no_suggest { Vec::new() } else { default_candidates(&spec) };
+    let r = plan(&model, &spec, &candidates)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(Outcome::Ok);
+    }
+    println!(
+        "plan: {} runs, {} samples per channel; gyro σ {:.3e} deg/s, accel σ {:.3e} m/s^2 per sample",
+        spec.runs.len(),
+        r.samples,
+        r.sigma[0].to_degrees(),
+        r.sigma[3]
+    );
+    println!("{:<22} {:>14} {:>14}  unit", "coefficient", "predicted 2σ", "output err/σ");
+    for c in &r.coefficients {
+        let (se, out) = match (c.status, c.std_error) {
+            (CoefStatus::Fitted, Some(se)) => (format::num(2.0 * se), format!("{:.3e}", c.output_error.unwrap_or(0.0))),
+            (CoefStatus::Unidentifiable, _) => ("UNIDENTIFIABLE".to_string(), "-".to_string()),
+            _ => ("fixed".to_string(), "-".to_string()),
+        };
+        println!("{:<22} {:>14} {:>14}  {}", c.name, se, out, c.unit);
+    }
+    for u in &r.unidentifiable {
+        println!("UNIDENTIFIABLE {}: {}\n  remedy: {}", u.held, u.reason, u.remedy);
+    }
+    for c in &r.correlated {
+        println!("correlated: {} and {} (ρ = {:+.3})", c.a, c.b, c.correlation);
+    }
+    if let Some((name, e)) = &r.worst {
+        println!("worst: {name} (output error {e:.3e} σ)");
+    }
+    match &r.suggestion {
+        Some(s) => {
+            println!("suggested extra run: {}", s.run);
+            if !s.resolves.is_empty() {
+                println!("  makes identifiable: {}", s.resolves.join(", "));
+            }
+            if let (Some(b), Some(a)) = (&s.worst_before, &s.worst_after) {
+                println!("  worst output error {:.3e} σ ({}) → {:.3e} σ ({})", b.1, b.0, a.1, a.0);
+            }
+        }
+        None if !a.no_suggest => println!("no candidate run improves the plan by 10 % or more"),
+        None => {}
+    }
+    Ok(Outcome::Ok)
+}
