@@ -13,5 +13,6 @@ mod paper;
 mod profile_store;
 mod reference;
 mod robust;
+mod stand;
 mod uncertainty;
 mod validate;

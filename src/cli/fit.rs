@@ -43,6 +43,10 @@ pub struct Args {
     /// held-out errors and reduction factors are stored in the profile.
     #[arg(long)]
     holdout: Vec<String>,
+    /// Estimate each conic run's actual cone angle, rate and phase with the coefficients
+    /// (for a stand that does not sit exactly at its nominal settings).
+    #[arg(long)]
+    stand: bool,
     /// Store this noise characterisation (JSON from `crosscal noise --save`) in the profile.
     #[arg(long)]
     noise: Option<PathBuf>,
@@ -73,8 +77,12 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let deriv = DerivativeConfig::default();
     let tr = tracks(&session, &deriv);
     let opts = FitOptions { robust: a.robust, ..FitOptions::default() };
-    let fit = crosscal::estimate::fit(&model, &fit_runs(&session, &tr), &opts)
-        .with_context(|| format!("fitting {}", a.session.display()))?;
+    let fit = if a.stand {
+        crosscal::estimate::fit_with_stand(&model, &session, &deriv, &opts)
+    } else {
+        crosscal::estimate::fit(&model, &fit_runs(&session, &tr), &opts)
+    }
+    .with_context(|| format!("fitting {}", a.session.display()))?;
     if a.strict {
         fit.ensure_identifiable().with_context(|| format!("fitting {} (--strict)", a.session.display()))?;
     }
@@ -128,6 +136,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         print!("{}", format::sensor_fit(&profile.gyro));
         print!("{}", format::sensor_fit(&profile.accel));
         print!("{}", format::nonlinear(&profile.nonlinear));
+        print!("{}", format::stand(&profile.stand));
     }
     if !a.dry_run {
         let path = save(&profile, &a.out).with_context(|| format!("saving the profile under {}", a.out.display()))?;

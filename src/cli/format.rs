@@ -139,3 +139,19 @@ pub fn check_summary(r: &CheckReport) -> String {
     let _ = writeln!(s, "(errors: max |error| over all runs as % of each run's reference amplitude of the axis; sys = systematic part, cone-phase harmonics; pass uses the systematic reduction; noise-limited = no remaining systematic error is distinguishable from noise)");
     s
 }
+
+/// Estimated stand settings per run, value ± 2σ next to the label.
+pub fn stand(params: &[crosscal::estimate::StandParams]) -> String {
+    let mut s = String::new();
+    if params.is_empty() {
+        return s;
+    }
+    let _ = writeln!(s, "stand settings (estimated ± 2σ; label in brackets):");
+    let _ =
+        writeln!(s, "  {:<20} {:>26} {:>28} {:>24}", "run", "cone angle α (deg)", "rate ω_s (deg/s)", "phase φ (deg)");
+    for p in params {
+        let cell = |k: usize| format!("{:.5} ± {:.1e} [{}]", p.value[k], 2.0 * p.std_error[k], p.nominal[k]);
+        let _ = writeln!(s, "  {:<20} {:>26} {:>28} {:>24}", p.run, cell(0), cell(1), cell(2));
+    }
+    s
+}

@@ -390,6 +390,7 @@ pub fn diagnose(
             let _ = held.fix_nonlinear(e.effect.id(), values);
         }
         let mut scored = Vec::new();
+        let screening = FitOptions { screening: true, ..*opts };
         for (id, explain) in options {
             let present = current.effects().iter().any(|m| m.id() == id)
                 || current.nonlinear().iter().any(|m| m.effect.id() == id);
@@ -400,7 +401,7 @@ pub fn diagnose(
             if m.add_effect(id).is_err() {
                 continue;
             }
-            let Ok(f) = fit(&m, runs, opts) else { continue };
+            let Ok(f) = fit(&m, runs, &screening) else { continue };
             scored.push((score(&current_fit, &f, id, explain), id, f));
         }
         scored.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));

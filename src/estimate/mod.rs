@@ -16,10 +16,12 @@
 pub mod identify;
 pub mod nonlinear;
 pub mod qr;
+pub mod stand;
 
 pub use identify::{Correlation, Unidentifiable};
 pub use nonlinear::NonlinearParam;
 pub use qr::QrAccumulator;
+pub use stand::{fit_with_stand, StandParams};
 
 use crate::model::{Model, SensorKind, State, TermStatus, AXES};
 use crate::motion::Track;
@@ -90,11 +92,14 @@ pub struct FitOptions {
     /// Known per-sample noise σ of each channel (gx, gy, gz in rad/s; ax, ay, az in m/s²):
     /// the covariance is then σ²(ΦᵀΦ)⁻¹, the Cramér–Rao bound, instead of using the residual.
     pub known_sigma: Option<[f64; 6]>,
+    /// Screening (ranking candidates): nonlinear parameters get a coarse scan and a short
+    /// simplex search, and the best point found is returned even if not converged.
+    pub screening: bool,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { chunk: 4096, rcond: 1e-9, robust: false, known_sigma: None }
+        Self { chunk: 4096, rcond: 1e-9, robust: false, known_sigma: None, screening: false }
     }
 }
 
@@ -238,6 +243,9 @@ pub struct Fit {
     /// Parameters of nonlinear effects (time delay, dead zone), if the model has any.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub nonlinear: Vec<NonlinearParam>,
+    /// Estimated stand settings (cone angle, rate, phase) per conic run, when fitted.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stand: Vec<StandParams>,
 }
 
 impl Fit {
@@ -288,6 +296,7 @@ pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit,
         gyro: fit_sensor(model, SensorKind::Gyro, runs, opts)?,
         accel: fit_sensor(model, SensorKind::Accel, runs, opts)?,
         nonlinear: Vec::new(),
+        stand: Vec::new(),
     })
 }
 
@@ -479,8 +488,10 @@ fn fit_sensor(
         );
     }
 
-    // Second pass: largest residual and residual autocovariances per channel.
+    // Second pass: largest residual and residual autocovariances per channel (skipped
+    // when only screening candidates by their residual).
     let mut pred = [0.0; 3];
+    let runs = if opts.screening { &runs[..0] } else { runs };
     let mut lrv = [LongRunVariance::default(), LongRunVariance::default(), LongRunVariance::default()];
     for run in runs {
         let lags = newey_west_lags(run.len());
@@ -510,7 +521,7 @@ fn fit_sensor(
         let c = &mut channels[ch];
         c.residual_lag1 = lrv[ch].lag1();
         // With a known σ the covariance is already the Cramér–Rao bound σ²(ΦᵀΦ)⁻¹.
-        if opts.known_sigma.is_none() {
+        if opts.known_sigma.is_none() && !opts.screening {
             let f = lrv[ch].inflation();
             c.coloured_inflation = f;
             rescale(c, &fitted_sets[ch], &mut std_errors, f);

@@ -208,12 +208,13 @@ pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit,
             // J is in χ² units: a spread of 1e-4 across the simplex is far below 1σ.
             .with_sd_tolerance(1e-4)
             .map_err(|e| EstimateError::NotConverged(e.to_string()))?;
+        let budget = if opts.screening { 30 } else { 400 } * defs.len() as u64;
         let res = Executor::new(obj, solver)
-            .configure(|s| s.max_iters(400 * defs.len() as u64))
+            .configure(|s| s.max_iters(budget))
             .run()
             .map_err(|e| EstimateError::NotConverged(e.to_string()))?;
         let state = res.state();
-        if matches!(state.get_termination_reason(), Some(TerminationReason::MaxItersReached)) {
+        if !opts.screening && matches!(state.get_termination_reason(), Some(TerminationReason::MaxItersReached)) {
             return Err(EstimateError::NotConverged(format!(
                 "{} did not converge from the nominal start in {} iterations",
                 defs.iter().map(|d| d.1.name.as_str()).collect::<Vec<_>>().join(", "),
@@ -224,9 +225,9 @@ pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit,
         for (i, (_, d)) in defs.iter().enumerate() {
             p_hat[i] = bounded(d, p_hat[i]);
         }
-        // Numerical Hessian of J at p̂ (central differences).
+        // Numerical Hessian of J at p̂ (central differences); not needed for screening.
         let obj = &res.problem.problem;
-        if let Some(obj) = obj {
+        if let Some(obj) = obj.as_ref().filter(|_| !opts.screening) {
             let n = defs.len();
             let h: Vec<f64> = defs.iter().zip(&p_hat).map(|((_, d), v)| (d.scale * 1e-2).max(v.abs() * 1e-3)).collect();
             // Parameters at a bound (e.g. a zero dead zone) have no σ; the rest get one.
@@ -281,5 +282,5 @@ pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit,
             }
         }
     }
-    Ok(Fit { gyro, accel, nonlinear: params })
+    Ok(Fit { gyro, accel, nonlinear: params, stand: Vec::new() })
 }

@@ -110,6 +110,9 @@ pub struct Profile {
     /// Parameters of nonlinear effects (time delay, dead zone).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub nonlinear: Vec<crate::estimate::NonlinearParam>,
+    /// Estimated stand settings per conic run (`fit --stand`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stand: Vec<crate::estimate::StandParams>,
     /// Runs used to fit.
     pub runs: Vec<RunUsed>,
     /// Check on runs left out of the fit (`fit --holdout`), if any.
@@ -205,6 +208,7 @@ impl Profile {
             gyro: fit.gyro,
             accel: fit.accel,
             nonlinear: fit.nonlinear,
+            stand: fit.stand,
             runs: runs_used(session),
             correction: CorrectionSettings::default(),
             validation: None,
