@@ -162,3 +162,55 @@ pub fn cross_validate(
     }
     Ok(summarize(runs, thresholds))
 }
+
+/// Everything acceptance can learn about a unit from its session with a profile: the check
+/// of the session corrected with it and, when asked, whether `diagnose` finds the model
+/// adequate.
+#[derive(Debug, Clone)]
+pub struct Acceptance {
+    /// Check report (offline correction).
+    pub check: CheckReport,
+    /// Diagnose verdict: adequate, and the unexplained findings otherwise.
+    pub adequacy: Option<(bool, Vec<String>)>,
+}
+
+/// Errors of [`acceptance`].
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum AcceptanceError {
+    /// The profile cannot drive a correction.
+    #[error(transparent)]
+    Correct(#[from] CorrectError),
+    /// The profile's model cannot be rebuilt.
+    #[error(transparent)]
+    Model(#[from] crate::model::ModelError),
+    /// Diagnose failed.
+    #[error(transparent)]
+    Estimate(#[from] EstimateError),
+}
+
+/// Checks `session` with `profile` and (with `diagnose`) tests the model's adequacy.
+pub fn acceptance(
+    profile: &crate::profile::Profile,
+    session: &Session,
+    diagnose: bool,
+) -> Result<Acceptance, AcceptanceError> {
+    let cal = Calibration::from_profile(profile)?;
+    let check = check_session(session, &cal, Mode::Offline, Thresholds::default())?;
+    let adequacy = if diagnose {
+        let model = profile.model()?;
+        let tr = tracks(session, &DerivativeConfig::default());
+        let runs = fit_runs(session, &tr);
+        let motions: Vec<&crate::session::MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
+        let d = crate::diagnose::diagnose(&model, &runs, &motions, &FitOptions::default())?;
+        let ok = d.verdict == crate::diagnose::Verdict::Adequate;
+        let mut why = d.unexplained.clone();
+        if !d.proposal.is_empty() {
+            why.push(format!("missing effects: {}", d.proposal.join(", ")));
+        }
+        Some((ok, why))
+    } else {
+        None
+    };
+    Ok(Acceptance { check, adequacy })
+}

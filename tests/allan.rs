@@ -27,10 +27,13 @@ fn allan_variance_matches_the_definition() {
     let y: Vec<f64> = series(&p, 3000, 1).iter().map(|v| v + 7.5).collect();
     let mut x = y.clone();
     allan::rate_to_phase(&mut x, DT);
-    for m in allan::cluster_sizes(y.len(), 8) {
+    let ms = allan::cluster_sizes(y.len());
+    let all = allan::avar_all(&x, DT, &ms);
+    for (&m, blocked) in ms.iter().zip(all) {
         let fast = allan::avar_from_phase(&x, DT, m).unwrap();
         let slow = naive_avar(&y, m);
         assert!((fast / slow - 1.0).abs() < 1e-12, "m = {m}: {fast} vs {slow}");
+        assert!((blocked.unwrap() / slow - 1.0).abs() < 1e-12, "m = {m}: blocked vs {slow}");
     }
 }
 
@@ -160,6 +163,38 @@ fn noise_command_reads_a_static_session_and_stores_the_result_in_a_new_profile_r
     assert!((sigma_gyro / (worst_density * 10.0) - 1.0).abs() < 1e-12, "{sigma_gyro}");
     let (code, _, err) = run_in(d, &["plan", "--noise-from", first[0].to_str().unwrap()]);
     assert_eq!(code, 0, "{err}");
+
+    // Acceptance rules on the noise: ARW is 0.3 °/√h, so a 0.35 limit passes, 0.25 rejects.
+    let rules = |max: f64| {
+        format!(
+            r#"{{"format":"crosscal-rules/1","rules":[
+                {{"kind":"noise","sensor":"gyro","term":"white","max":{max},"unit":"deg/sqrt(h)"}},
+                {{"kind":"coefficient","select":"gyro.c_*","max_abs_deviation":0.02}},
+                {{"kind":"std_error","select":"*","max":1e-3}},
+                {{"kind":"reduction","sensor":"gyro","min":10}},
+                {{"kind":"residual","sensor":"accel","max_pct":0.01}},
+                {{"kind":"adequate"}}]}}"#
+        )
+    };
+    std::fs::write(d.join("ok.json"), rules(0.35)).unwrap();
+    std::fs::write(d.join("tight.json"), rules(0.25)).unwrap();
+    let latest_path = crosscal::profile::history(&d.join("calib-profiles"), "I1426-0042").unwrap().pop().unwrap().0;
+    let lp = latest_path.to_str().unwrap();
+    let (code, out, err) =
+        run_in(d, &["accept", lp, "--rules", "ok.json", "--session", "stand/session.json", "--diagnose"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("ACCEPTED"), "{out}");
+    let (code, out, _) =
+        run_in(d, &["accept", lp, "--rules", "tight.json", "--session", "stand/session.json", "--json"]);
+    assert_eq!(code, 1, "{out}");
+    let res: Vec<crosscal::check::rules::RuleResult> = serde_json::from_str(&out).unwrap();
+    let failed: Vec<&str> = res.iter().filter(|r| !r.pass).map(|r| r.rule.as_str()).collect();
+    // The noise rule fails, and so does `adequate` (diagnose was not asked for).
+    assert_eq!(failed, ["gyro white noise", "model adequate"], "{res:?}");
+    // Without a session the session rules fail with their reason.
+    let (code, out, _) = run_in(d, &["accept", lp, "--rules", "ok.json"]);
+    assert_eq!(code, 1);
+    assert!(out.contains("no session was checked"), "{out}");
 
     // A session without a static run is refused with the reason.
     let (code, _, err) = run_in(d, &["noise", "stand/session.json"]);

@@ -13,6 +13,7 @@
 
 pub mod harmonics;
 pub mod paper;
+pub mod rules;
 
 use crate::correct::Corrected;
 use crate::model::{SensorKind, AXES};

@@ -1,5 +1,6 @@
 //! Subcommands. Parsing and printing only; every number comes from the library.
 
+mod accept;
 mod check;
 mod compare;
 mod correct;
@@ -52,6 +53,13 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
                 _ => 18,
             };
         }
+        if let Some(r) = cause.downcast_ref::<crosscal::check::rules::RulesError>() {
+            return match r {
+                crosscal::check::rules::RulesError::Io { .. } => 3,
+                crosscal::check::rules::RulesError::UnknownFormat { .. } => 12,
+                _ => 11,
+            };
+        }
         if let Some(EstimateError::Unidentifiable(_)) = cause.downcast_ref::<EstimateError>() {
             return 17;
         }
@@ -92,6 +100,8 @@ enum Command {
     Noise(noise::Args),
     /// Predicted uncertainty of every coefficient for proposed runs, before recording; suggests a run.
     Plan(plan::Args),
+    /// Accept or reject a unit: its profile (and session) against acceptance rules; exit 1 on reject.
+    Accept(accept::Args),
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -122,6 +132,7 @@ pub fn main() -> ExitCode {
         Command::Effects(a) => effects::run(a),
         Command::Noise(a) => noise::run(a),
         Command::Plan(a) => plan::run(a),
+        Command::Accept(a) => accept::run(a),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

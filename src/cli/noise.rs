@@ -28,9 +28,9 @@ pub struct Args {
     /// Local gravity of a plain CSV, m/s².
     #[arg(long, default_value_t = 9.80665)]
     g: f64,
-    /// Cluster times per decade.
-    #[arg(long, default_value_t = 6)]
-    per_decade: usize,
+    /// Largest cluster time, s (default: a third of the recording).
+    #[arg(long)]
+    max_tau: Option<f64>,
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
@@ -96,7 +96,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     for w in &data.warnings {
         eprintln!("warning: {w}");
     }
-    let r: NoiseReport = analyse(&label, data, NoiseOptions { per_decade: a.per_decade.max(1) })?;
+    let r: NoiseReport = analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {

@@ -215,6 +215,8 @@ pub struct RunResiduals {
     pub theta: Option<Vec<f64>>,
     /// Six channels: gyro x, y, z, accel x, y, z.
     pub r: Vec<Vec<f64>>,
+    /// Sum of squared outputs per channel (for the recording's numerical resolution).
+    pub output_ss: [f64; 6],
 }
 
 /// Residuals of a fitted model on every run (nonlinear effects applied).
@@ -233,6 +235,7 @@ pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotio
                 _ => None,
             },
             r: (0..6).map(|_| Vec::with_capacity(run.len())).collect(),
+            output_ss: [0.0; 6],
         })
         .collect();
     for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
@@ -249,12 +252,16 @@ pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotio
                 let y = run.output(sensor, k);
                 for ch in 0..3 {
                     o.r[3 * si + ch].push(y[ch] - u[ch]);
+                    o.output_ss[3 * si + ch] += y[ch] * y[ch];
                 }
             }
         }
     }
     out
 }
+
+/// Relative numerical resolution below which a residual is rounding, not physics.
+const RESOLUTION: f64 = 1e-10;
 
 /// Channel reports (residual RMS, noise floor, systematic part) from residuals.
 pub fn channel_reports(res: &[RunResiduals], motions: &RunMotions<'_>) -> Vec<ChannelReport> {
@@ -292,7 +299,12 @@ pub fn channel_reports(res: &[RunResiduals], motions: &RunMotions<'_>) -> Vec<Ch
         }
         // One pooled test per channel over all runs, at 0.001 % (few false alarms even
         // over many channels and sessions).
-        let significant = dof > 0 && chi > chi2_upper(dof, SIGNIFICANCE_Z);
+        // Residuals below 1e-10 of the output RMS are rounding of the recording and of the
+        // arithmetic (no sensor resolves 1e-10 of its signal): never "systematic".
+        let out_ss: f64 = res.iter().map(|r| r.output_ss[c]).sum();
+        let resolution = RESOLUTION * (out_ss / n.max(1) as f64).sqrt();
+        let sys_rms = (sys_ss / n.max(1) as f64).sqrt();
+        let significant = dof > 0 && chi > chi2_upper(dof, SIGNIFICANCE_Z) && sys_rms > resolution;
         let mid = diffs.len() / 2;
         let mad = if diffs.is_empty() { 0.0 } else { *diffs.select_nth_unstable_by(mid, f64::total_cmp).1 };
         // For white noise, |Δr| has median 0.6745·√2·σ.
@@ -302,7 +314,7 @@ pub fn channel_reports(res: &[RunResiduals], motions: &RunMotions<'_>) -> Vec<Ch
             axis: AXES[c % 3],
             residual_rms: (ss / n.max(1) as f64).sqrt(),
             noise_floor,
-            systematic_rms: (sys_ss / n.max(1) as f64).sqrt(),
+            systematic_rms: sys_rms,
             systematic: significant,
             worst,
         });

@@ -30,16 +30,10 @@ pub const CHANNELS: [&str; 6] = ["gx", "gy", "gz", "ax", "ay", "az"];
 pub const LEVEL: f64 = 0.683;
 
 /// Settings of an analysis.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct NoiseOptions {
-    /// Cluster times per decade.
-    pub per_decade: usize,
-}
-
-impl Default for NoiseOptions {
-    fn default() -> Self {
-        Self { per_decade: 6 }
-    }
+    /// Largest cluster time, s (None: a third of the recording).
+    pub max_tau_s: Option<f64>,
 }
 
 /// One point of an Allan deviation curve.
@@ -205,7 +199,10 @@ pub fn analyse_channel(
         return Err(NoiseError::Interval(tau0_s));
     }
     let n = samples.len();
-    let ms = allan::cluster_sizes(n, opts.per_decade);
+    let mut ms = allan::cluster_sizes(n);
+    if let Some(t) = opts.max_tau_s {
+        ms.retain(|&m| m as f64 * tau0_s <= t);
+    }
     if ms.len() < 2 {
         return Err(NoiseError::TooShort(n));
     }
@@ -213,8 +210,8 @@ pub fn analyse_channel(
     let mut tau = Vec::with_capacity(ms.len());
     let mut avar = Vec::with_capacity(ms.len());
     let mut used = Vec::with_capacity(ms.len());
-    for &m in &ms {
-        if let Some(v) = allan::avar_from_phase(samples, tau0_s, m) {
+    for (&m, v) in ms.iter().zip(allan::avar_all(samples, tau0_s, &ms)) {
+        if let Some(v) = v {
             tau.push(m as f64 * tau0_s);
             avar.push(v);
             used.push(m);

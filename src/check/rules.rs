@@ -1,0 +1,437 @@
+//! Acceptance rules (JSON) for a unit's calibration: bounds on coefficients, on their
+//! standard errors, on the measured noise, on the corrected residual and reduction factors,
+//! and on model adequacy.
+//!
+//! ```json
+//! { "format": "crosscal-rules/1",
+//!   "rules": [
+//!     { "kind": "coefficient", "select": "gyro.c_*", "max_abs_deviation": 0.02 },
+//!     { "kind": "std_error", "select": "*", "max": 1e-3 },
+//!     { "kind": "noise", "sensor": "gyro", "term": "white", "max": 0.2, "unit": "deg/sqrt(h)" },
+//!     { "kind": "residual", "sensor": "accel", "max_pct": 0.01 },
+//!     { "kind": "reduction", "sensor": "gyro", "min": 10 },
+//!     { "kind": "adequate" } ] }
+//! ```
+//!
+//! `select` is a coefficient name with `*` wildcards. A deviation is |value − nominal|
+//! (nominal 1 for a diagonal scale, 0 otherwise). Noise units: SI by default, or
+//! `deg/sqrt(h)`, `deg/s/sqrt(Hz)` (white gyro), `m/s/sqrt(h)`, `ug/sqrt(Hz)` (white
+//! accel), `deg/h` (gyro bias instability), `ug` (accel bias instability), `deg/h/sqrt(h)`
+//! (gyro random walk). Rules that need a session (residual, reduction, adequate) fail with
+//! that reason when none was checked.
+
+use super::CheckReport;
+use crate::model::SensorKind;
+use crate::profile::Profile;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The rules format this version reads.
+pub const RULES_FORMAT: &str = "crosscal-rules/1";
+
+/// A set of rules.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Rules {
+    /// Always [`RULES_FORMAT`].
+    pub format: String,
+    /// The rules, all of which must pass.
+    pub rules: Vec<Rule>,
+}
+
+/// One rule.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Rule {
+    /// Bounds on coefficient values.
+    Coefficient {
+        /// Name pattern (`*` wildcard).
+        select: String,
+        /// Lower bound on the value.
+        #[serde(default)]
+        min: Option<f64>,
+        /// Upper bound on the value.
+        #[serde(default)]
+        max: Option<f64>,
+        /// Bound on |value − nominal|.
+        #[serde(default)]
+        max_abs_deviation: Option<f64>,
+        /// Rule name shown in reports.
+        #[serde(default)]
+        name: Option<String>,
+    },
+    /// Bound on standard errors (a too-uncertain calibration fails; unidentifiable fails).
+    StdError {
+        /// Name pattern.
+        select: String,
+        /// Largest standard error, SI.
+        max: f64,
+        /// Rule name.
+        #[serde(default)]
+        name: Option<String>,
+    },
+    /// Bound on a measured noise term (needs a noise section in the profile).
+    Noise {
+        /// `gyro` or `accel`.
+        sensor: SensorKind,
+        /// `white`, `bias_instability` or `random_walk`.
+        term: String,
+        /// Upper bound, in `unit`.
+        max: f64,
+        /// Unit of `max` (SI when absent).
+        #[serde(default)]
+        unit: Option<String>,
+        /// Rule name.
+        #[serde(default)]
+        name: Option<String>,
+    },
+    /// Bound on the corrected error of a checked session (largest over runs and axes).
+    Residual {
+        /// `gyro` or `accel`.
+        sensor: SensorKind,
+        /// Largest corrected error, % of the run's amplitude.
+        max_pct: f64,
+        /// Rule name.
+        #[serde(default)]
+        name: Option<String>,
+    },
+    /// Lower bound on the (systematic) reduction factor of a checked session.
+    Reduction {
+        /// `gyro` or `accel`.
+        sensor: SensorKind,
+        /// Smallest reduction over axes; noise-limited axes pass.
+        min: f64,
+        /// Rule name.
+        #[serde(default)]
+        name: Option<String>,
+    },
+    /// `diagnose` finds no unexplained systematic residual.
+    Adequate {
+        /// Rule name.
+        #[serde(default)]
+        name: Option<String>,
+    },
+}
+
+/// Rules errors.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RulesError {
+    /// Cannot read the file.
+    #[error("{path}: {source}")]
+    Io {
+        /// File.
+        path: std::path::PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// Not valid rules.
+    #[error("{path}:{line}:{column}: {msg}")]
+    Parse {
+        /// File.
+        path: std::path::PathBuf,
+        /// Line.
+        line: usize,
+        /// Column.
+        column: usize,
+        /// What is wrong.
+        msg: String,
+    },
+    /// Unknown version.
+    #[error("{path}: rules format '{found}' is not supported: expected '{RULES_FORMAT}'")]
+    UnknownFormat {
+        /// File.
+        path: std::path::PathBuf,
+        /// Found.
+        found: String,
+    },
+}
+
+impl Rules {
+    /// Reads and validates a rules file.
+    pub fn read(path: &Path) -> Result<Self, RulesError> {
+        let text =
+            std::fs::read_to_string(path).map_err(|source| RulesError::Io { path: path.to_path_buf(), source })?;
+        Self::parse(path, &text)
+    }
+
+    /// Parses rules (the path names the file in messages).
+    pub fn parse(path: &Path, text: &str) -> Result<Self, RulesError> {
+        let r: Rules = serde_json::from_str(text).map_err(|e| RulesError::Parse {
+            path: path.to_path_buf(),
+            line: e.line(),
+            column: e.column(),
+            msg: format!("{e}; see the README for the rule kinds"),
+        })?;
+        if r.format != RULES_FORMAT {
+            return Err(RulesError::UnknownFormat { path: path.to_path_buf(), found: r.format });
+        }
+        for rule in &r.rules {
+            if let Rule::Noise { term, unit, .. } = rule {
+                if !["white", "bias_instability", "random_walk"].contains(&term.as_str()) {
+                    return Err(RulesError::Parse {
+                        path: path.to_path_buf(),
+                        line: 0,
+                        column: 0,
+                        msg: format!("noise term '{term}': expected white, bias_instability or random_walk"),
+                    });
+                }
+                if let Some(u) = unit {
+                    if noise_factor(u).is_none() {
+                        return Err(RulesError::Parse {
+                            path: path.to_path_buf(),
+                            line: 0,
+                            column: 0,
+                            msg: format!("noise unit '{u}' is not known; see the README for the accepted units"),
+                        });
+                    }
+                }
+            }
+        }
+        Ok(r)
+    }
+}
+
+/// The outcome of one rule.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RuleResult {
+    /// Rule name (given, or generated from the rule).
+    pub rule: String,
+    /// Passed.
+    pub pass: bool,
+    /// The numbers behind the verdict, or why it failed.
+    pub detail: String,
+}
+
+/// What was learnt from the unit's session besides its profile.
+#[derive(Debug, Clone, Default)]
+pub struct Evidence<'a> {
+    /// Check of the session (or of held-out runs) with the profile.
+    pub check: Option<&'a CheckReport>,
+    /// Diagnose verdict and its unexplained findings, if it was run.
+    pub adequacy: Option<(bool, Vec<String>)>,
+}
+
+/// Shell-style match with `*` only.
+pub fn matches(pattern: &str, name: &str) -> bool {
+    let parts: Vec<&str> = pattern.split('*').collect();
+    if parts.len() == 1 {
+        return pattern == name;
+    }
+    let mut rest = name;
+    for (i, p) in parts.iter().enumerate() {
+        if i == 0 {
+            match rest.strip_prefix(p) {
+                Some(r) => rest = r,
+                None => return false,
+            }
+        } else if i == parts.len() - 1 {
+            return rest.ends_with(p);
+        } else {
+            match rest.find(p) {
+                Some(k) => rest = &rest[k + p.len()..],
+                None => return false,
+            }
+        }
+    }
+    true
+}
+
+/// Multiplier from a display unit to SI for noise terms.
+fn noise_factor(unit: &str) -> Option<f64> {
+    let deg = std::f64::consts::PI / 180.0;
+    let g = 9.80665;
+    Some(match unit {
+        "deg/sqrt(h)" => deg / 60.0,
+        "deg/s/sqrt(Hz)" => deg,
+        "m/s/sqrt(h)" => 1.0 / 60.0,
+        "ug/sqrt(Hz)" => 1e-6 * g,
+        "deg/h" => deg / 3600.0,
+        "ug" => 1e-6 * g,
+        "deg/h/sqrt(h)" => deg / 3600.0 / 60.0,
+        "SI" => 1.0,
+        _ => return None,
+    })
+}
+
+fn nominal_of(name: &str) -> f64 {
+    // Diagonal scale terms (c_xx, k_yy, …) are nominally 1.
+    let key = name.rsplit('.').next().unwrap_or("");
+    let b = key.as_bytes();
+    if b.len() == 4 && (b[0] == b'c' || b[0] == b'k') && b[1] == b'_' && b[2] == b[3] {
+        1.0
+    } else {
+        0.0
+    }
+}
+
+/// Evaluates every rule on a profile and what was checked on its session.
+pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<RuleResult> {
+    let coefs: Vec<&crate::estimate::Coefficient> =
+        profile.gyro.coefficients.iter().chain(&profile.accel.coefficients).collect();
+    rules
+        .rules
+        .iter()
+        .map(|rule| {
+            let (label, pass, detail) = match rule {
+                Rule::Coefficient { select, min, max, max_abs_deviation, name } => {
+                    let label = name.clone().unwrap_or_else(|| format!("coefficient {select}"));
+                    let picked: Vec<_> = coefs.iter().filter(|c| matches(select, &c.name)).collect();
+                    let bad: Vec<String> = picked
+                        .iter()
+                        .filter_map(|c| {
+                            let dev = (c.value - nominal_of(&c.name)).abs();
+                            let out = min.is_some_and(|m| c.value < m)
+                                || max.is_some_and(|m| c.value > m)
+                                || max_abs_deviation.is_some_and(|m| dev > m);
+                            out.then(|| format!("{} = {:.6e}", c.name, c.value))
+                        })
+                        .collect();
+                    if picked.is_empty() {
+                        (label, false, format!("no coefficient matches '{select}'"))
+                    } else if bad.is_empty() {
+                        (label, true, format!("{} coefficients within bounds", picked.len()))
+                    } else {
+                        (label, false, format!("out of bounds: {}", bad.join(", ")))
+                    }
+                }
+                Rule::StdError { select, max, name } => {
+                    let label = name.clone().unwrap_or_else(|| format!("standard error {select}"));
+                    let picked: Vec<_> = coefs
+                        .iter()
+                        .filter(|c| matches(select, &c.name) && c.status != crate::estimate::CoefStatus::Fixed)
+                        .collect();
+                    let bad: Vec<String> = picked
+                        .iter()
+                        .filter_map(|c| match c.std_error {
+                            Some(se) if se <= *max => None,
+                            Some(se) => Some(format!("{} ± {se:.3e}", c.name)),
+                            None => Some(format!("{} unidentifiable", c.name)),
+                        })
+                        .collect();
+                    if bad.is_empty() {
+                        (label, true, format!("{} standard errors ≤ {max:e}", picked.len()))
+                    } else {
+                        (label, false, format!("too uncertain: {}", bad.join(", ")))
+                    }
+                }
+                Rule::Noise { sensor, term, max, unit, name } => {
+                    let label = name.clone().unwrap_or_else(|| format!("{sensor} {term} noise"));
+                    let k = unit.as_deref().and_then(noise_factor).unwrap_or(1.0);
+                    match &profile.noise {
+                        None => {
+                            (label, false, "the profile has no noise characterisation (crosscal noise --store)".into())
+                        }
+                        Some(n) => {
+                            let vals: Vec<(String, Option<f64>)> = n
+                                .channels
+                                .iter()
+                                .filter(|c| c.sensor() == *sensor)
+                                .map(|c| {
+                                    let v = match term.as_str() {
+                                        "white" => c.white_density,
+                                        "bias_instability" => c.bias_instability,
+                                        _ => c.random_walk,
+                                    };
+                                    (c.channel.clone(), v)
+                                })
+                                .collect();
+                            let worst = vals.iter().filter_map(|v| v.1).fold(0.0, f64::max) / k;
+                            let u = unit.as_deref().unwrap_or("SI");
+                            if vals.is_empty() {
+                                (label, false, format!("no {sensor} channel in the noise characterisation"))
+                            } else {
+                                (label, worst <= *max, format!("worst axis {worst:.4e} {u} (limit {max} {u})"))
+                            }
+                        }
+                    }
+                }
+                Rule::Residual { sensor, max_pct, name } => {
+                    let label = name.clone().unwrap_or_else(|| format!("{sensor} residual"));
+                    match ev.check {
+                        None => (label, false, "no session was checked".into()),
+                        Some(r) => {
+                            let worst = r
+                                .summary
+                                .iter()
+                                .filter(|a| a.sensor == *sensor)
+                                .filter_map(|a| a.after_pct)
+                                .fold(0.0, f64::max);
+                            (
+                                label,
+                                worst <= *max_pct,
+                                format!("largest corrected error {worst:.3e} % (limit {max_pct} %)"),
+                            )
+                        }
+                    }
+                }
+                Rule::Reduction { sensor, min, name } => {
+                    let label = name.clone().unwrap_or_else(|| format!("{sensor} reduction"));
+                    match ev.check {
+                        None => (label, false, "no session was checked".into()),
+                        Some(r) => {
+                            let axes: Vec<_> = r.summary.iter().filter(|a| a.sensor == *sensor).collect();
+                            let bad: Vec<String> = axes
+                                .iter()
+                                .filter(|a| !a.noise_limited && a.reduction_sys.is_none_or(|v| v < *min))
+                                .map(|a| format!("{} {}: {:.3e}×", a.sensor, a.axis, a.reduction_sys.unwrap_or(0.0)))
+                                .collect();
+                            if bad.is_empty() {
+                                (label, true, format!("every axis ≥ {min}× or at the noise floor"))
+                            } else {
+                                (label, false, format!("below {min}×: {}", bad.join(", ")))
+                            }
+                        }
+                    }
+                }
+                Rule::Adequate { name } => {
+                    let label = name.clone().unwrap_or_else(|| "model adequate".into());
+                    match &ev.adequacy {
+                        None => (label, false, "diagnose was not run".into()),
+                        Some((true, _)) => (label, true, "no unexplained systematic residual".into()),
+                        Some((false, why)) => {
+                            (label, false, format!("unexplained systematic residual: {}", why.join("; ")))
+                        }
+                    }
+                }
+            };
+            RuleResult { rule: label, pass, detail }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    #[allow(clippy::float_cmp)]
+    fn wildcards() {
+        assert!(matches("gyro.c_*", "gyro.c_xy"));
+        assert!(!matches("gyro.c_*", "gyro.e_xy"));
+        assert!(matches("*", "accel.b_x"));
+        assert!(matches("*.b_*", "accel.b_x"));
+        assert!(matches("accel.k_xx", "accel.k_xx"));
+        assert!(!matches("accel.k_x", "accel.k_xx"));
+        assert!(nominal_of("gyro.c_yy") == 1.0);
+        assert!(nominal_of("gyro.c_xy") == 0.0);
+        assert!(nominal_of("gyro.e_xx") == 0.0);
+    }
+
+    #[test]
+    fn unknown_fields_and_versions_are_refused() {
+        let p = Path::new("r.json");
+        assert!(Rules::parse(p, r#"{"format":"crosscal-rules/1","rules":[{"kind":"adequate"}]}"#).is_ok());
+        let e = Rules::parse(p, r#"{"format":"crosscal-rules/9","rules":[]}"#).unwrap_err();
+        assert!(e.to_string().contains("not supported"), "{e}");
+        let e = Rules::parse(p, r#"{"format":"crosscal-rules/1","rules":[{"kind":"coefficient","selct":"*"}]}"#)
+            .unwrap_err();
+        assert!(e.to_string().contains("r.json:1:"), "{e}");
+        let e = Rules::parse(
+            p,
+            r#"{"format":"crosscal-rules/1","rules":[{"kind":"noise","sensor":"gyro","term":"white","max":1,"unit":"furlong"}]}"#,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("furlong"), "{e}");
+    }
+}

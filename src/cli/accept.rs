@@ -1,0 +1,54 @@
+//! `crosscal accept`: a unit's profile (and session) against acceptance rules.
+
+use super::Outcome;
+use anyhow::Context;
+use crosscal::check::rules::{evaluate, Evidence, Rules};
+use crosscal::profile::Profile;
+use crosscal::session::Session;
+use std::path::PathBuf;
+
+/// Options of `accept`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The unit's profile.
+    profile: PathBuf,
+    /// Acceptance rules (JSON, format crosscal-rules/1; see the README).
+    #[arg(long)]
+    rules: PathBuf,
+    /// The unit's session: checked with the profile for residual and reduction rules.
+    #[arg(long)]
+    session: Option<PathBuf>,
+    /// Also run diagnose on the session (for the `adequate` rule).
+    #[arg(long)]
+    diagnose: bool,
+    /// Print the results as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    let rules = Rules::read(&a.rules)?;
+    let profile = Profile::read(&a.profile)?;
+    let acc = match &a.session {
+        Some(path) => {
+            let s = Session::load(path).with_context(|| format!("reading session {}", path.display()))?;
+            profile.ensure_unit(&a.profile, &s.manifest.serial)?;
+            Some(crosscal::pipeline::acceptance(&profile, &s, a.diagnose)?)
+        }
+        None if a.diagnose => anyhow::bail!("--diagnose needs --session"),
+        None => None,
+    };
+    let ev =
+        Evidence { check: acc.as_ref().map(|x| &x.check), adequacy: acc.as_ref().and_then(|x| x.adequacy.clone()) };
+    let results = evaluate(&rules, &profile, &ev);
+    let pass = results.iter().all(|r| r.pass);
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+    } else {
+        for r in &results {
+            println!("{:<5} {:<32} {}", if r.pass { "pass" } else { "FAIL" }, r.rule, r.detail);
+        }
+        println!("unit {}: {}", profile.serial, if pass { "ACCEPTED" } else { "REJECTED" });
+    }
+    Ok(if pass { Outcome::Ok } else { Outcome::CheckFailed })
+}
