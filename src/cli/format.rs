@@ -79,6 +79,14 @@ pub fn sensor_fit(f: &SensorFit) -> String {
             ch.n_params,
             ch.condition_number
         );
+        if ch.coloured_inflation > 1.5 {
+            let _ = writeln!(
+                s,
+                "    coloured residual (lag-1 correlation {:.2}): standard errors widened {:.1}× for it",
+                ch.residual_lag1,
+                ch.coloured_inflation.sqrt()
+            );
+        }
     }
     for u in &f.unidentifiable {
         let _ =
