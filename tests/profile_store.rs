@@ -50,3 +50,50 @@ fn unknown_profile_format_is_refused() {
     let e = Profile::from_json(std::path::Path::new("p.json"), "{\"format\": 3").unwrap_err();
     assert!(e.to_string().starts_with("p.json:1:"), "{e}");
 }
+
+#[test]
+fn profile_list_show_at_and_diff_find_a_drifted_coefficient() {
+    use crate::common::run_in;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sim = |out: &str, seed: &str, extra: &[&str]| {
+        let mut args = vec!["simulate", "-o", out, "--duration", "12", "--rate-hz", "50", "--seed", seed];
+        args.extend(["--gyro-noise", "0.002", "--accel-noise", "2e-5"]);
+        args.extend(extra);
+        let (code, _, err) = run_in(d, &args);
+        assert_eq!(code, 0, "{err}");
+    };
+    sim("jan", "1", &[]);
+    sim("feb", "2", &[]);
+    sim("mar", "3", &["--set", "gyro.c_xy=0.0105"]);
+    let mut files = Vec::new();
+    for s in ["jan", "feb", "mar"] {
+        let (code, out, err) = run_in(d, &["fit", &format!("{s}/session.json")]);
+        assert_eq!(code, 0, "{err}");
+        let path = out.lines().find_map(|l| l.strip_prefix("profile written to ")).unwrap().to_string();
+        files.push(path);
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let (code, out, _) = run_in(d, &["profile", "list"]);
+    assert_eq!(code, 0);
+    assert!(out.contains("I1426-0042: 3 profile(s)"), "{out}");
+    // show --at the second profile's time gives the second, not the newest.
+    let second = crosscal::profile::Profile::read(&d.join(&files[1])).unwrap();
+    let (code, out, err) = run_in(d, &["profile", "show", "I1426-0042", "--at", &second.created_utc, "--json"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(crosscal::profile::Profile::from_json(std::path::Path::new("x"), &out).unwrap(), second);
+    let (code, _, err) = run_in(d, &["profile", "show", "I1426-0042", "--at", "2001-01-01"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("no profile of unit 'I1426-0042' created at or before 2001-01-01"), "{err}");
+    // Two calibrations of an unchanged unit agree within noise; the changed c_xy is drift.
+    let (code, out, _) = run_in(d, &["profile", "diff", &files[0], &files[1]]);
+    assert_eq!(code, 0, "{out}");
+    let (code, out, _) = run_in(d, &["profile", "diff", &files[1], &files[2]]);
+    assert_eq!(code, 1, "{out}");
+    assert!(out.contains("DRIFTED (|z| > 3): gyro.c_xy"), "{out}");
+    // An old profile draws a warning when used.
+    let (code, _, err) =
+        run_in(d, &["correct", "--profile", &files[0], "jan/cone+10.csv", "-o", "c.csv", "--max-age-days", "0"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("days old"), "{err}");
+}

@@ -57,10 +57,20 @@ pub struct Args {
     /// stamps (offline only) instead of re-stamping it.
     #[arg(long)]
     resample: bool,
+    /// Warn when the profile is older than this many days.
+    #[arg(long, default_value_t = 365.0)]
+    max_age_days: f64,
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let profile = Profile::read(&a.profile)?;
+    if let Some(age) = profile.age_days(jiff::Timestamp::now()).filter(|d| *d > a.max_age_days) {
+        eprintln!(
+            "warning: profile {} is {age:.0} days old (limit {} days): the unit may have drifted; recalibrate or check it with `crosscal profile diff`",
+            a.profile.display(),
+            a.max_age_days
+        );
+    }
     let cal = Calibration::from_profile(&profile).with_context(|| format!("using profile {}", a.profile.display()))?;
     let mut units: Units = profile.input_units;
     if let Some(u) = &a.gyro_unit {

@@ -11,6 +11,7 @@ mod fit;
 mod format;
 mod noise;
 mod plan;
+mod profile;
 mod simulate;
 
 use clap::{Parser, Subcommand};
@@ -102,6 +103,8 @@ enum Command {
     Plan(plan::Args),
     /// Accept or reject a unit: its profile (and session) against acceptance rules; exit 1 on reject.
     Accept(accept::Args),
+    /// The profile store: list units and histories, show the profile in force, diff two profiles.
+    Profile(profile::Args),
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -133,6 +136,7 @@ pub fn main() -> ExitCode {
         Command::Noise(a) => noise::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Accept(a) => accept::run(a),
+        Command::Profile(a) => profile::run(a),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

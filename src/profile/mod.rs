@@ -427,3 +427,59 @@ pub fn save(profile: &Profile, root: &Path) -> Result<PathBuf, ProfileError> {
         source: std::io::Error::other("more than 1000 profiles with the same time stamp"),
     })
 }
+
+/// How one coefficient changed between two profiles of a unit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CoefChange {
+    /// Coefficient name.
+    pub name: String,
+    /// SI unit.
+    pub unit: String,
+    /// Value in the older profile.
+    pub before: f64,
+    /// Value in the newer profile.
+    pub after: f64,
+    /// (after − before) / √(se_before² + se_after²), when both have standard errors.
+    pub z: Option<f64>,
+}
+
+/// Coefficient changes from `a` to `b` (coefficients present in both), in units of their
+/// combined standard error: |z| > 3 means the unit has drifted beyond what the two
+/// calibrations' noise explains.
+pub fn diff(a: &Profile, b: &Profile) -> Vec<CoefChange> {
+    let before: Vec<&crate::estimate::Coefficient> = a.gyro.coefficients.iter().chain(&a.accel.coefficients).collect();
+    b.gyro
+        .coefficients
+        .iter()
+        .chain(&b.accel.coefficients)
+        .filter_map(|cb| {
+            let ca = before.iter().find(|c| c.name == cb.name)?;
+            let z = match (ca.std_error, cb.std_error) {
+                (Some(x), Some(y)) if x > 0.0 || y > 0.0 => Some((cb.value - ca.value) / (x * x + y * y).sqrt()),
+                _ => None,
+            };
+            Some(CoefChange { name: cb.name.clone(), unit: cb.unit.clone(), before: ca.value, after: cb.value, z })
+        })
+        .collect()
+}
+
+/// Serials with at least one file in the store, sorted.
+pub fn serials(root: &Path) -> Result<Vec<String>, ProfileError> {
+    let rd = std::fs::read_dir(root).map_err(|source| ProfileError::Io { path: root.to_path_buf(), source })?;
+    let mut out: Vec<String> = rd
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().is_dir())
+        .filter_map(|e| e.file_name().to_str().map(str::to_string))
+        .filter(|s| crate::session::valid_serial(s))
+        .collect();
+    out.sort();
+    Ok(out)
+}
+
+impl Profile {
+    /// Age of the profile at `now`, days (None if its time stamp does not parse).
+    pub fn age_days(&self, now: jiff::Timestamp) -> Option<f64> {
+        let t = self.created_utc.parse::<jiff::Timestamp>().ok()?;
+        Some((now.as_millisecond() - t.as_millisecond()) as f64 / 86_400_000.0)
+    }
+}

@@ -1,0 +1,128 @@
+//! `crosscal profile list|show|diff`: the per-unit profile store.
+
+use super::{format, Outcome};
+use crosscal::profile::{diff, history, latest, serials, Profile};
+use std::path::{Path, PathBuf};
+
+/// Options of `profile`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    command: Sub,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum Sub {
+    /// List units, or one unit's profile history (oldest first).
+    List {
+        /// Unit serial (all units when absent).
+        serial: Option<String>,
+        /// Profile store.
+        #[arg(long, default_value = "calib-profiles")]
+        store: PathBuf,
+    },
+    /// Show the latest profile of a unit (valid at a date with --at).
+    Show {
+        /// Unit serial.
+        serial: String,
+        /// The profile in force at this time (RFC 3339 or a date, e.g. 2026-11-23).
+        #[arg(long)]
+        at: Option<String>,
+        /// Profile store.
+        #[arg(long, default_value = "calib-profiles")]
+        store: PathBuf,
+        /// Print the profile JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Coefficient changes between two profiles in units of their standard errors (has the unit drifted?).
+    Diff {
+        /// Older profile (file).
+        a: PathBuf,
+        /// Newer profile (file).
+        b: PathBuf,
+        /// |z| above which a change counts as drift.
+        #[arg(long, default_value_t = 3.0)]
+        threshold: f64,
+    },
+}
+
+fn list(store: &Path, serial: Option<&str>) -> anyhow::Result<()> {
+    let units = match serial {
+        Some(s) => vec![s.to_string()],
+        None => serials(store)?,
+    };
+    for u in units {
+        let h = history(store, &u)?;
+        println!("{u}: {} profile(s)", h.len());
+        for (path, p) in h {
+            match p {
+                Ok(p) => println!(
+                    "  {}  model {:<8} {:>2} runs  {}{}",
+                    p.created_utc,
+                    p.model,
+                    p.runs.len(),
+                    path.display(),
+                    if p.noise.is_some() { "  (noise)" } else { "" }
+                ),
+                Err(e) => println!("  unreadable: {e}"),
+            }
+        }
+    }
+    Ok(())
+}
+
+pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    match a.command {
+        Sub::List { serial, store } => list(&store, serial.as_deref())?,
+        Sub::Show { serial, at, store, json } => {
+            let (path, p) = latest(&store, &serial, at.as_deref())?;
+            if json {
+                print!("{}", p.to_json());
+            } else {
+                println!(
+                    "unit {} profile {} (created {}, model '{}')",
+                    p.serial,
+                    path.display(),
+                    p.created_utc,
+                    p.model
+                );
+                print!("{}", format::sensor_fit(&p.gyro));
+                print!("{}", format::sensor_fit(&p.accel));
+                print!("{}", format::nonlinear(&p.nonlinear));
+                print!("{}", format::stand(&p.stand));
+            }
+        }
+        Sub::Diff { a, b, threshold } => {
+            let (pa, pb) = (Profile::read(&a)?, Profile::read(&b)?);
+            if pa.serial != pb.serial {
+                anyhow::bail!("{} is unit '{}' but {} is unit '{}'", a.display(), pa.serial, b.display(), pb.serial);
+            }
+            let changes = diff(&pa, &pb);
+            println!("unit {}: {} → {}", pa.serial, pa.created_utc, pb.created_utc);
+            println!("{:<22} {:>14} {:>14} {:>9}", "coefficient", "before", "after", "z");
+            let mut drifted = Vec::new();
+            for c in &changes {
+                let z = c.z.map_or("-".to_string(), |z| format!("{z:+.2}"));
+                println!(
+                    "{:<22} {:>14} {:>14} {:>9}  {}",
+                    c.name,
+                    format::num(c.before),
+                    format::num(c.after),
+                    z,
+                    c.unit
+                );
+                if c.z.is_some_and(|z| z.abs() > threshold) {
+                    drifted.push(c.name.as_str());
+                }
+            }
+            if drifted.is_empty() {
+                println!("no coefficient moved by more than {threshold} standard errors");
+            } else {
+                println!("DRIFTED (|z| > {threshold}): {}", drifted.join(", "));
+                return Ok(Outcome::CheckFailed);
+            }
+        }
+    }
+    Ok(Outcome::Ok)
+}
