@@ -10,6 +10,7 @@
 //! `u = f(true)`; matrices row-major (`C[i][j]` is the weight of input j in output i).
 
 pub mod atomic;
+pub mod batch;
 pub mod check;
 pub mod correct;
 pub mod diagnose;

@@ -198,7 +198,7 @@ pub fn acceptance(
     let cal = Calibration::from_profile(profile)?;
     let check = check_session(session, &cal, Mode::Offline, Thresholds::default())?;
     let adequacy = if diagnose {
-        let model = profile.model()?;
+        let model = profile.fitted_model()?;
         let tr = tracks(session, &DerivativeConfig::default());
         let runs = fit_runs(session, &tr);
         let motions: Vec<&crate::session::MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();

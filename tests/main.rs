@@ -2,6 +2,7 @@
 
 mod allan;
 mod bad_input;
+mod batch;
 mod cli;
 mod common;
 mod diagnose;

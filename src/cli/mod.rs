@@ -1,6 +1,7 @@
 //! Subcommands. Parsing and printing only; every number comes from the library.
 
 mod accept;
+mod batch;
 mod check;
 mod compare;
 mod correct;
@@ -105,6 +106,8 @@ enum Command {
     Accept(accept::Args),
     /// The profile store: list units and histories, show the profile in force, diff two profiles.
     Profile(profile::Args),
+    /// Calibrate a production lot in parallel: a profile per unit, acceptance, outliers, reports.
+    Batch(batch::Args),
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -137,6 +140,7 @@ pub fn main() -> ExitCode {
         Command::Plan(a) => plan::run(a),
         Command::Accept(a) => accept::run(a),
         Command::Profile(a) => profile::run(a),
+        Command::Batch(a) => batch::run(a),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

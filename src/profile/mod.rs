@@ -227,6 +227,16 @@ impl Profile {
 
     /// Rebuilds the model with every coefficient held at its stored value (for correction).
     pub fn model(&self) -> Result<Model, ModelError> {
+        self.rebuild(true)
+    }
+
+    /// Rebuilds the model as it was fitted: the same effects, free coefficients (those the
+    /// fit held stay held), nonlinear parameters free (for re-fitting and `diagnose`).
+    pub fn fitted_model(&self) -> Result<Model, ModelError> {
+        self.rebuild(false)
+    }
+
+    fn rebuild(&self, fix_all: bool) -> Result<Model, ModelError> {
         let mut effects = Vec::with_capacity(self.effects.len());
         let mut nonlinear = Vec::new();
         for id in &self.effects {
@@ -240,7 +250,15 @@ impl Profile {
         }
         let mut m = Model::from_effects(&self.model, effects);
         for c in self.gyro.coefficients.iter().chain(&self.accel.coefficients) {
-            m.fix(&c.name, c.value)?;
+            if fix_all || c.status == crate::estimate::CoefStatus::Fixed {
+                m.fix(&c.name, c.value)?;
+            }
+        }
+        if !fix_all {
+            for id in nonlinear {
+                m.add_effect(id)?;
+            }
+            return Ok(m);
         }
         for id in nonlinear {
             let values = self.nonlinear.iter().filter(|p| p.effect == id).map(|p| p.value).collect();

@@ -1,0 +1,327 @@
+//! Batch calibration of a production lot: one session per unit, fitted in parallel, each
+//! unit's profile stored, every unit judged by acceptance rules, statistical outliers
+//! within the batch flagged, and the batch reported as CSV, JSON and self-contained HTML.
+//!
+//! A unit that cannot be processed (corrupt or missing files, unidentifiable model) fails
+//! with its reason; the rest of the batch completes. Profiles are written atomically as
+//! each unit finishes, so an interrupted batch keeps every finished profile; with
+//! `resume`, a unit whose store already holds a profile fitted on exactly the same files
+//! (same SHA-256) is not fitted again.
+//!
+//! Outliers: for every coefficient, the robust z-score (x − median)/(1.4826·MAD) over the
+//! units that were fitted; |z| > 5 flags the unit even when it passes the fixed rules.
+
+use crate::check::rules::{evaluate, Evidence, RuleResult, Rules};
+use crate::estimate::FitOptions;
+use crate::model::Model;
+use crate::profile::{history, save, Profile};
+use crate::session::Session;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Robust z-score above which a unit is an outlier within its batch.
+pub const OUTLIER_Z: f64 = 5.0;
+
+/// Settings of a batch.
+#[derive(Debug, Clone)]
+pub struct BatchOptions {
+    /// Model fitted to every unit.
+    pub model: Model,
+    /// Profile store.
+    pub store: PathBuf,
+    /// Acceptance rules.
+    pub rules: Rules,
+    /// Reuse profiles already fitted on the same files.
+    pub resume: bool,
+    /// Worker threads (0: all cores).
+    pub jobs: usize,
+}
+
+/// Verdict of one unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// Every rule passed.
+    Pass,
+    /// A rule failed.
+    Fail,
+    /// The unit could not be processed (files, identifiability).
+    Error,
+}
+
+/// The result of one unit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UnitResult {
+    /// The unit's folder.
+    pub dir: PathBuf,
+    /// Serial (when the manifest could be read).
+    pub serial: Option<String>,
+    /// Verdict.
+    pub verdict: Verdict,
+    /// Why it failed or errored (failed rules' names and details, or the error).
+    pub reasons: Vec<String>,
+    /// Every rule's outcome.
+    pub rules: Vec<RuleResult>,
+    /// Profile written (or reused).
+    pub profile: Option<PathBuf>,
+    /// Whether the profile was reused (`resume`).
+    pub reused: bool,
+    /// Fitted coefficient values by name.
+    pub coefficients: Vec<(String, f64)>,
+    /// Coefficients where the unit is a batch outlier, with their robust z.
+    pub outliers: Vec<(String, f64)>,
+}
+
+/// The whole batch.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BatchReport {
+    /// Units in folder order.
+    pub units: Vec<UnitResult>,
+    /// Per coefficient: (name, median, robust σ) over the fitted units.
+    pub spread: Vec<(String, f64, f64)>,
+}
+
+impl BatchReport {
+    /// Units that pass.
+    pub fn passed(&self) -> usize {
+        self.units.iter().filter(|u| u.verdict == Verdict::Pass).count()
+    }
+}
+
+/// The unit folders of a batch: every sub-folder of `dir` holding a `session.json`, sorted
+/// (a sub-folder without one is a unit whose manifest is missing).
+pub fn unit_dirs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut out: Vec<PathBuf> =
+        std::fs::read_dir(dir)?.filter_map(|e| e.ok()).map(|e| e.path()).filter(|p| p.is_dir()).collect();
+    out.sort();
+    Ok(out)
+}
+
+/// A profile already in the store fitted on exactly this session's files.
+fn existing(store: &Path, session: &Session) -> Option<(PathBuf, Profile)> {
+    let files: Vec<&str> = session.runs.iter().map(|r| r.rec.sha256.as_str()).collect();
+    history(store, &session.manifest.serial).ok()?.into_iter().rev().find_map(|(path, p)| {
+        let p = p.ok()?;
+        let used: Vec<&str> = p.runs.iter().map(|r| r.sha256.as_str()).collect();
+        (used == files).then_some((path, p))
+    })
+}
+
+fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
+    let mut r = UnitResult {
+        dir: dir.to_path_buf(),
+        serial: None,
+        verdict: Verdict::Error,
+        reasons: Vec::new(),
+        rules: Vec::new(),
+        profile: None,
+        reused: false,
+        coefficients: Vec::new(),
+        outliers: Vec::new(),
+    };
+    let manifest = dir.join("session.json");
+    let session = match Session::load(&manifest) {
+        Ok(s) => s,
+        Err(e) => {
+            r.reasons.push(format!("cannot read the session: {e}"));
+            return r;
+        }
+    };
+    r.serial = Some(session.manifest.serial.clone());
+    let (path, profile, reused) = match existing(&opts.store, &session).filter(|_| opts.resume) {
+        Some((path, p)) => (path, p, true),
+        None => {
+            let fit = match crate::pipeline::fit_session(&session, &opts.model, &FitOptions::default()) {
+                Ok(f) => f,
+                Err(e) => {
+                    r.reasons.push(format!("fit failed: {e}"));
+                    return r;
+                }
+            };
+            if let Err(e) = fit.ensure_identifiable() {
+                r.reasons.push(e.to_string());
+                return r;
+            }
+            let p = Profile::from_fit(&session, &opts.model, fit, session.warnings());
+            match save(&p, &opts.store) {
+                Ok(path) => (path, p, false),
+                Err(e) => {
+                    r.reasons.push(format!("cannot store the profile: {e}"));
+                    return r;
+                }
+            }
+        }
+    };
+    r.profile = Some(path);
+    r.reused = reused;
+    r.coefficients = profile
+        .gyro
+        .coefficients
+        .iter()
+        .chain(&profile.accel.coefficients)
+        .map(|c| (c.name.clone(), c.value))
+        .collect();
+    let diagnose = opts.rules.rules.iter().any(|x| matches!(x, crate::check::rules::Rule::Adequate { .. }));
+    let acc = match crate::pipeline::acceptance(&profile, &session, diagnose) {
+        Ok(a) => a,
+        Err(e) => {
+            r.reasons.push(format!("check failed: {e}"));
+            return r;
+        }
+    };
+    let ev = Evidence { check: Some(&acc.check), adequacy: acc.adequacy.clone() };
+    r.rules = evaluate(&opts.rules, &profile, &ev);
+    r.reasons = r.rules.iter().filter(|x| !x.pass).map(|x| format!("{}: {}", x.rule, x.detail)).collect();
+    r.verdict = if r.reasons.is_empty() { Verdict::Pass } else { Verdict::Fail };
+    r
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Fits, stores and judges every unit (in parallel), then flags batch outliers.
+/// `on_done` is called as each unit finishes (for progress display).
+pub fn run(
+    dirs: &[PathBuf],
+    opts: &BatchOptions,
+    on_done: &(dyn Fn(&UnitResult) + Sync),
+) -> Result<BatchReport, rayon::ThreadPoolBuildError> {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(opts.jobs).build()?;
+    let mut units: Vec<UnitResult> = pool.install(|| {
+        dirs.par_iter()
+            .map(|d| {
+                let r = process_unit(d, opts);
+                on_done(&r);
+                r
+            })
+            .collect()
+    });
+    // Robust spread of every coefficient over the fitted units.
+    let mut names: Vec<String> = Vec::new();
+    for u in &units {
+        for (n, _) in &u.coefficients {
+            if !names.contains(n) {
+                names.push(n.clone());
+            }
+        }
+    }
+    let mut spread = Vec::with_capacity(names.len());
+    for name in &names {
+        let mut vals: Vec<f64> =
+            units.iter().filter_map(|u| u.coefficients.iter().find(|c| &c.0 == name).map(|c| c.1)).collect();
+        if vals.len() < 5 {
+            continue;
+        }
+        let med = median(&mut vals);
+        let mut dev: Vec<f64> = vals.iter().map(|v| (v - med).abs()).collect();
+        let sigma = 1.4826 * median(&mut dev);
+        spread.push((name.clone(), med, sigma));
+        if sigma > 0.0 {
+            for u in &mut units {
+                if let Some(c) = u.coefficients.iter().find(|c| &c.0 == name) {
+                    let z = (c.1 - med) / sigma;
+                    if z.abs() > OUTLIER_Z {
+                        u.outliers.push((name.clone(), z));
+                    }
+                }
+            }
+        }
+    }
+    Ok(BatchReport { units, spread })
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// The batch as CSV: one row per unit.
+pub fn to_csv(r: &BatchReport) -> String {
+    let mut s = String::from("unit,serial,verdict,reasons,outliers,profile\n");
+    for u in &r.units {
+        let outl: Vec<String> = u.outliers.iter().map(|(n, z)| format!("{n} (z = {z:+.1})")).collect();
+        let row = [
+            u.dir.display().to_string(),
+            u.serial.clone().unwrap_or_default(),
+            format!("{:?}", u.verdict).to_lowercase(),
+            u.reasons.join("; "),
+            outl.join("; "),
+            u.profile.as_ref().map(|p| p.display().to_string()).unwrap_or_default(),
+        ];
+        let cells: Vec<String> = row.iter().map(|c| csv_field(c)).collect();
+        s.push_str(&cells.join(","));
+        s.push('\n');
+    }
+    s
+}
+
+/// The batch as a self-contained HTML page: verdict table, then each coefficient's
+/// distribution over the batch (histogram) with its median and robust σ.
+pub fn to_html(r: &BatchReport, title: &str) -> String {
+    use crate::diagnose::report::{esc, page_start};
+    use std::fmt::Write;
+    let mut s = page_start(title);
+    let _ = write!(
+        s,
+        "<p class=\"verdict\">{} of {} units pass; {} flagged as batch outliers (|robust z| &gt; {OUTLIER_Z}).</p>",
+        r.passed(),
+        r.units.len(),
+        r.units.iter().filter(|u| !u.outliers.is_empty()).count()
+    );
+    s.push_str("<table><tr><th>unit</th><th>serial</th><th>verdict</th><th>reasons</th><th>outlier</th></tr>");
+    for u in &r.units {
+        let outl: Vec<String> = u.outliers.iter().map(|(n, z)| format!("{n} (z = {z:+.1})")).collect();
+        let colour = match u.verdict {
+            Verdict::Pass => "#dfd",
+            Verdict::Fail => "#fdd",
+            Verdict::Error => "#fcc",
+        };
+        let _ = write!(
+            s,
+            "<tr style=\"background:{colour}\"><td style=\"text-align:left\">{}</td><td>{}</td><td>{:?}</td><td style=\"text-align:left\">{}</td><td style=\"text-align:left\">{}</td></tr>",
+            esc(&u.dir.display().to_string()),
+            esc(u.serial.as_deref().unwrap_or("-")),
+            u.verdict,
+            esc(&u.reasons.join("; ")),
+            esc(&outl.join("; "))
+        );
+    }
+    s.push_str("</table><h2>coefficients across the batch</h2>");
+    for (name, med, sigma) in &r.spread {
+        let vals: Vec<f64> =
+            r.units.iter().filter_map(|u| u.coefficients.iter().find(|c| &c.0 == name).map(|c| c.1)).collect();
+        let (lo, hi) = vals.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| (a.0.min(v), a.1.max(v)));
+        let bins = 20usize;
+        let width = ((hi - lo) / bins as f64).max(f64::MIN_POSITIVE);
+        let mut counts = vec![0usize; bins];
+        for v in &vals {
+            counts[(((v - lo) / width) as usize).min(bins - 1)] += 1;
+        }
+        let bars: Vec<(String, f64)> = counts
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| (format!("{:.3e}", lo + (i as f64 + 0.5) * width), c as f64))
+            .collect();
+        s.push_str(&crate::diagnose::plot::bars(
+            &format!("{name}: median {med:.6e}, robust σ {sigma:.2e}"),
+            "value (bin centre)",
+            "units",
+            &bars,
+        ));
+    }
+    s.push_str("</body></html>\n");
+    s
+}
