@@ -97,3 +97,103 @@ fn profile_list_show_at_and_diff_find_a_drifted_coefficient() {
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("days old"), "{err}");
 }
+
+#[test]
+fn imucal_export_import_reproduces_the_common_coefficients_and_kalibr_states_what_is_lost() {
+    use crate::common::run_in;
+    use crosscal::profile::Profile;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (code, _, err) = run_in(
+        d,
+        &["simulate", "-o", "s", "--duration", "12", "--rate-hz", "50", "--gyro-bias", "0.1,-0.2,0.05"]
+            .into_iter()
+            .chain(["--accel-bias", "0.002,0,-0.001", "--hidden", "gyro-g-sensitivity", "--set", "gyro.g_xy=0.0004"])
+            .collect::<Vec<_>>(),
+    );
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err) = run_in(d, &["fit", "s/session.json", "--effect", "gyro-g-sensitivity"]);
+    assert_eq!(code, 0, "{err}");
+    let path = out.lines().find_map(|l| l.strip_prefix("profile written to ")).unwrap().to_string();
+    let (code, _, err) = run_in(d, &["profile", "export", &path, "--to", "imucal", "-o", "cal.json"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("gyro-angular-acceleration"), "C_ε is reported as not representable: {err}");
+    let (code, out, err) = run_in(d, &["profile", "import-imucal", "cal.json", "--serial", "IMPORTED-1"]);
+    assert_eq!(code, 0, "{err}");
+    let back = Profile::read(&d.join(out.trim().rsplit(" as ").next().unwrap())).unwrap();
+    let orig = Profile::read(&d.join(&path)).unwrap();
+    let mut compared = 0;
+    for c in back
+        .gyro
+        .coefficients
+        .iter()
+        .chain(&back.accel.coefficients)
+        .filter(|c| c.status == crosscal::estimate::CoefStatus::Fitted)
+    {
+        let o = orig.gyro.get(&c.name).or_else(|| orig.accel.get(&c.name)).unwrap();
+        let tol = 4.0 * f64::EPSILON * o.value.abs().max(1e-300);
+        assert!((c.value - o.value).abs() <= tol, "{}: {} vs {}", c.name, c.value, o.value);
+        compared += 1;
+    }
+    assert_eq!(compared, 3 + 9 + 9 + 3 + 9, "biases, C, G, accel biases, K");
+    // The imported profile corrects data like any other.
+    let (code, _, err) =
+        run_in(d, &["correct", "--profile", out.trim().rsplit(" as ").next().unwrap(), "s/cone+10.csv", "-o", "c.csv"]);
+    assert_eq!(code, 0, "{err}");
+    // Kalibr: the YAML carries the intrinsics and says what it leaves out.
+    let (code, _, err) = run_in(d, &["profile", "export", &path, "--to", "kalibr", "-o", "imu.yaml"]);
+    assert_eq!(code, 0, "{err}");
+    let y = std::fs::read_to_string(d.join("imu.yaml")).unwrap();
+    for key in [
+        "gyroscope_noise_density",
+        "accelerometer_random_walk",
+        "gyroscope_M",
+        "gyroscope_A",
+        "accelerometer_M",
+        "Not represented",
+    ] {
+        assert!(y.contains(key), "{key}: {y}");
+    }
+}
+
+#[test]
+fn imucal_reference_calibration_imports_and_exports_to_the_same_matrices() {
+    let file = std::path::Path::new("../shared/data/real/imucal_annotated_session/reference_example_cal.json");
+    let Ok(text) = std::fs::read_to_string(file) else {
+        eprintln!("skipped: {} not present", file.display());
+        return;
+    };
+    let p = crosscal::profile::interop::from_imucal(file, &text, "IMUCAL-REF", 9.81).unwrap();
+    assert_eq!(p.input_units.gyro, crosscal::session::GyroUnit::Raw);
+    let (v, _) = crosscal::profile::interop::to_imucal(&p);
+    let orig: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let m = |v: &serde_json::Value, k: &str| -> Vec<Vec<f64>> {
+        v[k].as_array()
+            .unwrap()
+            .iter()
+            .map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect())
+            .collect()
+    };
+    let prod = |a: Vec<Vec<f64>>, b: Vec<Vec<f64>>| -> Vec<Vec<f64>> {
+        (0..3).map(|i| (0..3).map(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()).collect()).collect()
+    };
+    for (k, r) in [("K_a", "R_a"), ("K_g", "R_g")] {
+        let (a, b) = (prod(m(&orig, k), m(&orig, r)), prod(m(&v, k), m(&v, r)));
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!(
+                    (a[i][j] - b[i][j]).abs() <= 1e-12 * a[i][i].abs(),
+                    "{k}{r}[{i}][{j}]: {} vs {}",
+                    a[i][j],
+                    b[i][j]
+                );
+            }
+        }
+    }
+    for k in ["b_a", "b_g"] {
+        for i in 0..3 {
+            let (a, b) = (orig[k][i].as_f64().unwrap(), v[k][i].as_f64().unwrap());
+            assert!((a - b).abs() <= 1e-12 * a.abs().max(1.0), "{k}[{i}]");
+        }
+    }
+}

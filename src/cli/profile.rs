@@ -45,6 +45,34 @@ enum Sub {
         #[arg(long, default_value_t = 3.0)]
         threshold: f64,
     },
+    /// Export a profile to imucal's calibration JSON (Ferraris) or Kalibr's imu.yaml.
+    Export {
+        /// Profile file.
+        profile: PathBuf,
+        /// Target format: `imucal` or `kalibr`.
+        #[arg(long)]
+        to: String,
+        /// Output file (never overwritten).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// IMU update rate for Kalibr, Hz.
+        #[arg(long, default_value_t = 100.0)]
+        rate_hz: f64,
+    },
+    /// Import an imucal Ferraris calibration JSON as a profile of a unit in the store.
+    ImportImucal {
+        /// imucal calibration JSON.
+        file: PathBuf,
+        /// Serial of the unit.
+        #[arg(long)]
+        serial: String,
+        /// Local gravity (used when imucal's input unit is g), m/s².
+        #[arg(long, default_value_t = 9.80665)]
+        g: f64,
+        /// Profile store.
+        #[arg(long, default_value = "calib-profiles")]
+        store: PathBuf,
+    },
 }
 
 fn list(store: &Path, serial: Option<&str>) -> anyhow::Result<()> {
@@ -123,6 +151,33 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 return Ok(Outcome::CheckFailed);
             }
         }
+        Sub::Export { profile, to, output, rate_hz } => export(&profile, &to, &output, rate_hz)?,
+        Sub::ImportImucal { file, serial, g, store } => {
+            let text =
+                std::fs::read_to_string(&file).map_err(|e| anyhow::anyhow!("reading {}: {e}", file.display()))?;
+            let p = crosscal::profile::interop::from_imucal(&file, &text, &serial, g)?;
+            let path = crosscal::profile::save(&p, &store)?;
+            println!("imported {} as {}", file.display(), path.display());
+        }
     }
     Ok(Outcome::Ok)
+}
+
+fn export(profile: &Path, to: &str, output: &Path, rate_hz: f64) -> anyhow::Result<()> {
+    let p = Profile::read(profile)?;
+    let (text, lost) = match to {
+        "imucal" => {
+            let (v, lost) = crosscal::profile::interop::to_imucal(&p);
+            (serde_json::to_string_pretty(&v)? + "\n", lost)
+        }
+        "kalibr" => crosscal::profile::interop::to_kalibr(&p, rate_hz),
+        other => anyhow::bail!("--to {other}: expected imucal or kalibr"),
+    };
+    crosscal::atomic::write_new(output, text.as_bytes())
+        .map_err(|e| anyhow::anyhow!("writing {} (never overwritten): {e}", output.display()))?;
+    println!("exported {} to {} ({to})", profile.display(), output.display());
+    for l in lost {
+        eprintln!("not represented: {l}");
+    }
+    Ok(())
 }

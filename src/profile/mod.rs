@@ -6,6 +6,7 @@
 //! standard error, the covariance of the fitted ones, residual statistics, the runs used
 //! (file name and SHA-256) and the conventions of the numbers.
 
+pub mod interop;
 use crate::estimate::{CoefStatus, Fit, SensorFit};
 use crate::model::{find_effect, Model, ModelError, SensorKind};
 use crate::session::{Session, Units};
@@ -347,7 +348,7 @@ impl Profile {
 }
 
 /// The current UTC time, RFC 3339 to the millisecond.
-fn now_utc() -> String {
+pub(crate) fn now_utc() -> String {
     let now = jiff::Timestamp::now();
     now.round(jiff::Unit::Millisecond).unwrap_or(now).to_string()
 }
