@@ -89,6 +89,52 @@ fn batch() {
     );
 }
 
+/// Runs a command, polling its peak resident set (VmHWM) until it exits: (seconds, MB).
+fn measure(cmd: &mut std::process::Command) -> (f64, f64) {
+    let t0 = Instant::now();
+    let mut child = cmd.stdout(std::process::Stdio::null()).spawn().expect("spawn");
+    let status = format!("/proc/{}/status", child.id());
+    let mut peak_kb = 0.0f64;
+    loop {
+        if let Ok(text) = std::fs::read_to_string(&status) {
+            if let Some(v) = text.lines().find_map(|l| l.strip_prefix("VmHWM:")) {
+                peak_kb = peak_kb.max(v.trim().trim_end_matches("kB").trim().parse().unwrap_or(0.0));
+            }
+        }
+        if let Ok(Some(st)) = child.try_wait() {
+            assert!(st.success(), "{cmd:?} failed");
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    (t0.elapsed().as_secs_f64(), peak_kb / 1024.0)
+}
+
+/// End-to-end `crosscal fit` against the pandas + numpy peer on the same 10-run sessions.
+fn fit_vs_peer(sizes: &[usize]) {
+    use crosscal::simulate::{conic_plan, cyclic_mounts, write_session, SimConfig};
+    let peer = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/peer/fit_numpy.py");
+    let tmp = tempfile::tempdir().expect("temp dir");
+    for &n in sizes {
+        let mut c = SimConfig::paper();
+        c.runs = conic_plan(&[10.0, -10.0, 20.0, -20.0, 15.0], &[10.0], &cyclic_mounts(2), n as f64 / 1000.0);
+        c.gyro_noise_deg_s = 0.002;
+        c.accel_noise_g = 2e-5;
+        let dir = tmp.path().join(format!("s{n}"));
+        let manifest = write_session(&c.generate(), &dir).expect("write session");
+        let (tc, mc) = measure(
+            std::process::Command::new(env!("CARGO_BIN_EXE_crosscal")).args(["fit", "--dry-run"]).arg(&manifest),
+        );
+        let (tp, mp) = measure(std::process::Command::new("python3").arg(peer).arg(&manifest));
+        println!(
+            "fit     | {n:>9} samples, 10 runs: crosscal {tc:.2} s {mc:.0} MB | pandas+numpy {tp:.2} s {mp:.0} MB | {:.1}× faster, {:.2}× the memory",
+            tp / tc,
+            mc / mp
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
 fn main() {
     let only = std::env::args().skip(1).find(|a| !a.starts_with('-'));
     if only.as_deref().is_none_or(|o| "noise".contains(o)) {
@@ -96,5 +142,9 @@ fn main() {
     }
     if only.as_deref().is_none_or(|o| "batch".contains(o)) {
         batch();
+    }
+    if only.as_deref().is_none_or(|o| "fit".contains(o)) {
+        let big = std::env::var("CROSSCAL_BENCH_1E7").is_ok();
+        fit_vs_peer(if big { &[100_000, 1_000_000, 10_000_000] } else { &[100_000, 1_000_000] });
     }
 }

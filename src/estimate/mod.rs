@@ -571,16 +571,22 @@ struct AutoCov {
 
 impl AutoCov {
     fn new(max_lag: usize) -> Self {
-        Self { ring: vec![0.0; max_lag + 1], sums: vec![0.0; max_lag + 1], n: 0 }
+        // The ring is stored twice over (value at p and p + len) so that the last L + 2
+        // values are always one contiguous slice: no modulo in the per-sample loop.
+        Self { ring: vec![0.0; 2 * (max_lag + 1)], sums: vec![0.0; max_lag + 1], n: 0 }
     }
 
     #[inline]
     fn push(&mut self, r: f64) {
-        let len = self.ring.len();
+        let len = self.sums.len();
         let pos = self.n % len;
         self.ring[pos] = r;
-        for l in 0..len.min(self.n + 1) {
-            self.sums[l] += r * self.ring[(pos + len - l) % len];
+        self.ring[pos + len] = r;
+        // ring[pos + len - l] is the value l samples back, l = 0..len.
+        let window = &self.ring[pos + 1..pos + len + 1];
+        let have = len.min(self.n + 1);
+        for (l, s) in self.sums.iter_mut().enumerate().take(have) {
+            *s += r * window[len - 1 - l];
         }
         self.n += 1;
     }

@@ -22,6 +22,9 @@ pub struct QrAccumulator {
 impl QrAccumulator {
     /// Accumulator for rows of width `p`, re-factoring every `chunk` rows.
     pub fn new(p: usize, chunk: usize) -> Self {
+        // The blocks are narrow (tens of columns): faer's thread pool would only add wake-up
+        // latency, and crosscal parallelises across units and runs instead.
+        faer::set_global_parallelism(faer::Par::Seq);
         let chunk = chunk.max(p).max(1);
         Self { p, chunk, buf: Mat::zeros(p + chunk, p), filled: 0, rows: 0, col_sq: vec![0.0; p] }
     }

@@ -85,8 +85,12 @@ fn csv_err(
 
 /// Reads a recording file. `g_m_s2` converts `g` to m/s².
 pub fn read_recording(path: &Path, units: &Units, g_m_s2: f64, opts: ReadOptions) -> Result<Recording, SessionError> {
-    let bytes = std::fs::read(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
-    parse_recording(path, &bytes, units, g_m_s2, opts)
+    let io = |source| SessionError::Io { path: path.to_path_buf(), source };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let size = file.metadata().map_err(io)?.len() as usize;
+    // Streamed: the file is never held whole; a gap error re-reads it to name the line.
+    let reopen = || std::fs::File::open(path).ok().map(std::io::BufReader::new);
+    read_stream(path, std::io::BufReader::with_capacity(1 << 20, file), size / 64, units, g_m_s2, opts, reopen)
 }
 
 /// One CSV row converted to SI (stand-frame reference columns when requested).
@@ -112,12 +116,17 @@ pub struct Row {
 struct Hashing<R> {
     inner: R,
     hash: Sha256,
+    /// A byte other than ASCII whitespace has passed.
+    nonblank: bool,
 }
 
 impl<R: std::io::Read> std::io::Read for Hashing<R> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         let n = self.inner.read(buf)?;
         self.hash.update(&buf[..n]);
+        if !self.nonblank {
+            self.nonblank = buf[..n].iter().any(|b| !b.is_ascii_whitespace());
+        }
         Ok(n)
     }
 }
@@ -151,7 +160,7 @@ impl<R: std::io::Read> RowReader<R> {
             .flexible(true)
             .trim(csv::Trim::All)
             .buffer_capacity(1 << 16)
-            .from_reader(Hashing { inner: input, hash: Sha256::new() });
+            .from_reader(Hashing { inner: input, hash: Sha256::new(), nonblank: false });
         let mut rec = csv::ByteRecord::new();
 
         // Header: the first record that is not empty/comment.
@@ -159,6 +168,15 @@ impl<R: std::io::Read> RowReader<R> {
         let mut names: Vec<String> = Vec::new();
         loop {
             match rdr.read_byte_record(&mut rec) {
+                Ok(false) if !rdr.get_ref().nonblank => {
+                    return Err(csv_err(
+                        Problem::Empty,
+                        &path,
+                        1,
+                        "-",
+                        "the file is empty: expected a header line 't,gx,gy,gz,ax,ay,az[,temp]' and samples",
+                    ));
+                }
                 Ok(false) => {
                     return Err(csv_err(
                         Problem::Header,
@@ -377,17 +395,20 @@ pub fn parse_recording(
     g_m_s2: f64,
     opts: ReadOptions,
 ) -> Result<Recording, SessionError> {
-    if bytes.iter().all(|b| b.is_ascii_whitespace()) {
-        return Err(csv_err(
-            Problem::Empty,
-            path,
-            1,
-            "-",
-            "the file is empty: expected a header line 't,gx,gy,gz,ax,ay,az[,temp]' and samples",
-        ));
-    }
-    let mut rows = RowReader::new(path, bytes, units, g_m_s2, opts)?;
-    let cap = bytes.len() / 64;
+    read_stream(path, bytes, bytes.len() / 64, units, g_m_s2, opts, || Some(bytes))
+}
+
+/// Reads a recording from a stream; `reopen` gives the bytes again to locate a gap's line.
+fn read_stream<R: std::io::Read, S: std::io::Read>(
+    path: &Path,
+    input: R,
+    cap: usize,
+    units: &Units,
+    g_m_s2: f64,
+    opts: ReadOptions,
+    reopen: impl Fn() -> Option<S>,
+) -> Result<Recording, SessionError> {
+    let mut rows = RowReader::new(path, input, units, g_m_s2, opts)?;
     let mut out = Recording {
         t_s: Vec::with_capacity(cap),
         gyro: Vec::with_capacity(cap),
@@ -418,12 +439,12 @@ pub fn parse_recording(
         return Err(csv_err(Problem::Empty, path, header_line, "-", "the file has a header but no samples"));
     }
     out.reference = refc;
-    out.sha256 = sha256_hex(bytes);
+    out.sha256 = rows.sha256();
     let kt = units.time.to_s();
     let gaps = find_gaps(&out.t_s, kt, path);
     if opts.strict {
         if let Some((k, first)) = gaps.first() {
-            let line = line_of_sample(bytes, *k).unwrap_or(header_line);
+            let line = reopen().and_then(|r| line_of_sample(r, *k)).unwrap_or(header_line);
             return Err(csv_err(
                 Problem::Gap,
                 path,
@@ -440,8 +461,8 @@ pub fn parse_recording(
 }
 
 /// 1-based line of the k-th sample (0-based), by re-reading the bytes (used on errors only).
-fn line_of_sample(bytes: &[u8], k: usize) -> Option<u64> {
-    let mut rdr = csv::ReaderBuilder::new().has_headers(false).comment(Some(b'#')).flexible(true).from_reader(bytes);
+fn line_of_sample(input: impl std::io::Read, k: usize) -> Option<u64> {
+    let mut rdr = csv::ReaderBuilder::new().has_headers(false).comment(Some(b'#')).flexible(true).from_reader(input);
     let mut rec = csv::ByteRecord::new();
     let mut seen = 0usize;
     let mut header = true;
