@@ -29,3 +29,19 @@ pub fn run_in(dir: &std::path::Path, args: &[&str]) -> (i32, String, String) {
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
+
+/// Maps `f` over `items` on two threads, keeping the order.
+pub fn par_map<I: Sync, T: Send>(items: &[I], f: impl Fn(&I) -> T + Sync) -> Vec<T> {
+    let mut out = Vec::with_capacity(items.len());
+    std::thread::scope(|s| {
+        let f = &f;
+        let handles: Vec<_> = items
+            .chunks(items.len().div_ceil(2).max(1))
+            .map(|chunk| s.spawn(move || chunk.iter().map(f).collect::<Vec<T>>()))
+            .collect();
+        for h in handles {
+            out.extend(h.join().expect("worker"));
+        }
+    });
+    out
+}

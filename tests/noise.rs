@@ -18,29 +18,11 @@ fn noisy(seed: u64) -> SimConfig {
 fn fits(seeds: std::ops::Range<u64>) -> Vec<(SimConfig, Fit)> {
     let seeds: Vec<u64> = seeds.collect();
     let model = Model::default_model();
-    let mut out: Vec<(SimConfig, Fit)> = Vec::with_capacity(seeds.len());
-    std::thread::scope(|s| {
-        let handles: Vec<_> = seeds
-            .chunks(seeds.len().div_ceil(2).max(1))
-            .map(|chunk| {
-                let model = model.clone();
-                s.spawn(move || {
-                    chunk
-                        .iter()
-                        .map(|&seed| {
-                            let cfg = noisy(seed);
-                            let f = fit_session(&cfg.generate(), &model, &FitOptions::default()).unwrap();
-                            (cfg, f)
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        for h in handles {
-            out.extend(h.join().unwrap());
-        }
-    });
-    out
+    crate::common::par_map(&seeds, |&seed| {
+        let cfg = noisy(seed);
+        let f = fit_session(&cfg.generate(), &model, &FitOptions::default()).unwrap();
+        (cfg, f)
+    })
 }
 
 #[test]

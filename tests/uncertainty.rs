@@ -37,29 +37,11 @@ fn config(seed: u64, ar1: bool) -> SimConfig {
 fn monte_carlo(count: u64, ar1: bool) -> Vec<(SimConfig, Fit)> {
     let seeds: Vec<u64> = (0..count).map(|s| 50_000 + s).collect();
     let model = Model::default_model();
-    let mut out = Vec::with_capacity(seeds.len());
-    std::thread::scope(|s| {
-        let handles: Vec<_> = seeds
-            .chunks(seeds.len().div_ceil(2))
-            .map(|chunk| {
-                let model = model.clone();
-                s.spawn(move || {
-                    chunk
-                        .iter()
-                        .map(|&seed| {
-                            let cfg = config(seed, ar1);
-                            let f = fit_session(&cfg.generate(), &model, &FitOptions::default()).unwrap();
-                            (cfg, f)
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        for h in handles {
-            out.extend(h.join().unwrap());
-        }
-    });
-    out
+    crate::common::par_map(&seeds, |&seed| {
+        let cfg = config(seed, ar1);
+        let f = fit_session(&cfg.generate(), &model, &FitOptions::default()).unwrap();
+        (cfg, f)
+    })
 }
 
 /// Fraction of (simulation, coefficient) pairs whose 95 % interval holds the truth.

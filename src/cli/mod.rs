@@ -165,6 +165,38 @@ pub fn parse_triple(s: &str) -> Result<[f64; 3], String> {
 #[derive(Debug, Clone)]
 pub struct List(pub Vec<f64>);
 
+/// A set of conic stand runs on the command line (every mount × cone angle × rate).
+#[derive(Debug, clap::Args)]
+pub struct RunSet {
+    /// Stand rates ω_s, deg/s (sign = direction), comma-separated.
+    #[arg(long, value_parser = parse_list, allow_hyphen_values = true, default_value = "10,-10,20")]
+    pub rates: List,
+    /// Cone angles α, degrees, comma-separated.
+    #[arg(long, value_parser = parse_list, default_value = "10,20")]
+    pub cone_angles: List,
+    /// Number of cyclic mounts (1 = nominal only, 2 adds [+y,+z,+x], 3 adds [+z,+x,+y]).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
+    pub mounts: u8,
+    /// Duration of each run, s.
+    #[arg(long, default_value_t = 36.0)]
+    pub duration: f64,
+    /// Sample rate, Hz.
+    #[arg(long, default_value_t = 100.0)]
+    pub rate_hz: f64,
+}
+
+impl RunSet {
+    /// The runs.
+    pub fn plan(&self) -> Vec<crosscal::simulate::RunPlan> {
+        crosscal::simulate::conic_plan(
+            &self.rates.0,
+            &self.cone_angles.0,
+            &crosscal::simulate::cyclic_mounts(self.mounts as usize),
+            self.duration,
+        )
+    }
+}
+
 /// Parses a comma-separated list of finite numbers.
 pub fn parse_list(s: &str) -> Result<List, String> {
     let v: Result<Vec<f64>, _> = s.split(',').map(|p| p.trim().parse::<f64>()).collect();

@@ -1,33 +1,20 @@
 //! `crosscal plan`: predicted uncertainties of a proposed calibration, before recording.
 
 use super::fit::build_model;
-use super::{format, parse_list, List, Outcome};
+use super::{format, Outcome};
 use anyhow::Context;
 use crosscal::estimate::CoefStatus;
 use crosscal::model::SensorKind;
 use crosscal::noise::NoiseReport;
 use crosscal::plan::{default_candidates, plan, PlanSpec};
-use crosscal::simulate::{conic_plan, cyclic_mounts};
 use std::path::PathBuf;
 
 /// Options of `plan`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Stand rates ω_s, deg/s (sign = direction), comma-separated.
-    #[arg(long, value_parser = parse_list, allow_hyphen_values = true, default_value = "10,-10,20")]
-    rates: List,
-    /// Cone angles α, degrees, comma-separated.
-    #[arg(long, value_parser = parse_list, default_value = "10,20")]
-    cone_angles: List,
-    /// Number of cyclic mounts (1 = nominal only, 2 adds [+y,+z,+x], 3 adds [+z,+x,+y]).
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
-    mounts: u8,
-    /// Duration of each run, s.
-    #[arg(long, default_value_t = 36.0)]
-    duration: f64,
-    /// Sample rate, Hz.
-    #[arg(long, default_value_t = 100.0)]
-    rate_hz: f64,
+    /// The stand runs.
+    #[command(flatten)]
+    runs: super::RunSet,
     /// Model preset: `default` or `paper`.
     #[arg(long, default_value = "default")]
     model: String,
@@ -60,13 +47,13 @@ fn densities(r: &NoiseReport) -> (Option<f64>, Option<f64>) {
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
-    if !(a.duration > 0.0 && a.rate_hz > 0.0 && a.arw > 0.0 && a.vrw > 0.0) {
+    if !(a.runs.duration > 0.0 && a.runs.rate_hz > 0.0 && a.arw > 0.0 && a.vrw > 0.0) {
         anyhow::bail!("--duration, --rate-hz, --arw and --vrw must be positive");
     }
     let model = build_model(&a.model, &a.effects, &[])?;
     let mut spec = PlanSpec {
-        runs: conic_plan(&a.rates.0, &a.cone_angles.0, &cyclic_mounts(a.mounts as usize), a.duration),
-        sample_rate_hz: a.rate_hz,
+        runs: a.runs.plan(),
+        sample_rate_hz: a.runs.rate_hz,
         gyro_density: a.arw.to_radians() / 60.0,
         accel_density: a.vrw / 60.0,
     };

@@ -3,7 +3,7 @@
 use super::{parse_list, parse_triple, List, Outcome};
 use anyhow::Context;
 use crosscal::model::{SensorKind, AXES};
-use crosscal::simulate::{conic_plan, cyclic_mounts, write_session, SimConfig};
+use crosscal::simulate::{write_session, SimConfig};
 use std::path::PathBuf;
 
 /// Options of `simulate`.
@@ -31,21 +31,9 @@ pub struct Args {
     /// Random seed of the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Stand rates ω_s, deg/s (sign = direction), comma-separated.
-    #[arg(long, value_parser = parse_list, allow_hyphen_values = true, default_value = "10,-10,20")]
-    rates: List,
-    /// Cone angles α, degrees, comma-separated.
-    #[arg(long, value_parser = parse_list, default_value = "10,20")]
-    cone_angles: List,
-    /// Number of cyclic mounts (1 = nominal only, 2 adds [+y,+z,+x], 3 adds [+z,+x,+y]).
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=3))]
-    mounts: u8,
-    /// Duration of each run, s.
-    #[arg(long, default_value_t = 36.0)]
-    duration: f64,
-    /// Sample rate, Hz.
-    #[arg(long, default_value_t = 100.0)]
-    rate_hz: f64,
+    /// The stand runs.
+    #[command(flatten)]
+    runs: super::RunSet,
     /// Serial number of the simulated unit.
     #[arg(long)]
     serial: Option<String>,
@@ -91,17 +79,17 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if a.preset != "paper" && a.preset != "static" {
         anyhow::bail!("unknown preset '{}': expected 'paper' or 'static'", a.preset);
     }
-    if !(a.duration > 0.0 && a.rate_hz > 0.0 && a.gyro_noise >= 0.0 && a.accel_noise >= 0.0) {
+    if !(a.runs.duration > 0.0 && a.runs.rate_hz > 0.0 && a.gyro_noise >= 0.0 && a.accel_noise >= 0.0) {
         anyhow::bail!("--duration and --rate-hz must be positive and noise levels non-negative");
     }
     let mut cfg = SimConfig::paper();
     cfg.gyro_noise_deg_s = a.gyro_noise;
     cfg.accel_noise_g = a.accel_noise;
     cfg.seed = a.seed;
-    cfg.sample_rate_hz = a.rate_hz;
-    cfg.runs = conic_plan(&a.rates.0, &a.cone_angles.0, &cyclic_mounts(a.mounts as usize), a.duration);
+    cfg.sample_rate_hz = a.runs.rate_hz;
+    cfg.runs = a.runs.plan();
     if a.preset == "static" {
-        cfg.runs = SimConfig::static_recording(a.duration, a.rate_hz).runs;
+        cfg.runs = SimConfig::static_recording(a.runs.duration, a.runs.rate_hz).runs;
     }
     let deg = std::f64::consts::PI / 180.0;
     let coloured = [a.arw, a.gyro_bias_instability, a.rrw, a.vrw, a.accel_bias_instability, a.accel_random_walk];
