@@ -135,10 +135,44 @@ fn fit_vs_peer(sizes: &[usize]) {
     }
 }
 
+/// Peak resident set of this process so far, MB.
+fn own_peak_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|t| {
+            t.lines().find_map(|l| l.strip_prefix("VmHWM:")).map(|v| v.trim().trim_end_matches("kB").trim().to_string())
+        })
+        .and_then(|v| v.parse::<f64>().ok())
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+/// One channel of 1e8 samples: time and peak memory (the 800 MB input buffer dominates).
+fn noise_1e8() {
+    let n = 100_000_000usize;
+    let p = NoiseProcess { white_density: 1e-3, ..Default::default() };
+    let mut rng = ChaCha8Rng::seed_from_u64(2);
+    let mut g = p.generator(0.01, n as f64 * 0.01);
+    let mut data: Vec<f64> = (0..n).map(|_| g.next_sample(&mut rng)).collect();
+    let before = own_peak_mb();
+    let t0 = Instant::now();
+    let r = analyse_channel("gx", "rad/s", &mut data, 0.01, NoiseOptions::default()).expect("analysis");
+    println!(
+        "noise   | Allan deviation, 1e8 samples, one channel | {:.2} s; peak RSS {:.0} MB with an {:.0} MB input buffer ({:.0} MB before analysis); N = {:.4e}",
+        t0.elapsed().as_secs_f64(),
+        own_peak_mb(),
+        n as f64 * 8.0 / 1048576.0,
+        before,
+        r.white_density.unwrap_or(f64::NAN)
+    );
+}
+
 fn main() {
     let only = std::env::args().skip(1).find(|a| !a.starts_with('-'));
     if only.as_deref().is_none_or(|o| "noise".contains(o)) {
         noise();
+        if std::env::var("CROSSCAL_BENCH_1E8").is_ok() {
+            noise_1e8();
+        }
     }
     if only.as_deref().is_none_or(|o| "batch".contains(o)) {
         batch();
