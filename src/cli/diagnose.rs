@@ -5,7 +5,6 @@ use super::{format, Outcome};
 use anyhow::Context;
 use crosscal::diagnose::{diagnose, ChannelReport, Verdict};
 use crosscal::estimate::FitOptions;
-use crosscal::model::SensorKind;
 use crosscal::motion::DerivativeConfig;
 use crosscal::pipeline::{fit_runs, tracks};
 use crosscal::session::{MotionSpec, Session};
@@ -35,20 +34,13 @@ pub struct Args {
     report: Option<PathBuf>,
 }
 
-fn unit(s: SensorKind) -> (&'static str, f64) {
-    match s {
-        SensorKind::Gyro => ("deg/s", 180.0 / std::f64::consts::PI),
-        SensorKind::Accel => ("m/s^2", 1.0),
-    }
-}
-
 fn channel_table(c: &[ChannelReport]) -> String {
     let mut s = format!(
         "  {:<6} {:<4} {:>13} {:>13} {:>13}  {:<11} {}\n",
         "sensor", "axis", "residual rms", "noise floor", "systematic", "", "largest systematic part"
     );
     for r in c {
-        let (u, k) = unit(r.sensor);
+        let (u, k) = r.sensor.display_unit();
         let worst = match &r.worst {
             Some((run, Some(0), a)) => format!("constant {} {u} ({run})", format::num(a * k)),
             Some((run, Some(h), a)) => format!("harmonic {h}: {} {u} ({run})", format::num(a * k)),

@@ -28,6 +28,16 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// The project's chart frame on a drawing area: caption, margin and label areas.
+fn builder<'a, 'b>(
+    root: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    title: &str,
+) -> ChartBuilder<'a, 'b, SVGBackend<'b>> {
+    let mut b = ChartBuilder::on(root);
+    b.caption(title, ("sans-serif", 15)).margin(8).x_label_area_size(32).y_label_area_size(70);
+    b
+}
+
 /// A line chart of named series of (x, y) points, as an SVG string.
 pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(f64, f64)>)]) -> String {
     let mut buf = String::new();
@@ -36,13 +46,7 @@ pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(
     {
         let root = SVGBackend::with_string(&mut buf, (720, 260)).into_drawing_area();
         let _ = root.fill(&WHITE);
-        let Ok(mut chart) = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 15))
-            .margin(8)
-            .x_label_area_size(32)
-            .y_label_area_size(70)
-            .build_cartesian_2d(x0..x1, y0..y1)
-        else {
+        let Ok(mut chart) = builder(&root, title).build_cartesian_2d(x0..x1, y0..y1) else {
             return String::new();
         };
         let _ = chart.configure_mesh().x_desc(x_label).y_desc(y_label).light_line_style(WHITE).draw();
@@ -68,13 +72,7 @@ pub fn bars(title: &str, x_label: &str, y_label: &str, values: &[(String, f64)])
     {
         let root = SVGBackend::with_string(&mut buf, (720, 220)).into_drawing_area();
         let _ = root.fill(&WHITE);
-        let Ok(mut chart) = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 15))
-            .margin(8)
-            .x_label_area_size(32)
-            .y_label_area_size(70)
-            .build_cartesian_2d(-0.5..n - 0.5, 0.0..y1)
-        else {
+        let Ok(mut chart) = builder(&root, title).build_cartesian_2d(-0.5..n - 0.5, 0.0..y1) else {
             return String::new();
         };
         let labels: Vec<String> = values.iter().map(|v| v.0.clone()).collect();
@@ -120,13 +118,7 @@ pub fn loglog(
     {
         let root = SVGBackend::with_string(&mut buf, (720, 420)).into_drawing_area();
         let _ = root.fill(&WHITE);
-        let Ok(mut chart) = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 15))
-            .margin(8)
-            .x_label_area_size(32)
-            .y_label_area_size(70)
-            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
-        else {
+        let Ok(mut chart) = builder(&root, title).build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale()) else {
             return String::new();
         };
         let _ =

@@ -4,17 +4,15 @@
 use super::plot::{bars, lines};
 use super::{ChannelReport, Diagnosis, RunResiduals, Verdict, HARMONICS};
 use crate::check::harmonics::systematic;
+use crate::model::SensorKind;
 use crate::session::MotionSpec;
 use std::fmt::Write;
 
 const CHANNELS: [&str; 6] = ["gyro x", "gyro y", "gyro z", "accel x", "accel y", "accel z"];
 
 fn unit(c: usize) -> (&'static str, f64) {
-    if c < 3 {
-        ("deg/s", 180.0 / std::f64::consts::PI)
-    } else {
-        ("m/s^2", 1.0)
-    }
+    let sensor = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
+    sensor.display_unit()
 }
 
 /// The start of a self-contained report page (project style), with its title as heading.

@@ -85,15 +85,9 @@ impl<'m> Predictor<'m> {
     }
 
     fn predict(&self, s: &crate::model::State) -> [f64; 6] {
-        let mut out = [0.0; 6];
-        for k in 0..2 {
-            for (t, v) in self.terms[k].iter().zip(&self.values[k]) {
-                if *v != 0.0 {
-                    out[3 * k + t.term.channel] += v * t.regressor(s);
-                }
-            }
-        }
-        out
+        let g = crate::model::forward(&self.terms[0], &self.values[0], s);
+        let a = crate::model::forward(&self.terms[1], &self.values[1], s);
+        [g[0], g[1], g[2], a[0], a[1], a[2]]
     }
 }
 

@@ -76,6 +76,15 @@ impl SensorKind {
         }
     }
 
+    /// Unit shown to users and the factor from SI to it: deg/s for the gyro, m/s² for the
+    /// accelerometer.
+    pub fn display_unit(self) -> (&'static str, f64) {
+        match self {
+            Self::Gyro => ("deg/s", 180.0 / std::f64::consts::PI),
+            Self::Accel => ("m/s^2", 1.0),
+        }
+    }
+
     /// 0 for the gyro, 1 for the accelerometer (channels gx..gz are 0..3, ax..az 3..6).
     pub fn index(self) -> usize {
         match self {

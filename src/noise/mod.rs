@@ -276,16 +276,6 @@ pub fn analyse_channel(
     Ok(out)
 }
 
-/// Median of up to the first 100,000 time steps, s.
-fn median_step(steps: &mut [f64]) -> f64 {
-    if steps.is_empty() {
-        return f64::NAN;
-    }
-    let mid = steps.len() / 2;
-    steps.select_nth_unstable_by(mid, f64::total_cmp);
-    steps[mid]
-}
-
 /// The chosen channels of a static recording, read as a stream.
 #[derive(Debug, Clone)]
 pub struct StaticData {
@@ -327,7 +317,7 @@ pub fn read_channels(
             col.push(if *c < 3 { row.gyro[*c] } else { row.accel[*c - 3] });
         }
     }
-    let tau0_s = median_step(&mut steps);
+    let tau0_s = if steps.is_empty() { f64::NAN } else { crate::session::sanity::median(&mut steps) };
     let mut warnings = Vec::new();
     let mean = (last - first) / (n.max(2) - 1) as f64;
     if n > 2 && (mean / tau0_s - 1.0).abs() > 0.01 {

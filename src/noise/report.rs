@@ -1,7 +1,7 @@
 //! Noise results as a text table and as a self-contained HTML page with one log-log Allan
 //! deviation plot per channel (measured points with intervals, fitted curve, slope lines).
 
-use super::{ChannelNoise, NoiseReport, FLAT};
+use super::{NoiseReport, FLAT};
 use crate::diagnose::plot::loglog;
 use crate::diagnose::report::{esc, page_start};
 use crate::model::SensorKind;
@@ -9,14 +9,6 @@ use std::fmt::Write;
 
 fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "-".to_string(), |v| format!("{v:.digits$e}"))
-}
-
-/// Display factor and unit of a channel's rate (deg/s or m/s²).
-fn rate_unit(c: &ChannelNoise) -> (f64, &'static str) {
-    match c.sensor() {
-        SensorKind::Gyro => (180.0 / std::f64::consts::PI, "deg/s"),
-        SensorKind::Accel => (1.0, "m/s^2"),
-    }
 }
 
 /// One row per channel: the noise terms in engineering units.
@@ -33,7 +25,7 @@ pub fn table(r: &NoiseReport, g_m_s2: f64) -> String {
         "chan", "white /√Hz", "ARW/VRW", "bias inst.", "at τ (s)", "random walk", "quantisation"
     );
     for c in &r.channels {
-        let (k, _) = rate_unit(c);
+        let (_, k) = c.sensor().display_unit();
         let (w, walk) = match c.white_display(g_m_s2) {
             Some((a, b)) => (format!("{a:.4e}"), format!("{b:.4e}")),
             None => ("-".into(), "-".into()),
@@ -71,7 +63,7 @@ pub fn html(r: &NoiseReport, g_m_s2: f64) -> String {
     let mut s = page_start(&format!("crosscal noise: {}", r.source));
     let _ = write!(s, "<pre>{}</pre>", esc(&table(r, g_m_s2)));
     for c in &r.channels {
-        let (k, u) = rate_unit(c);
+        let (u, k) = c.sensor().display_unit();
         let measured: Vec<(f64, f64, f64, f64)> =
             c.points.iter().map(|p| (p.tau_s, p.low * k, p.adev * k, p.high * k)).collect();
         let taus: Vec<f64> = c.points.iter().map(|p| p.tau_s).collect();

@@ -81,7 +81,8 @@ fn saturation(x: &[f64], channel: &'static str) -> Option<Finding> {
     None
 }
 
-fn median(v: &mut [f64]) -> f64 {
+/// Median (upper middle for an even count) by selection, reordering `v`; 0 when empty.
+pub fn median(v: &mut [f64]) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
