@@ -100,6 +100,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             mount: crosscal::motion::Mount::identity(),
             temperature_c: None,
             note: None,
+            rows: None,
         },
         path: a.input.clone(),
         rec,

@@ -18,7 +18,10 @@ pub struct Args {
     /// Profile store; the profile goes to <out>/<serial>/<UTC time>.json.
     #[arg(long, default_value = "calib-profiles")]
     out: PathBuf,
-    /// Model preset: `default` (biases, full C_ω, C_ε, K) or `paper` (exactly eqs. 3–4).
+    /// Model preset: `default` (biases, full C_ω, C_ε, K), `paper` (exactly eqs. 3–4),
+    /// `ferraris` (biases, C_ω, gyro g-sensitivity, K) or `tedaldi` (biases, C_ω, upper-triangular
+    /// K). Protocol sessions (static poses, turns, multi-position) use `ferraris` or `tedaldi`
+    /// unless told otherwise.
     #[arg(long, default_value = "default")]
     model: String,
     /// Add a catalogue effect to the model (repeatable).
@@ -47,6 +50,11 @@ pub struct Args {
     /// (for a stand that does not sit exactly at its nominal settings).
     #[arg(long)]
     stand: bool,
+    /// Ferraris sessions: biases by the classic six-position formulas (each accelerometer bias
+    /// from the two faces along its axis, the gyro bias as the mean of all static samples), as
+    /// imucal computes them, instead of least squares over all six faces.
+    #[arg(long)]
+    classic_six_position: bool,
     /// Store this noise characterisation (JSON from `crosscal noise --save`) in the profile.
     #[arg(long)]
     noise: Option<PathBuf>,
@@ -65,9 +73,12 @@ pub fn build_model(preset: &str, effects: &[String], disable: &[String]) -> anyh
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
-    let model = build_model(&a.model, &a.effects, &a.disable)?;
     let full =
         Session::load_with(&a.session, a.strict).with_context(|| format!("reading session {}", a.session.display()))?;
+    if full.is_protocol() {
+        return run_protocol(&a, &full);
+    }
+    let model = build_model(&a.model, &a.effects, &a.disable)?;
     for h in &a.holdout {
         if !full.runs.iter().any(|r| &r.spec.name == h) {
             anyhow::bail!("--holdout {h}: no such run in {}", a.session.display());
@@ -133,10 +144,73 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         for w in session.warnings() {
             println!("warning: {w}");
         }
-        print!("{}", format::sensor_fit(&profile.gyro));
-        print!("{}", format::sensor_fit(&profile.accel));
+        print!("{}", format::profile_fits(&profile));
         print!("{}", format::nonlinear(&profile.nonlinear));
         print!("{}", format::stand(&profile.stand));
+    }
+    if !a.dry_run {
+        let path = save(&profile, &a.out).with_context(|| format!("saving the profile under {}", a.out.display()))?;
+        if a.json {
+            eprintln!("profile written to {}", path.display());
+        } else {
+            println!("profile written to {}", path.display());
+        }
+    }
+    Ok(Outcome::Ok)
+}
+
+/// The default model of a protocol session: `tedaldi` when the poses' orientations are
+/// unknown, else `ferraris`.
+fn protocol_preset(session: &Session) -> &'static str {
+    use crosscal::session::MotionSpec;
+    if session
+        .runs
+        .iter()
+        .any(|r| matches!(r.spec.motion, MotionSpec::MultiPosition { .. } | MotionSpec::StaticUnknown))
+    {
+        "tedaldi"
+    } else {
+        "ferraris"
+    }
+}
+
+/// `fit` on a protocol session (Ferraris or multi-position).
+fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
+    if a.stand || !a.holdout.is_empty() || a.robust {
+        anyhow::bail!(
+            "--stand, --holdout and --robust apply to stand sessions; {} is a protocol session",
+            a.session.display()
+        );
+    }
+    let preset = if a.model == "default" { protocol_preset(session) } else { a.model.as_str() };
+    let model = build_model(preset, &a.effects, &a.disable)?;
+    let popts = crosscal::estimate::protocol::ProtocolOptions { classic_six_position: a.classic_six_position };
+    let (fit, report) = crosscal::estimate::protocol::fit_protocol(session, &model, &popts)
+        .with_context(|| format!("fitting {}", a.session.display()))?;
+    if a.strict {
+        fit.ensure_identifiable().with_context(|| format!("fitting {} (--strict)", a.session.display()))?;
+    }
+    let mut notes = session.warnings();
+    notes.extend(report.warnings.iter().cloned());
+    for u in fit.gyro.unidentifiable.iter().chain(&fit.accel.unidentifiable) {
+        notes.push(format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy));
+    }
+    let mut profile = Profile::from_fit(session, &model, fit, notes);
+    profile.protocol = Some(report);
+    if a.json {
+        print!("{}", profile.to_json());
+    } else {
+        println!(
+            "unit {}: {} runs, {} samples, model '{}'",
+            profile.serial,
+            session.runs.len(),
+            session.n_samples(),
+            profile.model
+        );
+        if let Some(r) = &profile.protocol {
+            print!("{}", format::protocol(r));
+        }
+        print!("{}", format::profile_fits(&profile));
     }
     if !a.dry_run {
         let path = save(&profile, &a.out).with_context(|| format!("saving the profile under {}", a.out.display()))?;

@@ -49,11 +49,21 @@ pub fn ratio(x: Option<f64>) -> String {
 }
 
 /// The coefficient table of one sensor: value ± 2σ.
-pub fn sensor_fit(f: &SensorFit) -> String {
+pub fn sensor_fit(f: &SensorFit, raw: bool, residuals: bool) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "{} coefficients (value ± 2σ):", f.sensor);
+    let input = match f.sensor {
+        SensorKind::Gyro => "rad/s",
+        SensorKind::Accel => "m/s^2",
+    };
     for c in &f.coefficients {
-        let (u, k) = display_unit(&c.unit);
+        // Raw inputs: coefficients carry the recording's unit ("raw" = counts or volts).
+        let raw_unit = match c.unit.as_str() {
+            "1" => format!("raw per {input}"),
+            "rad/s" | "m/s^2" => "raw".to_string(),
+            other => other.replace("rad/s per", "raw per").replace("m/s^2 per", "raw per"),
+        };
+        let (u, k) = if raw { (raw_unit.as_str(), 1.0) } else { display_unit(&c.unit) };
         let v = match (c.status, c.std_error) {
             (CoefStatus::Fitted, Some(se)) => {
                 format!("{:>14} ± {:<11}", num(c.value * k), num(2.0 * se * k))
@@ -67,7 +77,7 @@ pub fn sensor_fit(f: &SensorFit) -> String {
         SensorKind::Gyro => ("deg/s", RAD2DEG),
         SensorKind::Accel => ("m/s^2", 1.0),
     };
-    for ch in &f.channels {
+    for ch in f.channels.iter().filter(|_| residuals) {
         let _ = writeln!(
             s,
             "  residual {}: rms {} max {} {ru} (σ {}; {} samples, {} coefficients, condition {:.3})",
@@ -160,6 +170,62 @@ pub fn stand(params: &[crosscal::estimate::StandParams]) -> String {
     for p in params {
         let cell = |k: usize| format!("{:.5} ± {:.1e} [{}]", p.value[k], 2.0 * p.std_error[k], p.nominal[k]);
         let _ = writeln!(s, "  {:<20} {:>26} {:>28} {:>24}", p.run, cell(0), cell(1), cell(2));
+    }
+    s
+}
+
+/// Both sensors' coefficients of a profile, in the units of its recordings (protocol
+/// profiles show their residuals in the protocol report instead of per channel).
+pub fn profile_fits(p: &crosscal::profile::Profile) -> String {
+    use crosscal::session::{AccelUnit, GyroUnit};
+    let per_channel = p.protocol.is_none();
+    sensor_fit(&p.gyro, p.input_units.gyro == GyroUnit::Raw, per_channel)
+        + &sensor_fit(&p.accel, p.input_units.accel == AccelUnit::Raw, per_channel)
+}
+
+/// The residuals of a protocol fit: poses, turns, pose detection.
+pub fn protocol(r: &crosscal::estimate::protocol::ProtocolReport) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "protocol: {} ({} static poses, {} turns/motions)", r.protocol, r.poses.len(), r.turns.len());
+    if let Some(d) = &r.detection {
+        match (d.multiplier, d.threshold) {
+            (Some(m), Some(t)) => {
+                let _ = writeln!(
+                    s,
+                    "  static poses detected: moving variance over {} samples below {} (= {m} × the initial rest's {}), poses ≥ {} samples",
+                    d.window,
+                    num(t),
+                    num(d.baseline_variance_norm),
+                    d.min_pose_samples
+                );
+                let tried: Vec<String> = d
+                    .tried
+                    .iter()
+                    .map(|(m, n, c)| {
+                        format!("×{m}: {n} poses{}", c.map_or(String::new(), |c| format!(", cost {}", num(c))))
+                    })
+                    .collect();
+                let _ = writeln!(s, "  thresholds tried: {}", tried.join("; "));
+            }
+            _ => {
+                let _ = writeln!(s, "  static poses as given in the manifest");
+            }
+        }
+    }
+    let worst = r.poses.iter().map(|p| p.gravity_error_m_s2.abs()).fold(0.0, f64::max);
+    let _ = writeln!(s, "  |a| − g over the poses: rms {} max {} m/s^2", num(r.gravity_rms_m_s2), num(worst));
+    if let Some(c) = r.accel_cost {
+        let _ = writeln!(s, "  accelerometer cost ½Σ(g − |a|)²: {}", num(c));
+    }
+    if let Some(c) = r.gyro_cost {
+        let _ = writeln!(s, "  gyro cost ½Σ|Rᵀv₀ − v₁|²: {}", num(c));
+    }
+    let worst_turn = r.turns.iter().map(|t| t.error_deg.abs()).fold(0.0, f64::max);
+    if !r.turns.is_empty() {
+        let _ = writeln!(s, "  worst turn/motion misfit: {} deg", num(worst_turn));
+    }
+    for w in &r.warnings {
+        let _ = writeln!(s, "  note: {w}");
     }
     s
 }

@@ -10,6 +10,7 @@ mod diagnose;
 mod effects;
 mod fit;
 mod format;
+mod import;
 mod noise;
 mod plan;
 mod profile;
@@ -108,6 +109,8 @@ enum Command {
     Profile(profile::Args),
     /// Calibrate a production lot in parallel: a profile per unit, acceptance, outliers, reports.
     Batch(batch::Args),
+    /// Turn a recording laid out for imucal, imu_tk or a Tedaldi script into a crosscal session.
+    Import(import::Args),
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -141,6 +144,7 @@ pub fn main() -> ExitCode {
         Command::Accept(a) => accept::run(a),
         Command::Profile(a) => profile::run(a),
         Command::Batch(a) => batch::run(a),
+        Command::Import(a) => import::run(a),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

@@ -115,8 +115,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                     p.created_utc,
                     p.model
                 );
-                print!("{}", format::sensor_fit(&p.gyro));
-                print!("{}", format::sensor_fit(&p.accel));
+                print!("{}", format::profile_fits(&p));
                 print!("{}", format::nonlinear(&p.nonlinear));
                 print!("{}", format::stand(&p.stand));
             }

@@ -14,7 +14,9 @@
 //! kind of run that would identify it; the rest of the fit proceeds.
 
 pub mod identify;
+pub mod lm;
 pub mod nonlinear;
+pub mod protocol;
 pub mod qr;
 pub mod stand;
 
@@ -136,6 +138,9 @@ pub enum EstimateError {
     /// The runs cannot identify the requested model (strict mode).
     #[error("the runs cannot identify the requested model: {0}")]
     Unidentifiable(String),
+    /// A protocol session (static poses, turns, multi-position) cannot be fitted as asked.
+    #[error("protocol session: {0}")]
+    Protocol(String),
 }
 
 /// How a coefficient's value was obtained.

@@ -306,7 +306,7 @@ pub enum ModelError {
     #[error("unknown effect '{0}': known effects are {1}")]
     UnknownEffect(String, String),
     /// Unknown model preset.
-    #[error("unknown model '{0}': expected 'default' or 'paper'")]
+    #[error("unknown model '{0}': expected 'default', 'paper', 'ferraris' or 'tedaldi'")]
     UnknownPreset(String),
     /// Unknown coefficient name.
     #[error("unknown coefficient '{0}' in this model")]
@@ -377,11 +377,28 @@ impl Model {
         m
     }
 
-    /// A preset by name (`default`, `paper`).
+    /// What a Ferraris session (six faces and three turns) identifies: biases, full C_ω,
+    /// gyro g-sensitivity, full K (imucal's model).
+    pub fn ferraris() -> Self {
+        let ids = ["gyro-bias", "gyro-scale-coupling", "gyro-g-sensitivity", "accel-bias", "accel-scale-coupling"];
+        Self::from_effects("ferraris", ids.iter().filter_map(|id| find_effect(id)).collect())
+    }
+
+    /// What a multi-position session identifies as imu_tk does: biases, full C_ω, K (upper
+    /// triangular: the accelerometer's axes define the frame). Add `gyro-g-sensitivity` to
+    /// fit it from the poses.
+    pub fn tedaldi() -> Self {
+        let ids = ["gyro-bias", "gyro-scale-coupling", "accel-bias", "accel-scale-coupling"];
+        Self::from_effects("tedaldi", ids.iter().filter_map(|id| find_effect(id)).collect())
+    }
+
+    /// A preset by name (`default`, `paper`, `ferraris`, `tedaldi`).
     pub fn preset(name: &str) -> Result<Self, ModelError> {
         match name {
             "default" => Ok(Self::default_model()),
             "paper" => Ok(Self::paper()),
+            "ferraris" => Ok(Self::ferraris()),
+            "tedaldi" => Ok(Self::tedaldi()),
             other => Err(ModelError::UnknownPreset(other.to_string())),
         }
     }

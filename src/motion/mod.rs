@@ -11,6 +11,7 @@
 pub mod derivative;
 pub mod frame;
 pub mod mount;
+pub mod statics;
 
 pub use derivative::{derivative_offline, DerivativeConfig, SlopeWeights};
 pub use frame::{Coupling, Output, Sensor, Stand, Truth, V3};
@@ -129,6 +130,19 @@ pub fn track_for(
                 push(&mut tr, k);
             }
             tr.epsilon_source = "exact (static: zero)".into();
+        }
+        MotionSpec::StaticUnknown | MotionSpec::Rotation { .. } | MotionSpec::MultiPosition { .. } => {
+            // Protocol runs have no per-sample truth: the state is unknown (NaN), and the
+            // protocol fit (crate::estimate::protocol) uses them instead.
+            let nan = Kinematics {
+                w_rad_s: V3::new([f64::NAN; 3]),
+                e_rad_s2: V3::new([f64::NAN; 3]),
+                a_m_s2: V3::new([f64::NAN; 3]),
+            };
+            for _ in 0..n {
+                push(&mut tr, nan);
+            }
+            tr.epsilon_source = "unknown (protocol run: see `crosscal fit` on protocol sessions)".into();
         }
         MotionSpec::Reference => {
             let Some(r) = rec.reference.as_ref() else {

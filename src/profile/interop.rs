@@ -254,6 +254,7 @@ pub fn from_imucal(path: &Path, text: &str, serial: &str, g_m_s2: f64) -> Result
             path.display()
         )],
         noise: None,
+        protocol: None,
     })
 }
 

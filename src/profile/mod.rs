@@ -127,6 +127,9 @@ pub struct Profile {
     /// Noise characterisation (Allan deviation) of a static recording of the unit.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise: Option<crate::noise::NoiseReport>,
+    /// Residuals and settings of a protocol fit (Ferraris or multi-position sessions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub protocol: Option<crate::estimate::protocol::ProtocolReport>,
 }
 
 /// Profile errors.
@@ -215,6 +218,7 @@ impl Profile {
             validation: None,
             notes,
             noise: None,
+            protocol: None,
         }
     }
 

@@ -16,6 +16,16 @@ pub struct ReferenceColumns {
     pub e_rad_s2: Option<Vec<[f64; 3]>>,
 }
 
+impl ReferenceColumns {
+    fn slice(&self, start: usize, end: usize) -> Self {
+        Self {
+            w_rad_s: self.w_rad_s[start..end].to_vec(),
+            a_m_s2: self.a_m_s2[start..end].to_vec(),
+            e_rad_s2: self.e_rad_s2.as_ref().map(|e| e[start..end].to_vec()),
+        }
+    }
+}
+
 /// One run's samples, converted to SI (gyro rad/s, accel m/s²; `raw` kept as recorded).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Recording {
@@ -44,6 +54,20 @@ impl Recording {
     /// True when there are no samples.
     pub fn is_empty(&self) -> bool {
         self.t_s.is_empty()
+    }
+
+    /// Samples `[start, end)` as a recording of their own (same file hash; warnings kept).
+    /// Panics if the range is out of bounds; callers check it against [`Self::len`].
+    pub fn slice(&self, start: usize, end: usize) -> Self {
+        Self {
+            t_s: self.t_s[start..end].to_vec(),
+            gyro: self.gyro[start..end].to_vec(),
+            accel: self.accel[start..end].to_vec(),
+            temp_c: self.temp_c.as_ref().map(|t| t[start..end].to_vec()),
+            reference: self.reference.as_ref().map(|r| r.slice(start, end)),
+            sha256: self.sha256.clone(),
+            warnings: self.warnings.clone(),
+        }
     }
 }
 

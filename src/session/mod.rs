@@ -7,6 +7,7 @@
 
 mod csvread;
 mod error;
+pub mod import;
 pub mod sanity;
 pub mod units;
 
@@ -20,8 +21,14 @@ use crate::motion::Mount;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
-/// The session format this reader understands.
+/// The stand-session format (conic, static with known up, reference runs).
 pub const SESSION_FORMAT: &str = "crosscal-session/1";
+
+/// Version 2 adds, compatibly, what hand-held and multi-position protocols need: `rows`
+/// (several runs sharing one CSV), `static` runs with `"up_stand": "unknown"`, `rotation`
+/// runs (known total angle about a known axis) and `multi_position` runs (static poses
+/// detected automatically). Every version-1 manifest is a valid version-2 manifest.
+pub const SESSION_FORMAT_2: &str = "crosscal-session/2";
 
 /// What the stand did during a run, as declared in the manifest (stand frame).
 #[derive(Debug, Clone, PartialEq)]
@@ -45,6 +52,108 @@ pub enum MotionSpec {
     },
     /// True ω, a (and optionally ε) are given per sample in the CSV.
     Reference,
+    /// At rest in an unknown orientation (version 2, `"up_stand": "unknown"`): only |a| = g
+    /// and ω = 0 are known (Tedaldi multi-position protocol).
+    StaticUnknown,
+    /// A turn from rest to rest through a known total angle about a known axis (version 2;
+    /// Ferraris turns). Only the integral of ω over the run is known.
+    Rotation {
+        /// Unit rotation axis, stand axes.
+        axis_stand: [f64; 3],
+        /// Total angle, degrees, right-handed about the axis.
+        angle_deg: f64,
+    },
+    /// Hand-held multi-position recording (version 2): rest at the start, then static poses
+    /// joined by free motion; the poses are detected from the accelerometer's moving variance.
+    MultiPosition {
+        /// Length of the initial rest, s (the gyro bias and the detector's noise level).
+        init_rest_s: f64,
+        /// Detector window, samples (odd).
+        window: usize,
+        /// Threshold multiplier on the initial rest's variance; `None` tries 2..=10 and keeps
+        /// the one whose accelerometer fit leaves the smallest cost.
+        threshold_multiplier: Option<f64>,
+        /// Shortest pose used, samples.
+        min_pose_samples: usize,
+        /// Poses given as sample ranges `[start, end)` within the run (detection skipped);
+        /// every pose is used whatever its length.
+        poses: Option<Vec<(usize, usize)>>,
+    },
+}
+
+impl MotionSpec {
+    /// True for the kinds whose true state is not known sample by sample (protocol runs).
+    pub fn is_protocol(&self) -> bool {
+        matches!(self, Self::StaticUnknown | Self::Rotation { .. } | Self::MultiPosition { .. })
+    }
+
+    /// The manifest's `"motion"` object for this motion.
+    pub fn to_json(&self) -> Value {
+        match self {
+            Self::Conic { cone_angle_deg, rate_deg_s, phase_deg } => serde_json::json!({
+                "kind": "conic", "cone_angle_deg": cone_angle_deg, "rate_deg_s": rate_deg_s, "phase_deg": phase_deg
+            }),
+            Self::Static { up_stand, .. } => serde_json::json!({"kind": "static", "up_stand": up_stand}),
+            Self::Reference => serde_json::json!({"kind": "reference"}),
+            Self::StaticUnknown => serde_json::json!({"kind": "static", "up_stand": "unknown"}),
+            Self::Rotation { axis_stand, angle_deg } => {
+                serde_json::json!({"kind": "rotation", "axis_stand": axis_stand, "angle_deg": angle_deg})
+            }
+            Self::MultiPosition { init_rest_s, window, threshold_multiplier, min_pose_samples, poses } => {
+                let mut v = serde_json::json!({
+                    "kind": "multi_position", "init_rest_s": init_rest_s, "window": window,
+                    "min_pose_samples": min_pose_samples
+                });
+                if let Some(o) = v.as_object_mut() {
+                    if let Some(t) = threshold_multiplier {
+                        o.insert("threshold_multiplier".into(), serde_json::json!(t));
+                    }
+                    if let Some(p) = poses {
+                        let list: Vec<[usize; 2]> = p.iter().map(|&(a, b)| [a, b]).collect();
+                        o.insert("poses".into(), serde_json::json!(list));
+                    }
+                }
+                v
+            }
+        }
+    }
+}
+
+impl RunSpec {
+    /// The manifest's entry for this run.
+    pub fn to_json(&self) -> Value {
+        let mut v = serde_json::json!({
+            "name": self.name, "file": self.file, "motion": self.motion.to_json(), "mount": self.mount.names()
+        });
+        if let Some(o) = v.as_object_mut() {
+            if let Some((a, b)) = self.rows {
+                o.insert("rows".into(), serde_json::json!([a, b]));
+            }
+            if let Some(t) = self.temperature_c {
+                o.insert("temperature_c".into(), serde_json::json!(t));
+            }
+            if let Some(n) = &self.note {
+                o.insert("note".into(), serde_json::json!(n));
+            }
+        }
+        v
+    }
+}
+
+impl Manifest {
+    /// The manifest as JSON text (version 2 when a run needs it, else version 1).
+    pub fn to_json(&self) -> String {
+        let v2 = self.runs.iter().any(|r| r.rows.is_some() || r.motion.is_protocol());
+        let runs: Vec<Value> = self.runs.iter().map(RunSpec::to_json).collect();
+        let manifest = serde_json::json!({
+            "format": if v2 { SESSION_FORMAT_2 } else { SESSION_FORMAT },
+            "serial": self.serial,
+            "units": {"gyro": self.units.gyro.to_string(), "accel": self.units.accel.to_string(), "time": self.units.time.to_string()},
+            "stand": {"g": self.g_m_s2},
+            "runs": runs,
+        });
+        serde_json::to_string_pretty(&manifest).unwrap_or_default() + "\n"
+    }
 }
 
 /// One run as declared in the manifest.
@@ -62,6 +171,9 @@ pub struct RunSpec {
     pub temperature_c: Option<f64>,
     /// Free text.
     pub note: Option<String>,
+    /// Sample range `[start, end)` (0-based data rows) of the CSV this run uses (version 2);
+    /// `None` uses the whole file.
+    pub rows: Option<(usize, usize)>,
 }
 
 /// A parsed manifest.
@@ -75,6 +187,8 @@ pub struct Manifest {
     pub g_m_s2: f64,
     /// Runs, in manifest order.
     pub runs: Vec<RunSpec>,
+    /// Format version (1 or 2).
+    pub version: u8,
 }
 
 /// One run: its declaration and its samples.
@@ -110,6 +224,7 @@ impl Session {
         let manifest = read_manifest(manifest_path)?;
         let dir = manifest_path.parent().unwrap_or(Path::new("."));
         let mut runs = Vec::with_capacity(manifest.runs.len());
+        let mut cache: Vec<(PathBuf, Recording)> = Vec::new();
         for spec in &manifest.runs {
             let path = dir.join(&spec.file);
             if !path.is_file() {
@@ -128,7 +243,38 @@ impl Session {
                 });
             }
             let opts = ReadOptions { reference: matches!(spec.motion, MotionSpec::Reference), strict };
-            let rec = read_recording(&path, &manifest.units, manifest.g_m_s2, opts)?;
+            let rec = match spec.rows {
+                None => read_recording(&path, &manifest.units, manifest.g_m_s2, opts)?,
+                Some((start, end)) => {
+                    // Runs sharing a file read it once.
+                    let i = match cache.iter().position(|(p, _)| *p == path) {
+                        Some(i) => i,
+                        None => {
+                            let r = read_recording(&path, &manifest.units, manifest.g_m_s2, opts)?;
+                            cache.push((path.clone(), r));
+                            cache.len() - 1
+                        }
+                    };
+                    let whole = &cache[i].1;
+                    if end > whole.len() {
+                        let (line, column) =
+                            locate(&std::fs::read_to_string(manifest_path).unwrap_or_default(), "rows");
+                        return Err(SessionError::Manifest {
+                            problem: Problem::Invalid,
+                            path: manifest_path.to_path_buf(),
+                            line,
+                            column,
+                            msg: format!(
+                                "run '{}': rows [{start}, {end}) reach past the end of {} ({} samples)",
+                                spec.name,
+                                spec.file,
+                                whole.len()
+                            ),
+                        });
+                    }
+                    whole.slice(start, end)
+                }
+            };
             runs.push(Run { spec: spec.clone(), path, rec });
         }
         Ok(Self { manifest_path: manifest_path.to_path_buf(), manifest, runs })
@@ -137,6 +283,12 @@ impl Session {
     /// Total number of samples over all runs.
     pub fn n_samples(&self) -> usize {
         self.runs.iter().map(|r| r.rec.len()).sum()
+    }
+
+    /// True when some run is a protocol run (unknown pose, rotation, multi-position): such
+    /// sessions are fitted by [`crate::estimate::protocol`], not sample by sample.
+    pub fn is_protocol(&self) -> bool {
+        self.runs.iter().any(|r| r.spec.motion.is_protocol())
     }
 
     /// Non-fatal findings of all recordings.
@@ -178,13 +330,14 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
     let bad = |needle: &str, msg: String| bad_kind(Problem::Invalid, needle, msg);
     let units_err = |needle: &str, msg: String| bad_kind(Problem::Units, needle, msg);
     let obj = json.as_object().ok_or_else(|| bad("", "the manifest must be a JSON object".into()))?;
-    match obj.get("format") {
-        Some(Value::String(f)) if f == SESSION_FORMAT => {}
+    let version = match obj.get("format") {
+        Some(Value::String(f)) if f == SESSION_FORMAT => 1,
+        Some(Value::String(f)) if f == SESSION_FORMAT_2 => 2,
         Some(Value::String(f)) => {
             return Err(SessionError::UnknownFormat { path: path.to_path_buf(), found: f.clone() })
         }
         _ => return Err(bad("format", format!("missing \"format\": expected \"format\": \"{SESSION_FORMAT}\""))),
-    }
+    };
     let serial = match obj.get("serial") {
         Some(Value::String(s)) if valid_serial(s) => s.clone(),
         Some(Value::String(s)) => {
@@ -238,14 +391,24 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
     }
     let mut runs = Vec::with_capacity(runs_json.len());
     for (i, r) in runs_json.iter().enumerate() {
-        runs.push(parse_run(i, r, &bad_kind)?);
+        let run = parse_run(i, r, &bad_kind)?;
+        if version < 2 && (run.rows.is_some() || run.motion.is_protocol()) {
+            return Err(bad(
+                &run.name,
+                format!(
+                    "run '{}' uses a version-2 feature (rows, unknown up_stand, rotation or multi_position): declare \"format\": \"{SESSION_FORMAT_2}\"",
+                    run.name
+                ),
+            ));
+        }
+        runs.push(run);
     }
     let mut names: Vec<&str> = runs.iter().map(|r: &RunSpec| r.name.as_str()).collect();
     names.sort_unstable();
     if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
         return Err(bad(w[0], format!("two runs are named '{}': run names must be unique", w[0])));
     }
-    Ok(Manifest { serial, units: Units { gyro, accel, time }, g_m_s2, runs })
+    Ok(Manifest { serial, units: Units { gyro, accel, time }, g_m_s2, runs, version })
 }
 
 /// A serial usable as a folder name.
@@ -258,6 +421,12 @@ pub fn valid_serial(s: &str) -> bool {
 
 fn num(v: &Value, key: &str) -> Option<f64> {
     v.get(key).and_then(Value::as_f64).filter(|x| x.is_finite())
+}
+
+fn vec3(v: &Value, key: &str) -> Option<[f64; 3]> {
+    let a = v.get(key)?.as_array().filter(|a| a.len() == 3)?;
+    let x: Vec<f64> = a.iter().filter_map(Value::as_f64).filter(|x| x.is_finite()).collect();
+    (x.len() == 3).then(|| [x[0], x[1], x[2]])
 }
 
 fn parse_run<F>(i: usize, r: &Value, bad_kind: &F) -> Result<RunSpec, SessionError>
@@ -277,7 +446,7 @@ where
         bad(
             &name,
             format!(
-                "run '{name}' has no \"motion\": expected {{\"kind\": \"conic\" | \"static\" | \"reference\", ...}}"
+                "run '{name}' has no \"motion\": expected {{\"kind\": \"conic\" | \"static\" | \"reference\" | \"rotation\" | \"multi_position\", ...}}"
             ),
         )
     })?;
@@ -299,6 +468,7 @@ where
             }
             MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg }
         }
+        "static" if m.get("up_stand").and_then(Value::as_str) == Some("unknown") => MotionSpec::StaticUnknown,
         "static" => {
             let up = m
                 .get("up_stand")
@@ -336,11 +506,74 @@ where
             MotionSpec::Static { up_stand: up, earth_rate_rad_s: earth }
         }
         "reference" => MotionSpec::Reference,
+        "rotation" => {
+            let axis = vec3(m, "axis_stand").ok_or_else(|| {
+                bad(&name, format!("run '{name}': rotation needs \"axis_stand\": [x, y, z], the turn axis in stand axes"))
+            })?;
+            let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+            if (norm - 1.0).abs() > 1e-3 {
+                return Err(bad(&name, format!("run '{name}': axis_stand has length {norm}: expected a unit vector")));
+            }
+            let angle_deg = num(m, "angle_deg").ok_or_else(|| {
+                bad(&name, format!("run '{name}': rotation needs a finite \"angle_deg\" (the total turn, e.g. -360)"))
+            })?;
+            if angle_deg == 0.0 {
+                return Err(bad(&name, format!("run '{name}': angle_deg is 0: a rotation run must turn")));
+            }
+            MotionSpec::Rotation { axis_stand: [axis[0] / norm, axis[1] / norm, axis[2] / norm], angle_deg }
+        }
+        "multi_position" => {
+            let init_rest_s = num(m, "init_rest_s").unwrap_or(30.0);
+            let window = m.get("window").and_then(Value::as_u64).unwrap_or(101) as usize;
+            let threshold_multiplier = num(m, "threshold_multiplier");
+            let min_pose_samples = m.get("min_pose_samples").and_then(Value::as_u64).unwrap_or(100) as usize;
+            if init_rest_s <= 0.0 || window < 3 || min_pose_samples < 2 || threshold_multiplier.is_some_and(|t| t <= 0.0) {
+                return Err(bad(
+                    &name,
+                    format!("run '{name}': multi_position needs init_rest_s > 0, window >= 3, min_pose_samples >= 2 and threshold_multiplier > 0"),
+                ));
+            }
+            let poses = match m.get("poses") {
+                None => None,
+                Some(v) => {
+                    let list: Option<Vec<(usize, usize)>> = v.as_array().and_then(|a| {
+                        a.iter()
+                            .map(|p| {
+                                let p = p.as_array().filter(|p| p.len() == 2)?;
+                                let (s, e) = (p[0].as_u64()? as usize, p[1].as_u64()? as usize);
+                                (e > s).then_some((s, e))
+                            })
+                            .collect()
+                    });
+                    Some(list.ok_or_else(|| {
+                        bad(&name, format!("run '{name}': poses must be a list of [start, end] sample ranges with start < end"))
+                    })?)
+                }
+            };
+            MotionSpec::MultiPosition { init_rest_s, window: window | 1, threshold_multiplier, min_pose_samples, poses }
+        }
         other => {
             return Err(bad(
                 if other.is_empty() { &name } else { other },
-                format!("run '{name}': motion kind '{other}' is unknown: expected conic, static or reference"),
+                format!("run '{name}': motion kind '{other}' is unknown: expected conic, static, reference, rotation or multi_position"),
             ))
+        }
+    };
+    let rows = match r.get("rows") {
+        None => None,
+        Some(v) => {
+            let pair = v.as_array().filter(|a| a.len() == 2).and_then(|a| Some((a[0].as_u64()?, a[1].as_u64()?)));
+            match pair {
+                Some((s, e)) if e > s => Some((s as usize, e as usize)),
+                _ => {
+                    return Err(bad(
+                        &name,
+                        format!(
+                            "run '{name}': rows must be [start, end] with 0 <= start < end (data rows, end exclusive)"
+                        ),
+                    ))
+                }
+            }
         }
     };
     let mount = match r.get("mount") {
@@ -366,6 +599,7 @@ where
         mount,
         temperature_c: num(r, "temperature_c"),
         note: r.get("note").and_then(Value::as_str).map(str::to_string),
+        rows,
     })
 }
 

@@ -271,6 +271,7 @@ impl SimConfig {
                     mount: plan.mount.clone(),
                     temperature_c: None,
                     note: None,
+                    rows: None,
                 },
                 path: PathBuf::from(format!("{}.csv", plan.name)),
                 rec,
@@ -283,6 +284,7 @@ impl SimConfig {
                 units,
                 g_m_s2: self.g_m_s2,
                 runs: runs.iter().map(|r| r.spec.clone()).collect(),
+                version: 1,
             },
             runs,
         }
@@ -348,30 +350,7 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
         }
         write_new(&path, text.as_bytes()).map_err(io(&path))?;
     }
-    let runs: Vec<serde_json::Value> = session
-        .runs
-        .iter()
-        .map(|r| {
-            let motion = match &r.spec.motion {
-                MotionSpec::Conic {
-                    cone_angle_deg,
-                    rate_deg_s,
-                    phase_deg,
-                } => serde_json::json!({"kind": "conic", "cone_angle_deg": cone_angle_deg, "rate_deg_s": rate_deg_s, "phase_deg": phase_deg}),
-                MotionSpec::Static { up_stand, .. } => serde_json::json!({"kind": "static", "up_stand": up_stand}),
-                MotionSpec::Reference => serde_json::json!({"kind": "reference"}),
-            };
-            serde_json::json!({"name": r.spec.name, "file": r.spec.file, "motion": motion, "mount": r.spec.mount.names()})
-        })
-        .collect();
-    let manifest = serde_json::json!({
-        "format": crate::session::SESSION_FORMAT,
-        "serial": session.manifest.serial,
-        "units": {"gyro": session.manifest.units.gyro.to_string(), "accel": session.manifest.units.accel.to_string(), "time": "s"},
-        "stand": {"g": session.manifest.g_m_s2},
-        "runs": runs,
-    });
-    let text = serde_json::to_string_pretty(&manifest).unwrap_or_default() + "\n";
+    let text = session.manifest.to_json();
     write_new(&manifest_path, text.as_bytes()).map_err(io(&manifest_path))?;
     Ok(manifest_path)
 }

@@ -1,0 +1,104 @@
+//! `crosscal import`: recordings laid out for other tools → crosscal sessions.
+
+use super::Outcome;
+use anyhow::Context;
+use crosscal::session::import::{imu_tk, imucal_annotated, imucal_ferraris, tedaldi_csv, ImportOptions, Imported};
+use std::path::PathBuf;
+
+/// Options of `import`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    layout: Layout,
+    /// Folder to write session.json and recording.csv into (must not hold them already).
+    #[arg(long, global = true, default_value = "imported-session")]
+    out: PathBuf,
+    /// Serial number of the unit.
+    #[arg(long, global = true, default_value = "imported")]
+    serial: String,
+    /// Local gravity, m/s² (imucal's default 9.81; imu_tk's example 9.81744).
+    #[arg(long, global = true)]
+    g: Option<f64>,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum Layout {
+    /// imucal's example: CSV `n_samples,gyr_*,acc_*` (deg/s, m/s²) and its section-list JSON.
+    ImucalFerraris {
+        /// The recording.
+        csv: PathBuf,
+        /// The section list ({"x_p": {"start":…, "end":…}, …}).
+        sections: PathBuf,
+        /// Sample rate, Hz.
+        #[arg(long)]
+        rate_hz: f64,
+        /// Total angle of each turn, degrees (negative = clockwise about +axis; imucal's default).
+        #[arg(long, default_value_t = -360.0, allow_hyphen_values = true)]
+        turn_angle_deg: f64,
+    },
+    /// imucal's annotated session: CSV with `part`, `samples` and raw `acc_*`, `gyr_*`.
+    ImucalAnnotated {
+        /// The recording.
+        csv: PathBuf,
+        /// Sample rate, Hz.
+        #[arg(long)]
+        rate_hz: f64,
+        /// Total angle of each turn, degrees.
+        #[arg(long, default_value_t = -360.0, allow_hyphen_values = true)]
+        turn_angle_deg: f64,
+    },
+    /// imu_tk: accelerometer and gyro files of `t x y z` rows (multi-position protocol).
+    ImuTk {
+        /// Accelerometer file.
+        acc: PathBuf,
+        /// Gyro file.
+        gyro: PathBuf,
+        /// Initial rest, s.
+        #[arg(long, default_value_t = 50.0)]
+        init_rest_s: f64,
+    },
+    /// `Fs,…` header lines then `ax,ay,az,gx,gy,gz` raw counts (multi-position protocol).
+    Tedaldi {
+        /// The recording.
+        csv: PathBuf,
+        /// Static intervals to use instead of detecting them (two rows: starts, ends).
+        #[arg(long)]
+        intervals: Option<PathBuf>,
+    },
+}
+
+pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    let mut opts = ImportOptions { serial: a.serial.clone(), ..ImportOptions::default() };
+    let done: Imported = match &a.layout {
+        Layout::ImucalFerraris { csv, sections, rate_hz, turn_angle_deg } => {
+            opts.rate_hz = Some(*rate_hz);
+            opts.turn_angle_deg = *turn_angle_deg;
+            opts.g_m_s2 = a.g.unwrap_or(9.81);
+            imucal_ferraris(csv, sections, &a.out, &opts)
+        }
+        Layout::ImucalAnnotated { csv, rate_hz, turn_angle_deg } => {
+            opts.rate_hz = Some(*rate_hz);
+            opts.turn_angle_deg = *turn_angle_deg;
+            opts.g_m_s2 = a.g.unwrap_or(9.81);
+            imucal_annotated(csv, &a.out, &opts)
+        }
+        Layout::ImuTk { acc, gyro, init_rest_s } => {
+            opts.init_rest_s = Some(*init_rest_s);
+            opts.g_m_s2 = a.g.unwrap_or(9.81744);
+            imu_tk(acc, gyro, &a.out, &opts)
+        }
+        Layout::Tedaldi { csv, intervals } => {
+            opts.g_m_s2 = a.g.unwrap_or(9.80665);
+            tedaldi_csv(csv, intervals.as_deref(), &a.out, &opts)
+        }
+    }
+    .with_context(|| format!("importing into {}", a.out.display()))?;
+    println!(
+        "wrote {} ({} runs, {} samples); fit it with: crosscal fit {}",
+        done.manifest_path.display(),
+        done.runs,
+        done.samples,
+        done.manifest_path.display()
+    );
+    Ok(Outcome::Ok)
+}
