@@ -12,6 +12,8 @@ mod identify;
 mod noise;
 mod paper;
 mod profile_store;
+mod protocol;
+mod real;
 mod reference;
 mod robust;
 mod stand;

@@ -335,7 +335,12 @@ fn ferraris(session: &Session, model: &Model, popts: &ProtocolOptions) -> Result
     }
     let all_runs: Vec<FitRun<'_>> = obs.iter().map(Obs::as_run).collect();
     let second = fit(model, &all_runs, &opts)?;
-    let out = Fit { gyro: second.gyro, accel: first.accel, nonlinear: Vec::new(), stand: Vec::new() };
+    let mut out = Fit { gyro: second.gyro, accel: first.accel, nonlinear: Vec::new(), stand: Vec::new() };
+    // Six faces leave few degrees of freedom, so the residual σ can come out far below the
+    // sensor's own noise by chance; the noise of a pose mean is a floor under it.
+    let statics: Vec<&Run> = obs.iter().filter(|o| o.turn.is_none()).map(|o| o.run).collect();
+    inflate_to_floor(&mut out.gyro, pose_mean_noise(&statics, |r| &r.rec.gyro));
+    inflate_to_floor(&mut out.accel, pose_mean_noise(&statics, |r| &r.rec.accel));
 
     // Residuals with the final calibration.
     let cal = GyroCal::from_fit(&out.gyro);
@@ -379,6 +384,51 @@ fn ferraris(session: &Session, model: &Model, popts: &ProtocolOptions) -> Result
         warnings,
     };
     Ok((out, report))
+}
+
+/// Per channel, the standard deviation of a pose's mean output from the scatter within the
+/// poses: `s² · mean(1/N)` with `s²` the pooled within-pose variance.
+fn pose_mean_noise(runs: &[&Run], data: impl Fn(&Run) -> &[[f64; 3]]) -> [f64; 3] {
+    let mut out = [0.0; 3];
+    for i in 0..3 {
+        let (mut ss, mut dof, mut inv_n) = (0.0, 0usize, 0.0);
+        for r in runs {
+            let x = data(r);
+            if x.len() < 2 {
+                continue;
+            }
+            let m = x.iter().map(|v| v[i]).sum::<f64>() / x.len() as f64;
+            ss += x.iter().map(|v| (v[i] - m).powi(2)).sum::<f64>();
+            dof += x.len() - 1;
+            inv_n += 1.0 / x.len() as f64;
+        }
+        if dof > 0 {
+            out[i] = (ss / dof as f64 * inv_n / runs.len() as f64).sqrt();
+        }
+    }
+    out
+}
+
+/// Widens each channel's standard errors and covariance so that its σ is at least `floor`.
+fn inflate_to_floor(f: &mut SensorFit, floor: [f64; 3]) {
+    for (ch, fl) in f.channels.iter_mut().zip(floor) {
+        if ch.sigma >= fl || ch.sigma <= 0.0 {
+            if ch.sigma <= 0.0 && fl > 0.0 {
+                ch.sigma = fl;
+            }
+            continue;
+        }
+        let r = fl / ch.sigma;
+        ch.sigma = fl;
+        for row in &mut ch.covariance {
+            for v in row.iter_mut() {
+                *v *= r * r;
+            }
+        }
+        for c in f.coefficients.iter_mut().filter(|c| ch.covariance_names.contains(&c.name)) {
+            c.std_error = c.std_error.map(|s| s * r);
+        }
+    }
 }
 
 fn rms(x: impl Iterator<Item = f64>) -> f64 {

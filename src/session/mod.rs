@@ -632,9 +632,9 @@ mod tests {
     #[test]
     fn rejects_unknown_format_and_units_with_position() {
         let e =
-            parse_manifest(Path::new("s.json"), &GOOD.replace("crosscal-session/1", "crosscal-session/2")).unwrap_err();
+            parse_manifest(Path::new("s.json"), &GOOD.replace("crosscal-session/1", "crosscal-session/3")).unwrap_err();
         assert!(matches!(e, SessionError::UnknownFormat { .. }));
-        assert!(e.to_string().contains("crosscal-session/2"));
+        assert!(e.to_string().contains("crosscal-session/3"));
         let e = parse_manifest(Path::new("s.json"), &GOOD.replace("\"deg/s\"", "\"deg/sec\"")).unwrap_err();
         let m = e.to_string();
         assert!(m.starts_with("s.json:4:") && m.contains("deg/sec") && m.contains("deg/s, rad/s, raw"), "{m}");

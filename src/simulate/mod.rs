@@ -5,6 +5,7 @@
 //! `u = f(true)`), so any catalogue effect can be hidden in the data by giving it a value.
 
 pub mod noise;
+pub mod protocol;
 
 use crate::atomic::write_new;
 use crate::model::{forward, Model, SensorKind, State};
