@@ -31,6 +31,12 @@ pub fn fit_runs<'a>(session: &'a Session, tracks: &'a [Track]) -> Vec<FitRun<'a>
 
 /// Fits a model to all runs of a session.
 pub fn fit_session(session: &Session, model: &Model, opts: &FitOptions) -> Result<Fit, EstimateError> {
+    if session.is_protocol() {
+        return Err(EstimateError::Protocol(format!(
+            "{} has protocol runs: fit it with `crosscal fit` (estimate::protocol::fit_protocol), not sample by sample",
+            session.manifest_path.display()
+        )));
+    }
     let tr = tracks(session, &DerivativeConfig::default());
     fit(model, &fit_runs(session, &tr), opts)
 }
@@ -64,6 +70,9 @@ pub fn check_session(
     mode: Mode,
     thresholds: Thresholds,
 ) -> Result<CheckReport, CorrectError> {
+    if session.is_protocol() {
+        return Err(CorrectError::ProtocolSession(session.manifest_path.display().to_string()));
+    }
     let tr = tracks(session, &DerivativeConfig::default());
     let raw = [session.manifest.units.gyro == GyroUnit::Raw, session.manifest.units.accel == AccelUnit::Raw];
     let mut runs = Vec::with_capacity(session.runs.len());

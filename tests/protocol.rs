@@ -127,7 +127,117 @@ fn protocol_sessions_refuse_what_they_cannot_identify() {
     let session = ferraris(&truth, 2.0, -360.0, 1).session();
     let e = fit_protocol(&session, &Model::default_model(), &ProtocolOptions::default()).unwrap_err();
     assert!(e.to_string().contains("gyro-angular-acceleration"), "{e}");
-    let e = fit_protocol(&multi_position(&truth, 2.0, 3, 1.5, 1).session(), &Model::tedaldi(), &ProtocolOptions::default())
-        .unwrap_err();
+    let e =
+        fit_protocol(&multi_position(&truth, 2.0, 3, 1.5, 1).session(), &Model::tedaldi(), &ProtocolOptions::default())
+            .unwrap_err();
     assert!(e.to_string().contains("initial rest") || e.to_string().contains("too few"), "{e}");
+}
+
+#[test]
+fn diagnose_finds_a_hidden_accelerometer_nonlinearity_on_six_faces_and_the_fit_removes_it() {
+    use crosscal::diagnose::protocol::diagnose_protocol;
+    let mut truth = ProtocolTruth::mems(false);
+    truth.q_accel = nalgebra::Vector3::new(0.05, -0.04, 0.06); // counts per (m/s²)²: ~5 counts at 1 g
+    let session = ferraris(&truth, 4.0, -360.0, 21).session();
+    let d = diagnose_protocol(&session, &Model::ferraris()).unwrap();
+    let best = d.proposal.clone().expect("a proposal");
+    assert!(best == "accel-quadratic" || best == "accel-scale-asymmetry", "{best}");
+    assert!(d.indistinguishable.iter().any(|e| e.starts_with("accel-")), "{:?}", d.indistinguishable);
+    assert_eq!(d.candidates[0].fittable, Ok(()));
+    let mut model = Model::ferraris();
+    model.add_effect("accel-quadratic").unwrap();
+    let (fit, after) = fit_protocol(&session, &model, &ProtocolOptions::default()).unwrap();
+    println!(
+        "hidden accel quadratic: |a|−g rms {:.2e} → {:.2e} m/s²",
+        d.report.gravity_rms_m_s2, after.gravity_rms_m_s2
+    );
+    assert!(after.gravity_rms_m_s2 < d.report.gravity_rms_m_s2 / 10.0);
+    for (i, q) in truth.q_accel.iter().enumerate() {
+        let c = fit.get(&format!("accel.q_{}", AXES[i])).unwrap();
+        assert!(
+            (c.value - q).abs() < 4.0 * c.std_error.unwrap(),
+            "q_{i}: {} ± {} vs {q}",
+            c.value,
+            c.std_error.unwrap()
+        );
+    }
+}
+
+#[test]
+fn diagnose_finds_hidden_gyro_g_sensitivity_in_a_multi_position_session_and_nothing_in_clean_ones() {
+    use crosscal::diagnose::protocol::diagnose_protocol;
+    let mut clean = ProtocolTruth::mems(true);
+    clean.g_gyro = nalgebra::Matrix3::zeros();
+    for seed in [2, 3, 4] {
+        let d = diagnose_protocol(&multi_position(&clean, 20.0, 24, 3.0, seed).session(), &Model::tedaldi()).unwrap();
+        assert_eq!(d.proposal, None, "seed {seed}: {:?}", d.candidates.first());
+    }
+    let mut hidden = clean.clone();
+    hidden.g_gyro = nalgebra::Matrix3::new(0.5, -0.2, 0.1, 0.3, 0.4, -0.2, -0.1, 0.2, 0.6);
+    let session = multi_position(&hidden, 20.0, 24, 3.0, 2).session();
+    let d = diagnose_protocol(&session, &Model::tedaldi()).unwrap();
+    assert_eq!(d.proposal.as_deref(), Some("gyro-g-sensitivity"), "{:?}", d.candidates.first());
+    let mut model = Model::tedaldi();
+    model.add_effect("gyro-g-sensitivity").unwrap();
+    let (_, after) = fit_protocol(&session, &model, &ProtocolOptions::default()).unwrap();
+    let (before, after) = (d.report.gyro_cost.unwrap(), after.gyro_cost.unwrap());
+    println!("hidden gyro g-sensitivity: gyro cost {before:.3e} → {after:.3e}");
+    assert!(after < before);
+}
+
+#[test]
+fn cli_fits_diagnoses_and_corrects_a_protocol_session_and_refuses_stand_only_commands() {
+    use crate::common::run_in;
+    let tmp = tempfile::tempdir().unwrap();
+    let truth = ProtocolTruth::mems(false);
+    ferraris(&truth, 3.0, -360.0, 4).write(&tmp.path().join("s")).unwrap();
+    let (code, out, err) = run_in(tmp.path(), &["fit", "s/session.json", "--out", "store"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(
+        out.contains("protocol: ferraris (6 static poses, 3 turns/motions)") && out.contains("raw per rad/s"),
+        "{out}"
+    );
+    let profile = std::fs::read_dir(tmp.path().join("store/SIM-FERRARIS")).unwrap().next().unwrap().unwrap().path();
+    let text = std::fs::read_to_string(&profile).unwrap();
+    assert!(text.contains("\"protocol\"") && text.contains("\"ferraris\""), "the profile keeps the protocol report");
+    let (code, out, err) = run_in(tmp.path(), &["diagnose", "s/session.json"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.contains("verdict: adequate"), "{out}");
+    let (code, out, err) = run_in(
+        tmp.path(),
+        &["correct", "--profile", profile.to_str().unwrap(), "s/recording.csv", "-o", "corrected.csv"],
+    );
+    assert_eq!(code, 0, "{out}{err}");
+    let (code, _, err) = run_in(tmp.path(), &["check", "s/session.json", "--profile", profile.to_str().unwrap()]);
+    assert_ne!(code, 0);
+    assert!(err.contains("protocol session"), "{err}");
+    let (code, _, err) =
+        run_in(tmp.path(), &["fit", "s/session.json", "--effect", "gyro-angular-acceleration", "--dry-run"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("gyro-angular-acceleration"), "{err}");
+}
+
+#[test]
+fn importers_name_file_line_and_column_of_bad_input() {
+    use crate::common::run_in;
+    let tmp = tempfile::tempdir().unwrap();
+    let csv = "n_samples,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z\n0,0,0,0,9.8,0,0\n1,0,zero,0,9.8,0,0\n";
+    std::fs::write(tmp.path().join("f.csv"), csv).unwrap();
+    std::fs::write(tmp.path().join("l.json"), "{\"x_p\": {\"start\": 0, \"end\": 1}}").unwrap();
+    let (code, _, err) =
+        run_in(tmp.path(), &["import", "imucal-ferraris", "f.csv", "l.json", "--rate-hz", "100", "--out", "o"]);
+    assert_eq!(code, 6, "{err}");
+    assert!(err.contains("f.csv:3:3 (gyr_y)") && err.contains("'zero'"), "{err}");
+    std::fs::write(tmp.path().join("f.csv"), &csv.replace("zero", "0")).unwrap();
+    let (code, _, err) =
+        run_in(tmp.path(), &["import", "imucal-ferraris", "f.csv", "l.json", "--rate-hz", "100", "--out", "o"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("section 'x_a' is missing"), "{err}");
+    // imu_tk files that do not share time stamps.
+    std::fs::write(tmp.path().join("a.mat"), "0.0 1 2 3\n0.01 1 2 3\n").unwrap();
+    std::fs::write(tmp.path().join("g.mat"), "0.0 1 2 3\n0.02 1 2 3\n").unwrap();
+    let (code, _, err) = run_in(tmp.path(), &["import", "imu-tk", "a.mat", "g.mat", "--out", "o2"]);
+    assert_eq!(code, 8, "{err}");
+    assert!(err.contains("g.mat:2:1 (t)"), "{err}");
+    assert!(!tmp.path().join("o/session.json").exists() && !tmp.path().join("o2/session.json").exists());
 }

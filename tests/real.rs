@@ -88,7 +88,9 @@ fn imucal_ferraris_example_matches_imucal() {
         let (kg, _) = k_r(&matrix(&f, SensorKind::Gyro, "c"));
         let ba = vector(&f, "accel.b");
         let bg = vector(&f, "gyro.b") / DEG;
-        println!("classic {classic}: K_a {ka:?} b_a {ba:?} K_g {kg:?} b_g {bg:?}; import {import_s:.3} s + fit {secs:.3} s");
+        println!(
+            "classic {classic}: K_a {ka:?} b_a {ba:?} K_g {kg:?} b_g {bg:?}; import {import_s:.3} s + fit {secs:.3} s"
+        );
         assert!(import_s + secs < 2.0);
         for i in 0..3 {
             assert!(rel(ka[i], k_a[i]) < 1e-3, "K_a {i}: {} vs {}", ka[i], k_a[i]);
@@ -117,8 +119,14 @@ fn imucal_ferraris_example_matches_imucal() {
                 assert!((ba[i] - all).abs() < 1e-9, "crosscal's b_a {i} is the mean over the three pairs");
             }
             let spread = (ba - Vector3::from(b_a)).amax();
-            println!("  least-squares accelerometer biases differ from imucal's by up to {spread:.4} m/s^2; |a|−g rms {:.4}", r.gravity_rms_m_s2);
-            assert!(spread < 0.02 && spread < 2.0 * r.gravity_rms_m_s2, "the face pairs disagree by about the residual");
+            println!(
+                "  least-squares accelerometer biases differ from imucal's by up to {spread:.4} m/s^2; |a|−g rms {:.4}",
+                r.gravity_rms_m_s2
+            );
+            assert!(
+                spread < 0.02 && spread < 2.0 * r.gravity_rms_m_s2,
+                "the face pairs disagree by about the residual"
+            );
         }
     }
     // imucal's own calibrated output of the first 50 samples, reproduced by crosscal's
@@ -160,7 +168,10 @@ fn imucal_annotated_session_reproduces_the_snapshot() {
     for angle in ["-360", "360"] {
         let tmp = tempfile::tempdir().unwrap();
         let t0 = Instant::now();
-        let m = import(tmp.path(), &["imucal-annotated", csv.to_str().unwrap(), "--rate-hz", "204.8", "--turn-angle-deg", angle]);
+        let m = import(
+            tmp.path(),
+            &["imucal-annotated", csv.to_str().unwrap(), "--rate-hz", "204.8", "--turn-angle-deg", angle],
+        );
         let (_, f, r, secs) = fit(&m, &Model::ferraris(), true);
         let total = t0.elapsed().as_secs_f64();
         println!("turn {angle}°: import + fit {total:.3} s (fit {secs:.3} s)");
@@ -232,7 +243,8 @@ fn imu_tk_xsens_matches_imu_tk_and_fits_gravity_no_worse() {
         assert!((ba[i] - acc_b[i]).abs() < 0.005 * acc_b[i].abs() && (ba[i] - acc_b[i]).abs() < 0.1, "acc B {i}");
         assert!((bg[i] - gyr_b[i]).abs() < 0.1, "gyro B {i}: {} vs {}", bg[i], gyr_b[i]);
         for j in 0..3 {
-            worst = worst.max((ours_acc_t[(i, j)] - acc_t[(i, j)]).abs()).max((ours_gyr_t[(i, j)] - gyr_t[(i, j)]).abs());
+            worst =
+                worst.max((ours_acc_t[(i, j)] - acc_t[(i, j)]).abs()).max((ours_gyr_t[(i, j)] - gyr_t[(i, j)]).abs());
         }
     }
     println!("  largest difference: {worst:.2e} (relative in scale, absolute in misalignment)");

@@ -28,6 +28,12 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let session = Session::load(&a.session).with_context(|| format!("reading session {}", a.session.display()))?;
+    if session.is_protocol() {
+        anyhow::bail!(
+            "{} is a protocol session: `compare` ranks models on stand runs; use `crosscal diagnose` for its candidate effects",
+            a.session.display()
+        );
+    }
     let tr = tracks(&session, &DerivativeConfig::default());
     let runs = fit_runs(&session, &tr);
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();

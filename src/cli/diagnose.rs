@@ -15,7 +15,8 @@ use std::path::PathBuf;
 pub struct Args {
     /// The session manifest (session.json).
     session: PathBuf,
-    /// Model to start from: `default` or `paper`.
+    /// Model to start from: `default` or `paper` (protocol sessions: `ferraris` or `tedaldi`,
+    /// chosen from the session unless given).
     #[arg(long, default_value = "default", conflicts_with = "profile")]
     model: String,
     /// Start from a unit's profile instead: its coefficients are held, nothing is refitted,
@@ -63,6 +64,9 @@ fn channel_table(c: &[ChannelReport]) -> String {
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let session = Session::load(&a.session).with_context(|| format!("reading session {}", a.session.display()))?;
+    if session.is_protocol() {
+        return run_protocol(&a, &session);
+    }
     let model = match &a.profile {
         Some(p) => {
             let prof = crosscal::profile::Profile::read(p)?;
@@ -160,6 +164,97 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 println!("  {u}");
             }
         }
+    }
+    Ok(Outcome::Ok)
+}
+
+/// `diagnose` on a protocol session: pose and turn residuals, candidate effects on the poses.
+fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
+    if a.report.is_some() {
+        anyhow::bail!("--report draws stand-run residuals; for a protocol session use the text or --json output");
+    }
+    let model = match &a.profile {
+        Some(p) => {
+            let prof = crosscal::profile::Profile::read(p)?;
+            prof.ensure_unit(p, &session.manifest.serial)?;
+            let mut m = prof.model().with_context(|| format!("using profile {}", p.display()))?;
+            for e in &a.effects {
+                m.add_effect(e)?;
+            }
+            m
+        }
+        None => {
+            let preset = if a.model != "default" {
+                a.model.as_str()
+            } else if crosscal::estimate::protocol::is_multi_position(session) {
+                "tedaldi"
+            } else {
+                "ferraris"
+            };
+            build_model(preset, &a.effects, &[])?
+        }
+    };
+    let d = crosscal::diagnose::protocol::diagnose_protocol(session, &model)
+        .with_context(|| format!("diagnosing {}", a.session.display()))?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&d)?);
+        return Ok(Outcome::Ok);
+    }
+    println!(
+        "unit {}: model '{}' against {} ({} samples)",
+        session.manifest.serial,
+        d.model,
+        d.report.protocol,
+        session.n_samples()
+    );
+    print!("{}", format::protocol(&d.report));
+    let mut poses: Vec<_> = d.report.poses.iter().collect();
+    poses.sort_by(|x, y| y.gravity_error_m_s2.abs().total_cmp(&x.gravity_error_m_s2.abs()));
+    println!("\nlargest pose misfits (|a| − g, calibrated rate at rest):");
+    for p in poses.iter().take(5) {
+        let w = p.rate_at_rest_deg_s;
+        println!(
+            "  {:<24} {:>+10.5} m/s^2   ω {:+.4} {:+.4} {:+.4} deg/s",
+            format!("{}[{}..{}]", p.run, p.start, p.end),
+            p.gravity_error_m_s2,
+            w[0],
+            w[1],
+            w[2]
+        );
+    }
+    for o in &d.outlier_poses {
+        println!("  OUTLIER {o}: did the unit move, or was the pose cut too wide?");
+    }
+    if !d.candidates.is_empty() {
+        println!("\ncandidate effects on the static poses, best first:");
+        println!("  {:<26} {:>6} {:>12} {:>11}  fit on this session", "effect", "params", "rss change", "p-value");
+        for c in d.candidates.iter().take(8) {
+            let change = if c.rss_before > 0.0 { 100.0 * (c.rss_after / c.rss_before - 1.0) } else { 0.0 };
+            let fit = match &c.fittable {
+                Ok(()) => "yes".to_string(),
+                Err(_) => "no".to_string(),
+            };
+            println!("  {:<26} {:>6} {:>11.2}% {:>11.2e}  {fit}", c.effect, c.added_params, change, c.p_value);
+        }
+    }
+    match d.proposal.as_deref().and_then(|p| d.candidates.iter().find(|c| c.effect == p)) {
+        Some(c) => {
+            println!("\nverdict: missing effect {} (p = {:.1e})", c.effect, c.p_value);
+            if !d.indistinguishable.is_empty() {
+                println!(
+                    "  these poses cannot tell it from {}: poses at other angles (e.g. 45° tilts) would separate them",
+                    d.indistinguishable.join(", ")
+                );
+            }
+            match &c.fittable {
+                Ok(()) => println!("next: crosscal fit {} --effect {}", a.session.display(), c.effect),
+                Err(why) => println!("next: {why}"),
+            }
+        }
+        None => println!(
+            "\nverdict: adequate: no catalogued effect explains the pose residuals (p ≥ {:.0e} for all)",
+            crosscal::diagnose::protocol::P_PROPOSE
+        ),
     }
     Ok(Outcome::Ok)
 }

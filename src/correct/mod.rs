@@ -47,6 +47,9 @@ pub enum CorrectError {
     /// The profile has a temperature effect but the data have no temperature.
     #[error("the profile's effect '{0}' needs temperatures: the recording has no temp column")]
     MissingTemperature(String),
+    /// The session has no per-sample reference (protocol runs).
+    #[error("{0} is a protocol session (static poses, turns, multi-position): it has no per-sample reference to check against; `crosscal fit` and `crosscal diagnose` report its pose and turn residuals")]
+    ProtocolSession(String),
     /// Input arrays disagree in length.
     #[error("input lengths differ: t has {t}, gyro {g}, accel {a}")]
     Length {

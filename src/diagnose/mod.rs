@@ -18,6 +18,7 @@
 //!    harmonic and runs where the systematic residual stays).
 
 pub mod plot;
+pub mod protocol;
 pub mod report;
 
 use crate::check::harmonics::{chi2_upper, systematic, Systematic};

@@ -31,9 +31,58 @@ use argmin::core::{CostFunction, Error as ArgminError, Jacobian, Operator};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
-/// The effects a protocol session can identify.
-pub const PROTOCOL_EFFECTS: [&str; 5] =
+/// The effects the multi-position fit supports.
+pub const MULTI_POSITION_EFFECTS: [&str; 5] =
     ["gyro-bias", "gyro-scale-coupling", "gyro-g-sensitivity", "accel-bias", "accel-scale-coupling"];
+
+/// True when every regressor of the effect is a constant or a function of the specific
+/// force alone (`1`, `a_x`, `a_x^2`, `|a_x|`, `a_xa_y`, …), or (with `linear_rate`) a rate
+/// entering linearly (`w_x`): what static poses (and, for linear rate terms, turns) identify.
+pub fn pose_identifiable(effect: &dyn crate::model::Effect, linear_rate: bool) -> bool {
+    !effect.needs_temperature()
+        && effect.terms().iter().all(|t| {
+            let k = t.key.as_str();
+            k == "1"
+                || (k.starts_with("a_") || k.starts_with("|a_")) && !k.contains('w')
+                || linear_rate && matches!(k, "w_x" | "w_y" | "w_z")
+        })
+}
+
+/// True when the protocol fit of this kind of session can fit the model.
+fn supports(model: &Model, multi_position: bool) -> Result<(), String> {
+    for e in model.effects() {
+        let ok =
+            if multi_position { MULTI_POSITION_EFFECTS.contains(&e.id()) } else { pose_identifiable(e.as_ref(), true) };
+        if !ok {
+            return Err(if multi_position {
+                format!(
+                    "effect '{}' cannot be fitted from a multi-position session (it fits {}); record a Ferraris session (six faces, three turns) or stand runs for it",
+                    e.id(),
+                    MULTI_POSITION_EFFECTS.join(", ")
+                )
+            } else {
+                format!(
+                    "effect '{}' cannot be fitted from static faces and turns: they identify constants, functions of the specific force and rates entering linearly (use --model ferraris, optionally with accelerometer effects such as accel-quadratic)",
+                    e.id()
+                )
+            });
+        }
+    }
+    if let Some(e) = model.nonlinear().first() {
+        return Err(format!("nonlinear effect '{}' is not supported in protocol sessions", e.effect.id()));
+    }
+    Ok(())
+}
+
+/// True when the session's runs make it a multi-position session.
+pub fn is_multi_position(session: &Session) -> bool {
+    session.runs.iter().any(|r| matches!(r.spec.motion, MotionSpec::MultiPosition { .. } | MotionSpec::StaticUnknown))
+}
+
+/// Whether [`fit_protocol`] can fit `model` on `session`, and why not.
+pub fn can_fit(session: &Session, model: &Model) -> Result<(), String> {
+    supports(model, is_multi_position(session))
+}
 
 /// One static pose used by a protocol fit.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -133,24 +182,6 @@ fn median_dt(t: &[f64]) -> f64 {
     d[d.len() / 2]
 }
 
-/// Checks that the model only has effects a protocol session can identify.
-fn check_model(model: &Model) -> Result<(), EstimateError> {
-    if let Some(e) = model.effects().iter().find(|e| !PROTOCOL_EFFECTS.contains(&e.id())) {
-        return Err(protocol_error(format!(
-            "effect '{}' cannot be fitted from static poses and turns (they identify {}); use --model ferraris or --model tedaldi",
-            e.id(),
-            PROTOCOL_EFFECTS.join(", ")
-        )));
-    }
-    if let Some(e) = model.nonlinear().first() {
-        return Err(protocol_error(format!(
-            "nonlinear effect '{}' is not supported in protocol sessions",
-            e.effect.id()
-        )));
-    }
-    Ok(())
-}
-
 /// Choices of a protocol fit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ProtocolOptions {
@@ -169,7 +200,7 @@ pub fn fit_protocol(
     model: &Model,
     opts: &ProtocolOptions,
 ) -> Result<(Fit, ProtocolReport), EstimateError> {
-    check_model(model)?;
+    supports(model, is_multi_position(session)).map_err(protocol_error)?;
     let has = |f: fn(&MotionSpec) -> bool| session.runs.iter().any(|r| f(&r.spec.motion));
     if has(|m| matches!(m, MotionSpec::Conic { .. } | MotionSpec::Reference)) {
         return Err(protocol_error(
@@ -313,10 +344,25 @@ fn ferraris(session: &Session, model: &Model, popts: &ProtocolOptions) -> Result
     };
     let pose_runs: Vec<FitRun<'_>> = obs.iter().filter(|o| o.turn.is_none()).map(Obs::as_run).collect();
     let first = fit(model, &pose_runs, &opts)?;
+    let accel_terms = model.terms(SensorKind::Accel);
+    let accel_values: Vec<f64> =
+        accel_terms.iter().map(|t| first.accel.value(&t.term.name).unwrap_or(t.term.nominal)).collect();
     let (k, b) = accel_kb(&first.accel);
     let k_inv = k.try_inverse().ok_or_else(|| protocol_error("the fitted accelerometer matrix K is singular"))?;
+    // The accelerometer's inverse: Newton steps with the linear part's Jacobian K on the full
+    // forward model (exact for u = b + K a; converges for small nonlinear terms).
     let calibrate_a = |u: [f64; 3]| -> [f64; 3] {
-        let a = k_inv * (Vector3::from(u) - b);
+        let u = Vector3::from(u);
+        let mut a = k_inv * (u - b);
+        for _ in 0..50 {
+            let s = crate::model::State { a: [a[0], a[1], a[2]], ..Default::default() };
+            let r = u - Vector3::from(crate::model::forward(&accel_terms, &accel_values, &s));
+            let step = k_inv * r;
+            a += step;
+            if step.norm() <= 1e-13 * a.norm() {
+                break;
+            }
+        }
         [a[0], a[1], a[2]]
     };
     // Turns: the calibrated mean specific force, and a check of the turn's sign.
@@ -1076,4 +1122,60 @@ fn sensor_fit(
         })
         .collect();
     SensorFit { sensor, coefficients, channels, unidentifiable, correlated: Vec::new() }
+}
+
+/// One static pose as a one-sample run for linear refits ([`crate::diagnose::protocol`]):
+/// its true specific force (the declared up for a face, the calibrated direction × g for a
+/// pose of unknown orientation) and its mean outputs.
+#[derive(Debug, Clone)]
+pub struct PoseRow {
+    /// "run" or "run[start..end]".
+    pub name: String,
+    /// The pose's state (ω = 0).
+    pub track: Track,
+    /// Mean gyro output.
+    pub gyro: [[f64; 3]; 1],
+    /// Mean accelerometer output.
+    pub accel: [[f64; 3]; 1],
+}
+
+impl PoseRow {
+    /// The row as a run for [`fit`].
+    pub fn as_run(&self) -> FitRun<'_> {
+        FitRun {
+            name: &self.name,
+            track: &self.track,
+            gyro: &self.gyro,
+            accel: &self.accel,
+            temp_c: None,
+            temp_const_c: None,
+        }
+    }
+}
+
+/// The static poses of a fitted protocol session as rows (see [`PoseRow`]).
+pub fn pose_rows(session: &Session, fit: &Fit, report: &ProtocolReport) -> Vec<PoseRow> {
+    let g = session.manifest.g_m_s2;
+    let (k, b) = accel_kb(&fit.accel);
+    let k_inv = k.try_inverse().unwrap_or(Matrix3::from_element(f64::NAN));
+    let mut rows = Vec::with_capacity(report.poses.len());
+    for p in &report.poses {
+        let Some(run) = session.runs.iter().find(|r| r.spec.name == p.run) else { continue };
+        let (s, e) = (p.start.min(run.rec.len()), p.end.min(run.rec.len()));
+        if e <= s {
+            continue;
+        }
+        let gyro = [mean3(&run.rec.gyro[s..e])];
+        let accel = [mean3(&run.rec.accel[s..e])];
+        let a = match &run.spec.motion {
+            MotionSpec::Static { up_stand, .. } => run.spec.mount.to_sensor(V3::new(*up_stand)).xyz.map(|x| x * g),
+            _ => {
+                let d = (k_inv * (Vector3::from(accel[0]) - b)).normalize() * g;
+                [d[0], d[1], d[2]]
+            }
+        };
+        let name = if s == 0 && e == run.rec.len() { p.run.clone() } else { format!("{}[{s}..{e}]", p.run) };
+        rows.push(PoseRow { name, track: state_track([0.0; 3], a), gyro, accel });
+    }
+    rows
 }

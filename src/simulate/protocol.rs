@@ -6,9 +6,7 @@
 //! the hand is idealised as a pure rotation (no linear acceleration), so `a = Rᵀ g_up`.
 
 use crate::motion::Mount;
-use crate::session::{
-    AccelUnit, GyroUnit, Manifest, MotionSpec, Recording, Run, RunSpec, Session, TimeUnit, Units,
-};
+use crate::session::{AccelUnit, GyroUnit, Manifest, MotionSpec, Recording, Run, RunSpec, Session, TimeUnit, Units};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -28,6 +26,8 @@ pub struct ProtocolTruth {
     pub b_gyro: Vector3<f64>,
     /// Gyro g-sensitivity, counts per m/s².
     pub g_gyro: Matrix3<f64>,
+    /// Accelerometer quadratic nonlinearity `u_i += q_i a_i²`, counts per (m/s²)².
+    pub q_accel: Vector3<f64>,
     /// White noise per sample: gyro, accelerometer (counts).
     pub noise: (f64, f64),
     /// Local gravity, m/s².
@@ -49,6 +49,7 @@ impl ProtocolTruth {
             c_gyro: Matrix3::new(3760.0, 25.0, -31.0, -18.0, 3702.0, 40.0, 22.0, -36.0, 3731.0),
             b_gyro: Vector3::new(-14.0, 9.5, 3.2),
             g_gyro: Matrix3::new(0.05, -0.02, 0.01, 0.03, 0.04, -0.02, -0.01, 0.02, 0.06),
+            q_accel: Vector3::zeros(),
             noise: (2.0, 3.0),
             g_m_s2: 9.80665,
             rate_hz: 100.0,
@@ -69,7 +70,7 @@ impl Builder<'_> {
         let a = self.q.inverse_transform_vector(&Vector3::new(0.0, 0.0, t.g_m_s2));
         let gn = Normal::new(0.0, t.noise.0.max(0.0)).ok();
         let an = Normal::new(0.0, t.noise.1.max(0.0)).ok();
-        let mut ua = t.k_accel * a + t.b_accel;
+        let mut ua = t.k_accel * a + t.b_accel + t.q_accel.component_mul(&a.component_mul(&a));
         let mut ug = t.c_gyro * w_body + t.g_gyro * a + t.b_gyro;
         for i in 0..3 {
             ua[i] += an.map_or(0.0, |d| d.sample(&mut self.rng));
@@ -193,7 +194,11 @@ pub fn ferraris(truth: &ProtocolTruth, hold_s: f64, turn_deg: f64, seed: u64) ->
             .unwrap_or_else(|| UnitQuaternion::from_scaled_axis(Vector3::x() * std::f64::consts::PI));
         b.hold(0.5); // settling, not part of the run
         let rows = b.hold(hold_s);
-        runs.push(spec(name, MotionSpec::Static { up_stand: [up[0], up[1], up[2]], earth_rate_rad_s: [0.0; 3] }, Some(rows)));
+        runs.push(spec(
+            name,
+            MotionSpec::Static { up_stand: [up[0], up[1], up[2]], earth_rate_rad_s: [0.0; 3] },
+            Some(rows),
+        ));
     }
     for (i, name) in ["x_rot", "y_rot", "z_rot"].iter().enumerate() {
         b.q = UnitQuaternion::rotation_between(&Vector3::new(1.0, 1.0, 1.0), &Vector3::z()).unwrap_or_default();
@@ -204,13 +209,20 @@ pub fn ferraris(truth: &ProtocolTruth, hold_s: f64, turn_deg: f64, seed: u64) ->
         let (_, end) = b.hold(1.0);
         runs.push(spec(name, MotionSpec::Rotation { axis_stand: axis, angle_deg: turn_deg }, Some((start, end))));
     }
-    let manifest = Manifest { serial: "SIM-FERRARIS".into(), units: raw_units(), g_m_s2: truth.g_m_s2, runs, version: 2 };
+    let manifest =
+        Manifest { serial: "SIM-FERRARIS".into(), units: raw_units(), g_m_s2: truth.g_m_s2, runs, version: 2 };
     ProtocolSession { manifest, recording: b.rec }
 }
 
 /// Hand-held multi-position session: `init_rest_s` of rest, then `poses` random
 /// orientations held `hold_s` each, joined by 1.5 s turns.
-pub fn multi_position(truth: &ProtocolTruth, init_rest_s: f64, poses: usize, hold_s: f64, seed: u64) -> ProtocolSession {
+pub fn multi_position(
+    truth: &ProtocolTruth,
+    init_rest_s: f64,
+    poses: usize,
+    hold_s: f64,
+    seed: u64,
+) -> ProtocolSession {
     let mut b = Builder {
         truth,
         rng: ChaCha8Rng::seed_from_u64(seed),
@@ -220,7 +232,8 @@ pub fn multi_position(truth: &ProtocolTruth, init_rest_s: f64, poses: usize, hol
     b.hold(init_rest_s);
     for _ in 0..poses {
         // A random turn of 40–120° about a random axis.
-        let axis = Vector3::new(b.rng.random_range(-1.0..1.0), b.rng.random_range(-1.0..1.0), b.rng.random_range(-1.0..1.0));
+        let axis =
+            Vector3::new(b.rng.random_range(-1.0..1.0), b.rng.random_range(-1.0..1.0), b.rng.random_range(-1.0..1.0));
         let angle = b.rng.random_range(40f64..120.0).to_radians();
         b.turn(if axis.norm() > 1e-3 { axis } else { Vector3::x() }, angle, 1.5);
         b.hold(hold_s);

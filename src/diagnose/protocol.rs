@@ -1,0 +1,128 @@
+//! Diagnosis of protocol sessions (Ferraris faces and turns, multi-position poses): which
+//! poses and turns the model misfits, and which catalogue effect the static poses call for.
+//!
+//! The poses of the fitted session become one-row runs at their true specific force (the
+//! declared up of a face; the calibrated direction × g for a pose of unknown orientation).
+//! Every catalogue effect whose regressors are functions of the specific force alone is
+//! added in turn to the pose-level least-squares problem, and scored by the F-test of the
+//! residual sum of squares it removes (`F = (ΔRSS/Δp) / (RSS₁/(n − p₁))`). The best effect
+//! with p < [`P_PROPOSE`] is proposed, with whether this kind of session can fit it.
+
+use crate::estimate::protocol::{can_fit, fit_protocol, pose_identifiable, pose_rows, ProtocolOptions, ProtocolReport};
+use crate::estimate::{fit, CoefStatus, EstimateError, FitOptions, FitRun, SensorFit};
+use crate::model::{catalog, Model, SensorKind};
+use crate::session::Session;
+use serde::{Deserialize, Serialize};
+use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+
+/// p-value below which a candidate effect is proposed.
+pub const P_PROPOSE: f64 = 1e-3;
+
+/// One candidate effect scored on the static poses.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseCandidate {
+    /// Effect id.
+    pub effect: String,
+    /// Sensor it acts on.
+    pub sensor: SensorKind,
+    /// Coefficients it adds (fitted).
+    pub added_params: usize,
+    /// Residual sum of squares of that sensor's pose rows without it.
+    pub rss_before: f64,
+    /// With it.
+    pub rss_after: f64,
+    /// F-test p-value.
+    pub p_value: f64,
+    /// Whether `crosscal fit --effect <id>` can fit it on this kind of session (and why not).
+    pub fittable: Result<(), String>,
+}
+
+/// The diagnosis of a protocol session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ProtocolDiagnosis {
+    /// Model diagnosed.
+    pub model: String,
+    /// The fit's pose and turn residuals.
+    pub report: ProtocolReport,
+    /// Poses whose |a| − g stands out (robust z > 5 against the others).
+    pub outlier_poses: Vec<String>,
+    /// Candidates, best first.
+    pub candidates: Vec<PoseCandidate>,
+    /// The proposed effect, if any candidate is significant.
+    pub proposal: Option<String>,
+    /// Candidates that remove exactly as much as the proposal: these poses cannot tell them
+    /// apart (e.g. quadratic and scale asymmetry on six faces at ±g).
+    pub indistinguishable: Vec<String>,
+}
+
+fn rss(f: &SensorFit) -> (f64, usize, usize) {
+    let mut r = 0.0;
+    let mut n = 0;
+    for ch in &f.channels {
+        r += ch.residual_rms * ch.residual_rms * ch.n as f64;
+        n += ch.n as usize;
+    }
+    let p = f.coefficients.iter().filter(|c| c.status == CoefStatus::Fitted).count();
+    (r, n, p)
+}
+
+/// Diagnoses a protocol session with `model` (see the module documentation).
+pub fn diagnose_protocol(session: &Session, model: &Model) -> Result<ProtocolDiagnosis, EstimateError> {
+    let (fitted, report) = fit_protocol(session, model, &ProtocolOptions::default())?;
+    let rows = pose_rows(session, &fitted, &report);
+    let runs: Vec<FitRun<'_>> = rows.iter().map(|r| r.as_run()).collect();
+    let opts = FitOptions::default();
+    let base = fit(model, &runs, &opts)?;
+    let mut candidates = Vec::new();
+    for e in catalog() {
+        if model.effects().iter().any(|m| m.id() == e.id()) || !pose_identifiable(e.as_ref(), false) {
+            continue;
+        }
+        let mut m = model.clone();
+        if m.add_effect(e.id()).is_err() {
+            continue;
+        }
+        let Ok(with) = fit(&m, &runs, &opts) else { continue };
+        let (r0, _, p0) = rss(base.sensor(e.sensor()));
+        let (r1, n, p1) = rss(with.sensor(e.sensor()));
+        if p1 <= p0 || n <= p1 {
+            continue;
+        }
+        let (d1, d2) = ((p1 - p0) as f64, (n - p1) as f64);
+        let f = ((r0 - r1).max(0.0) / d1) / (r1 / d2).max(f64::MIN_POSITIVE);
+        let p_value = FisherSnedecor::new(d1, d2).map_or(1.0, |dist| dist.sf(f));
+        candidates.push(PoseCandidate {
+            effect: e.id().to_string(),
+            sensor: e.sensor(),
+            added_params: p1 - p0,
+            rss_before: r0,
+            rss_after: r1,
+            p_value,
+            fittable: can_fit(session, &m),
+        });
+    }
+    candidates.sort_by(|a, b| a.p_value.total_cmp(&b.p_value));
+    let proposal = candidates.first().filter(|c| c.p_value < P_PROPOSE).map(|c| c.effect.clone());
+    let indistinguishable = match candidates.first().filter(|_| proposal.is_some()) {
+        Some(best) => candidates[1..]
+            .iter()
+            .filter(|c| {
+                c.added_params == best.added_params && (c.rss_after - best.rss_after).abs() <= 1e-9 * best.rss_before
+            })
+            .map(|c| c.effect.clone())
+            .collect(),
+        None => Vec::new(),
+    };
+    // Robust z of each pose's |a| − g against the others (median / MAD).
+    let mut errs: Vec<f64> = report.poses.iter().map(|p| p.gravity_error_m_s2).collect();
+    let med = crate::session::sanity::median(&mut errs);
+    let mut dev: Vec<f64> = errs.iter().map(|e| (e - med).abs()).collect();
+    let mad = crate::session::sanity::median(&mut dev) * 1.4826;
+    let outlier_poses = report
+        .poses
+        .iter()
+        .filter(|p| mad > 0.0 && (p.gravity_error_m_s2 - med).abs() > 5.0 * mad)
+        .map(|p| format!("{}[{}..{}]: |a| − g = {:+.4} m/s^2", p.run, p.start, p.end, p.gravity_error_m_s2))
+        .collect();
+    Ok(ProtocolDiagnosis { model: model.name.clone(), report, outlier_poses, candidates, proposal, indistinguishable })
+}
