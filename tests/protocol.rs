@@ -228,7 +228,7 @@ fn importers_name_file_line_and_column_of_bad_input() {
         run_in(tmp.path(), &["import", "imucal-ferraris", "f.csv", "l.json", "--rate-hz", "100", "--out", "o"]);
     assert_eq!(code, 6, "{err}");
     assert!(err.contains("f.csv:3:3 (gyr_y)") && err.contains("'zero'"), "{err}");
-    std::fs::write(tmp.path().join("f.csv"), &csv.replace("zero", "0")).unwrap();
+    std::fs::write(tmp.path().join("f.csv"), csv.replace("zero", "0")).unwrap();
     let (code, _, err) =
         run_in(tmp.path(), &["import", "imucal-ferraris", "f.csv", "l.json", "--rate-hz", "100", "--out", "o"]);
     assert_ne!(code, 0);
