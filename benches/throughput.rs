@@ -122,14 +122,23 @@ fn fit_vs_peer(sizes: &[usize]) {
         c.accel_noise_g = 2e-5;
         let dir = tmp.path().join(format!("s{n}"));
         let manifest = write_session(&c.generate(), &dir).expect("write session");
-        let (tc, mc) = measure(
-            std::process::Command::new(env!("CARGO_BIN_EXE_crosscal")).args(["fit", "--dry-run"]).arg(&manifest),
-        );
+        let crosscal = |extra: &[&str]| {
+            measure(
+                std::process::Command::new(env!("CARGO_BIN_EXE_crosscal"))
+                    .args(["fit", "--dry-run"])
+                    .args(extra)
+                    .arg(&manifest),
+            )
+        };
+        let (tc, mc) = crosscal(&[]);
+        let (ts, ms) = crosscal(&["--stream"]);
         let (tp, mp) = measure(std::process::Command::new("python3").arg(peer).arg(&manifest));
         println!(
-            "fit     | {n:>9} samples, 10 runs: crosscal {tc:.2} s {mc:.0} MB | pandas+numpy {tp:.2} s {mp:.0} MB | {:.1}× faster, {:.2}× the memory",
+            "fit     | {n:>9} samples, 10 runs: crosscal {tc:.2} s {mc:.0} MB, --stream {ts:.2} s {ms:.0} MB | pandas+numpy {tp:.2} s {mp:.0} MB | {:.1}× / {:.1}× faster, {:.2}× / {:.2}× the memory",
             tp / tc,
-            mc / mp
+            tp / ts,
+            mc / mp,
+            ms / mp
         );
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -17,5 +17,6 @@ mod real;
 mod reference;
 mod robust;
 mod stand;
+mod stream;
 mod uncertainty;
 mod validate;

@@ -55,6 +55,11 @@ pub struct Args {
     /// imucal computes them, instead of least squares over all six faces.
     #[arg(long)]
     classic_six_position: bool,
+    /// Read the recordings as streams while fitting (memory independent of their length:
+    /// for long recordings). Conic and static runs, linear models; gaps in t are not
+    /// reported in this mode.
+    #[arg(long, conflicts_with_all = ["holdout", "stand", "robust"])]
+    stream: bool,
     /// Store this noise characterisation (JSON from `crosscal noise --save`) in the profile.
     #[arg(long)]
     noise: Option<PathBuf>,
@@ -73,6 +78,9 @@ pub fn build_model(preset: &str, effects: &[String], disable: &[String]) -> anyh
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    if a.stream {
+        return run_streaming(&a);
+    }
     let full =
         Session::load_with(&a.session, a.strict).with_context(|| format!("reading session {}", a.session.display()))?;
     if full.is_protocol() {
@@ -105,13 +113,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         notes.push(format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy));
     }
     let mut profile = Profile::from_fit(&session, &model, fit, notes);
-    if let Some(path) = &a.noise {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-        let r: crosscal::noise::NoiseReport = serde_json::from_str(&text).with_context(|| {
-            format!("{}: not a noise report (write one with `crosscal noise --save`)", path.display())
-        })?;
-        profile.noise = Some(r);
-    }
+    attach_noise(&a, &mut profile)?;
     if !a.holdout.is_empty() {
         let held = crosscal::pipeline::subset(&full, |n| a.holdout.iter().any(|h| h == n));
         let cal = crosscal::correct::Calibration::from_profile(&profile)?;
@@ -148,14 +150,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         print!("{}", format::nonlinear(&profile.nonlinear));
         print!("{}", format::stand(&profile.stand));
     }
-    if !a.dry_run {
-        let path = save(&profile, &a.out).with_context(|| format!("saving the profile under {}", a.out.display()))?;
-        if a.json {
-            eprintln!("profile written to {}", path.display());
-        } else {
-            println!("profile written to {}", path.display());
-        }
-    }
+    save_unless_dry(&a, &profile)?;
     Ok(Outcome::Ok)
 }
 
@@ -212,13 +207,69 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
         }
         print!("{}", format::profile_fits(&profile));
     }
+    save_unless_dry(a, &profile)?;
+    Ok(Outcome::Ok)
+}
+
+/// Stores `--noise`'s report in the profile.
+fn attach_noise(a: &Args, profile: &mut Profile) -> anyhow::Result<()> {
+    if let Some(path) = &a.noise {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let r: crosscal::noise::NoiseReport = serde_json::from_str(&text).with_context(|| {
+            format!("{}: not a noise report (write one with `crosscal noise --save`)", path.display())
+        })?;
+        profile.noise = Some(r);
+    }
+    Ok(())
+}
+
+/// `fit --stream`: the recordings are read as streams, never held.
+fn run_streaming(a: &Args) -> anyhow::Result<Outcome> {
+    let model = build_model(&a.model, &a.effects, &a.disable)?;
+    let opts = FitOptions::default();
+    let sf = crosscal::estimate::stream::fit_streaming(&a.session, &model, &opts)
+        .with_context(|| format!("fitting {} (streamed)", a.session.display()))?;
+    if a.strict {
+        sf.fit.ensure_identifiable().with_context(|| format!("fitting {} (--strict)", a.session.display()))?;
+    }
+    let mut notes = Vec::new();
+    for run in &sf.manifest.runs {
+        let eps = match run.motion {
+            crosscal::session::MotionSpec::Conic { .. } => crosscal::motion::EPSILON_CONIC,
+            _ => crosscal::motion::EPSILON_STATIC,
+        };
+        notes.push(format!("run {}: ε reference {eps}", run.name));
+    }
+    for u in sf.fit.gyro.unidentifiable.iter().chain(&sf.fit.accel.unidentifiable) {
+        notes.push(format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy));
+    }
+    let samples: usize = sf.runs.iter().map(|r| r.samples).sum();
+    let mut profile = Profile::from_fit_of(&sf.manifest, sf.runs, &model, sf.fit, notes);
+    attach_noise(a, &mut profile)?;
+    if a.json {
+        print!("{}", profile.to_json());
+    } else {
+        println!(
+            "unit {}: {} runs, {samples} samples (streamed), model '{}'",
+            profile.serial,
+            profile.runs.len(),
+            profile.model
+        );
+        print!("{}", format::profile_fits(&profile));
+    }
+    save_unless_dry(a, &profile)?;
+    Ok(Outcome::Ok)
+}
+
+/// Saves the profile in the store unless `--dry-run`; says where.
+fn save_unless_dry(a: &Args, profile: &Profile) -> anyhow::Result<()> {
     if !a.dry_run {
-        let path = save(&profile, &a.out).with_context(|| format!("saving the profile under {}", a.out.display()))?;
+        let path = save(profile, &a.out).with_context(|| format!("saving the profile under {}", a.out.display()))?;
         if a.json {
             eprintln!("profile written to {}", path.display());
         } else {
             println!("profile written to {}", path.display());
         }
     }
-    Ok(Outcome::Ok)
+    Ok(())
 }

@@ -19,6 +19,7 @@ pub mod nonlinear;
 pub mod protocol;
 pub mod qr;
 pub mod stand;
+pub mod stream;
 
 pub use identify::{Correlation, Unidentifiable};
 pub use nonlinear::NonlinearParam;
@@ -297,12 +298,29 @@ pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit,
     if !model.nonlinear().is_empty() {
         return nonlinear::fit(model, runs, opts);
     }
-    Ok(Fit {
-        gyro: fit_sensor(model, SensorKind::Gyro, runs, opts)?,
-        accel: fit_sensor(model, SensorKind::Accel, runs, opts)?,
-        nonlinear: Vec::new(),
-        stand: Vec::new(),
+    let sources: Vec<&dyn Samples> = runs.iter().map(|r| r as &dyn Samples).collect();
+    fit_samples(model, &sources, runs, opts).map_err(|e| match e {
+        SamplesError::Estimate(e) => e,
+        SamplesError::Read(e) => EstimateError::NotConverged(format!("reading samples: {e}")),
     })
+}
+
+/// Fits both sensors of a linear model to any [`Samples`] (streamed files or in-memory
+/// runs) in one pass per source plus one residual pass; `robust_runs` serve the robust
+/// refit, which needs the samples in memory.
+pub fn fit_samples(
+    model: &Model,
+    sources: &[&dyn Samples],
+    robust_runs: &[FitRun<'_>],
+    opts: &FitOptions,
+) -> Result<Fit, SamplesError> {
+    if opts.robust && robust_runs.is_empty() {
+        return Err(EstimateError::NotConverged("the robust fit needs the samples in memory".into()).into());
+    }
+    let mut v = fit_core(model, &SensorKind::BOTH, sources, robust_runs, opts)?;
+    let accel = v.pop().ok_or(EstimateError::NoData)?;
+    let gyro = v.pop().ok_or(EstimateError::NoData)?;
+    Ok(Fit { gyro, accel, nonlinear: Vec::new(), stand: Vec::new() })
 }
 
 /// Regressor columns of one sensor: unique keys, with the term that evaluates each.
@@ -345,32 +363,246 @@ impl Columns {
         k: usize,
         row: &mut [f64],
     ) {
-        let s = run.state(k);
+        self.fill_state_row(terms, &run.state(k), &run.output(sensor, k), row);
+    }
+
+    /// Design row at a state with the sensor's output.
+    #[inline]
+    pub(crate) fn fill_state_row(
+        &self,
+        terms: &[crate::model::TermRef<'_>],
+        s: &State,
+        output: &[f64; 3],
+        row: &mut [f64],
+    ) {
         for (c, &ti) in self.source.iter().enumerate() {
-            row[c] = terms[ti].regressor(&s);
+            row[c] = terms[ti].regressor(s);
         }
-        row[self.source.len()..].copy_from_slice(&run.output(sensor, k));
+        row[self.source.len()..].copy_from_slice(output);
     }
 }
 
+/// The per-sample callback of [`Samples`]: state, gyro output, accelerometer output.
+pub type SampleFn<'f> = dyn FnMut(&State, &[f64; 3], &[f64; 3]) + 'f;
+
+/// A sequence of samples for the linear estimator: the true state and both outputs of
+/// each, in order. In memory ([`FitRun`]) or streamed from a file ([`stream`]); both go
+/// through the same arithmetic, so their fits are identical.
+pub trait Samples: Sync {
+    /// Run name.
+    fn run_name(&self) -> &str;
+    /// Calls `f(state, gyro, accel)` for every sample in order.
+    fn for_each_sample(&self, f: &mut SampleFn<'_>) -> Result<(), crate::session::SessionError>;
+}
+
+impl Samples for FitRun<'_> {
+    fn run_name(&self) -> &str {
+        self.name
+    }
+
+    fn for_each_sample(&self, f: &mut SampleFn<'_>) -> Result<(), crate::session::SessionError> {
+        for k in 0..self.len() {
+            f(&self.state(k), &self.gyro[k], &self.accel[k]);
+        }
+        Ok(())
+    }
+}
+
+/// Failure of a fit over [`Samples`]: reading a streamed file, or the estimate itself.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SamplesError {
+    /// A streamed recording could not be read.
+    #[error(transparent)]
+    Read(#[from] crate::session::SessionError),
+    /// The estimate failed.
+    #[error(transparent)]
+    Estimate(#[from] EstimateError),
+}
+
+/// One sensor's regressors.
+struct SensorDesign<'m> {
+    sensor: SensorKind,
+    terms: Vec<crate::model::TermRef<'m>>,
+    cols: Columns,
+}
+
+/// A sensor's solution before the residual pass.
+struct Solved {
+    values: Vec<f64>,
+    std_errors: Vec<Option<f64>>,
+    status: Vec<CoefStatus>,
+    channels: Vec<ChannelFit>,
+    unidentifiable: Vec<Unidentifiable>,
+    correlated: Vec<Correlation>,
+    fitted_sets: Vec<Vec<usize>>,
+}
+
+/// Pass 1 over one source: the R factor of each sensor's design and the sample count.
+fn accumulate(
+    designs: &[SensorDesign<'_>],
+    src: &dyn Samples,
+    chunk: usize,
+) -> Result<(Vec<QrAccumulator>, usize), crate::session::SessionError> {
+    let mut accs: Vec<QrAccumulator> = designs.iter().map(|d| QrAccumulator::new(d.cols.len() + 3, chunk)).collect();
+    let mut rows: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; d.cols.len() + 3]).collect();
+    let mut n = 0usize;
+    src.for_each_sample(&mut |s, g, a| {
+        for ((d, acc), row) in designs.iter().zip(accs.iter_mut()).zip(rows.iter_mut()) {
+            let u = match d.sensor {
+                SensorKind::Gyro => g,
+                SensorKind::Accel => a,
+            };
+            d.cols.fill_state_row(&d.terms, s, u, row);
+            acc.push(row);
+        }
+        n += 1;
+    })?;
+    Ok((accs, n))
+}
+
+/// Residual statistics of one source for every sensor channel: autocovariance sums and the
+/// largest |residual|.
+fn residual_pass(
+    designs: &[SensorDesign<'_>],
+    solved: &[Solved],
+    src: &dyn Samples,
+    n: usize,
+) -> Result<(Vec<AutoCov>, Vec<f64>), crate::session::SessionError> {
+    let lags = newey_west_lags(n);
+    let mut acov: Vec<AutoCov> = (0..3 * designs.len()).map(|_| AutoCov::new(lags + 1)).collect();
+    let mut max = vec![0.0_f64; 3 * designs.len()];
+    let mut pred = [0.0; 3];
+    src.for_each_sample(&mut |s, g, a| {
+        for (di, (d, sol)) in designs.iter().zip(solved).enumerate() {
+            pred.fill(0.0);
+            for (ti, t) in d.terms.iter().enumerate() {
+                if sol.values[ti] != 0.0 {
+                    pred[t.term.channel] += sol.values[ti] * t.regressor(s);
+                }
+            }
+            let u = match d.sensor {
+                SensorKind::Gyro => g,
+                SensorKind::Accel => a,
+            };
+            for ch in 0..3 {
+                let e = u[ch] - pred[ch];
+                acov[3 * di + ch].push(e);
+                max[3 * di + ch] = max[3 * di + ch].max(e.abs());
+            }
+        }
+    })?;
+    Ok((acov, max))
+}
+
+/// The linear fit of `sensors` over `sources` (pass 1 per source in parallel, R factors
+/// merged in source order; solve; robust refit when asked, from `robust_runs`; pass 2 per
+/// source in parallel for the residual statistics).
+fn fit_core(
+    model: &Model,
+    sensors: &[SensorKind],
+    sources: &[&dyn Samples],
+    robust_runs: &[FitRun<'_>],
+    opts: &FitOptions,
+) -> Result<Vec<SensorFit>, SamplesError> {
+    use rayon::prelude::*;
+    let designs: Vec<SensorDesign<'_>> = sensors
+        .iter()
+        .map(|&sensor| {
+            let terms = model.terms(sensor);
+            let cols = Columns::new(&terms);
+            SensorDesign { sensor, terms, cols }
+        })
+        .collect();
+    let parts: Vec<(Vec<QrAccumulator>, usize)> =
+        sources.par_iter().map(|src| accumulate(&designs, *src, opts.chunk)).collect::<Result<_, _>>()?;
+    let counts: Vec<usize> = parts.iter().map(|p| p.1).collect();
+    let mut merged: Vec<QrAccumulator> =
+        designs.iter().map(|d| QrAccumulator::new(d.cols.len() + 3, opts.chunk)).collect();
+    for (mut accs, _) in parts {
+        for (m, a) in merged.iter_mut().zip(accs.iter_mut()) {
+            m.merge(a);
+        }
+    }
+    let mut solved = Vec::with_capacity(designs.len());
+    for (d, acc) in designs.iter().zip(merged.iter_mut()) {
+        let mut sol = solve(&d.terms, &d.cols, d.sensor, acc, opts)?;
+        if opts.robust {
+            robust_refit(
+                &d.terms,
+                &d.cols,
+                robust_runs,
+                d.sensor,
+                opts,
+                &sol.fitted_sets,
+                &sol.status,
+                &mut sol.values,
+                &mut sol.std_errors,
+                &mut sol.channels,
+            );
+        }
+        solved.push(sol);
+    }
+
+    // Second pass: largest residual and residual autocovariances per channel (skipped
+    // when only screening candidates by their residual).
+    if !opts.screening {
+        let stats: Vec<(Vec<AutoCov>, Vec<f64>)> = sources
+            .par_iter()
+            .zip(counts.par_iter())
+            .map(|(src, &n)| residual_pass(&designs, &solved, *src, n))
+            .collect::<Result<_, _>>()?;
+        for (di, sol) in solved.iter_mut().enumerate() {
+            let mut lrv = [LongRunVariance::default(), LongRunVariance::default(), LongRunVariance::default()];
+            for ((acov, max), &n) in stats.iter().zip(&counts) {
+                let lags = newey_west_lags(n);
+                for ch in 0..3 {
+                    lrv[ch].add(&acov[3 * di + ch], lags);
+                    if max[3 * di + ch] > sol.channels[ch].residual_max {
+                        sol.channels[ch].residual_max = max[3 * di + ch];
+                    }
+                }
+            }
+            for ch in 0..3 {
+                let c = &mut sol.channels[ch];
+                c.residual_lag1 = lrv[ch].lag1();
+                // With a known σ the covariance is already the Cramér–Rao bound σ²(ΦᵀΦ)⁻¹.
+                if opts.known_sigma.is_none() {
+                    let f = lrv[ch].inflation();
+                    c.coloured_inflation = f;
+                    rescale(c, &sol.fitted_sets[ch], &mut sol.std_errors, f);
+                }
+            }
+        }
+    }
+    Ok(designs.iter().zip(solved).map(|(d, sol)| finish(&d.terms, d.sensor, sol)).collect())
+}
+
+/// Fits one sensor of a model to in-memory runs.
 fn fit_sensor(
     model: &Model,
     sensor: SensorKind,
     runs: &[FitRun<'_>],
     opts: &FitOptions,
 ) -> Result<SensorFit, EstimateError> {
-    let terms = model.terms(sensor);
-    let cols = Columns::new(&terms);
-    let p = cols.len();
-    let width = p + 3;
-    let mut acc = QrAccumulator::new(width, opts.chunk);
-    let mut row = vec![0.0; width];
-    for run in runs {
-        for k in 0..run.len() {
-            cols.fill_row(&terms, run, sensor, k, &mut row);
-            acc.push(&row);
-        }
+    let sources: Vec<&dyn Samples> = runs.iter().map(|r| r as &dyn Samples).collect();
+    match fit_core(model, &[sensor], &sources, runs, opts) {
+        Ok(mut v) => Ok(v.remove(0)),
+        Err(SamplesError::Estimate(e)) => Err(e),
+        Err(SamplesError::Read(e)) => Err(EstimateError::NotConverged(format!("reading samples: {e}"))),
     }
+}
+
+/// Solves one sensor from its accumulated R factor: identifiability, coefficients,
+/// covariance (white-noise), per-channel residual RMS.
+fn solve(
+    terms: &[crate::model::TermRef<'_>],
+    cols: &Columns,
+    sensor: SensorKind,
+    acc: &mut QrAccumulator,
+    opts: &FitOptions,
+) -> Result<Solved, EstimateError> {
+    let p = cols.len();
     let n = acc.rows();
     let r = acc.r();
     let norms = acc.column_norms();
@@ -412,7 +644,7 @@ fn fit_sensor(
         });
         let (rs, cond) = loop {
             let q = fitted.len();
-            let rs = reduce(&r, &cols, &terms, &values, &status, &fitted, ch, p);
+            let rs = reduce(&r, cols, terms, &values, &status, &fitted, ch, p);
             if q == 0 {
                 break (rs, 1.0);
             }
@@ -433,7 +665,7 @@ fn fit_sensor(
                 break (rs, f64::INFINITY);
             };
             let combo: Vec<f64> = (0..q).map(|j| vt[(imin, j)]).collect();
-            let (report, drop_at) = identify::lost_combination(&terms, &fitted, &combo, ch);
+            let (report, drop_at) = identify::lost_combination(terms, &fitted, &combo, ch);
             let ti = fitted.remove(drop_at);
             status[ti] = CoefStatus::Unidentifiable;
             values[ti] = terms[ti].term.nominal;
@@ -478,61 +710,12 @@ fn fit_sensor(
         });
     }
 
-    if opts.robust {
-        robust_refit(
-            &terms,
-            &cols,
-            runs,
-            sensor,
-            opts,
-            &fitted_sets,
-            &status,
-            &mut values,
-            &mut std_errors,
-            &mut channels,
-        );
-    }
+    Ok(Solved { values, std_errors, status, channels, unidentifiable, correlated, fitted_sets })
+}
 
-    // Second pass: largest residual and residual autocovariances per channel (skipped
-    // when only screening candidates by their residual).
-    let mut pred = [0.0; 3];
-    let runs = if opts.screening { &runs[..0] } else { runs };
-    let mut lrv = [LongRunVariance::default(), LongRunVariance::default(), LongRunVariance::default()];
-    for run in runs {
-        let lags = newey_west_lags(run.len());
-        let mut acov: [AutoCov; 3] = std::array::from_fn(|_| AutoCov::new(lags + 1));
-        for k in 0..run.len() {
-            let s = run.state(k);
-            pred.fill(0.0);
-            for (ti, t) in terms.iter().enumerate() {
-                if values[ti] != 0.0 {
-                    pred[t.term.channel] += values[ti] * t.regressor(&s);
-                }
-            }
-            let u = run.output(sensor, k);
-            for ch in 0..3 {
-                let e = u[ch] - pred[ch];
-                acov[ch].push(e);
-                if e.abs() > channels[ch].residual_max {
-                    channels[ch].residual_max = e.abs();
-                }
-            }
-        }
-        for ch in 0..3 {
-            lrv[ch].add(&acov[ch], lags);
-        }
-    }
-    for ch in 0..3 {
-        let c = &mut channels[ch];
-        c.residual_lag1 = lrv[ch].lag1();
-        // With a known σ the covariance is already the Cramér–Rao bound σ²(ΦᵀΦ)⁻¹.
-        if opts.known_sigma.is_none() && !opts.screening {
-            let f = lrv[ch].inflation();
-            c.coloured_inflation = f;
-            rescale(c, &fitted_sets[ch], &mut std_errors, f);
-        }
-    }
-
+/// The sensor fit from its solution.
+fn finish(terms: &[crate::model::TermRef<'_>], sensor: SensorKind, sol: Solved) -> SensorFit {
+    let Solved { values, std_errors, status, channels, unidentifiable, correlated, .. } = sol;
     let coefficients = terms
         .iter()
         .enumerate()
@@ -546,7 +729,7 @@ fn fit_sensor(
             status: status[ti],
         })
         .collect();
-    Ok(SensorFit { sensor, coefficients, channels, unidentifiable, correlated })
+    SensorFit { sensor, coefficients, channels, unidentifiable, correlated }
 }
 
 /// Multiplies a channel's covariance by `scale` and updates its standard errors.

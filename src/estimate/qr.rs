@@ -72,6 +72,30 @@ impl QrAccumulator {
         self.filled = 0;
     }
 
+    /// Adds everything `other` accumulated: its R factor's rows are stacked under this one
+    /// (`[R₁; R₂]` has Gram matrix `X₁ᵀX₁ + X₂ᵀX₂`), its row count and column norms added.
+    pub fn merge(&mut self, other: &mut QrAccumulator) {
+        debug_assert_eq!(self.p, other.p);
+        if other.rows == 0 {
+            return;
+        }
+        let r = other.r();
+        for i in 0..self.p {
+            let row = self.p + self.filled;
+            for j in 0..self.p {
+                self.buf[(row, j)] = r[(i, j)];
+            }
+            self.filled += 1;
+            if self.filled == self.chunk {
+                self.flush();
+            }
+        }
+        self.rows += other.rows;
+        for (a, b) in self.col_sq.iter_mut().zip(&other.col_sq) {
+            *a += b;
+        }
+    }
+
     /// The R factor so far (p × p, upper triangular; `RᵀR = XᵀX`).
     pub fn r(&mut self) -> Mat<f64> {
         self.flush();

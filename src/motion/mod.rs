@@ -19,6 +19,11 @@ pub use mount::{Mount, MountError};
 
 use crate::session::{MotionSpec, Run};
 
+/// How ε is known on a conic run.
+pub const EPSILON_CONIC: &str = "exact (conic motion, paper eq. 1 differentiated)";
+/// How ε is known on a static run.
+pub const EPSILON_STATIC: &str = "exact (static: zero)";
+
 /// True kinematics at one instant in stand axes (SI units).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Kinematics {
@@ -118,7 +123,7 @@ pub fn track_for(
             for &t in &rec.t_s {
                 push(&mut tr, c.at(t, g_m_s2));
             }
-            tr.epsilon_source = "exact (conic motion, paper eq. 1 differentiated)".into();
+            tr.epsilon_source = EPSILON_CONIC.into();
         }
         MotionSpec::Static { up_stand, earth_rate_rad_s } => {
             let k = Kinematics {
@@ -129,7 +134,7 @@ pub fn track_for(
             for _ in 0..n {
                 push(&mut tr, k);
             }
-            tr.epsilon_source = "exact (static: zero)".into();
+            tr.epsilon_source = EPSILON_STATIC.into();
         }
         MotionSpec::StaticUnknown | MotionSpec::Rotation { .. } | MotionSpec::MultiPosition { .. } => {
             // Protocol runs have no per-sample truth: the state is unknown (NaN), and the

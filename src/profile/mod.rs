@@ -194,13 +194,25 @@ pub enum ProfileError {
 impl Profile {
     /// Builds a profile from a fit of a session.
     pub fn from_fit(session: &Session, model: &Model, fit: Fit, notes: Vec<String>) -> Self {
+        Self::from_fit_of(&session.manifest, runs_used(session), model, fit, notes)
+    }
+
+    /// Builds a profile from a fit of the runs of a manifest (for fits streamed from the
+    /// files, which never hold a [`Session`]).
+    pub fn from_fit_of(
+        manifest: &crate::session::Manifest,
+        runs: Vec<RunUsed>,
+        model: &Model,
+        fit: Fit,
+        notes: Vec<String>,
+    ) -> Self {
         Self {
             format: PROFILE_FORMAT.into(),
-            serial: session.manifest.serial.clone(),
+            serial: manifest.serial.clone(),
             created_utc: now_utc(),
             tool: format!("crosscal {}", env!("CARGO_PKG_VERSION")),
-            input_units: session.manifest.units,
-            g_m_s2: session.manifest.g_m_s2,
+            input_units: manifest.units,
+            g_m_s2: manifest.g_m_s2,
             conventions: Conventions::default(),
             model: model.name.clone(),
             effects: model
@@ -213,7 +225,7 @@ impl Profile {
             accel: fit.accel,
             nonlinear: fit.nonlinear,
             stand: fit.stand,
-            runs: runs_used(session),
+            runs,
             correction: CorrectionSettings::default(),
             validation: None,
             notes,

@@ -142,12 +142,16 @@ struct Hashing<R> {
     hash: Sha256,
     /// A byte other than ASCII whitespace has passed.
     nonblank: bool,
+    /// Pass bytes on without hashing them.
+    skip: bool,
 }
 
 impl<R: std::io::Read> std::io::Read for Hashing<R> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         let n = self.inner.read(buf)?;
-        self.hash.update(&buf[..n]);
+        if !self.skip {
+            self.hash.update(&buf[..n]);
+        }
         if !self.nonblank {
             self.nonblank = buf[..n].iter().any(|b| !b.is_ascii_whitespace());
         }
@@ -184,7 +188,7 @@ impl<R: std::io::Read> RowReader<R> {
             .flexible(true)
             .trim(csv::Trim::All)
             .buffer_capacity(1 << 16)
-            .from_reader(Hashing { inner: input, hash: Sha256::new(), nonblank: false });
+            .from_reader(Hashing { inner: input, hash: Sha256::new(), nonblank: false, skip: false });
         let mut rec = csv::ByteRecord::new();
 
         // Header: the first record that is not empty/comment.
@@ -404,6 +408,11 @@ impl<R: std::io::Read> RowReader<R> {
             }
             return Ok(true);
         }
+    }
+
+    /// Stops hashing the bytes still to come (a re-read whose hash is already known).
+    pub fn stop_hashing(&mut self) {
+        self.rdr.get_mut().skip = true;
     }
 
     /// The SHA-256 (hex) of every byte read so far; of the whole file once it is read.

@@ -222,26 +222,10 @@ impl Session {
     /// Reads a manifest and all its recordings; with `strict`, gaps in `t` are errors.
     pub fn load_with(manifest_path: &Path, strict: bool) -> Result<Self, SessionError> {
         let manifest = read_manifest(manifest_path)?;
-        let dir = manifest_path.parent().unwrap_or(Path::new("."));
         let mut runs = Vec::with_capacity(manifest.runs.len());
         let mut cache: Vec<(PathBuf, Recording)> = Vec::new();
         for spec in &manifest.runs {
-            let path = dir.join(&spec.file);
-            if !path.is_file() {
-                let (line, column) = locate(&std::fs::read_to_string(manifest_path).unwrap_or_default(), &spec.file);
-                return Err(SessionError::Manifest {
-                    problem: Problem::MissingFile,
-                    path: manifest_path.to_path_buf(),
-                    line,
-                    column,
-                    msg: format!(
-                        "run '{}': file '{}' does not exist (looked for {})",
-                        spec.name,
-                        spec.file,
-                        path.display()
-                    ),
-                });
-            }
+            let path = run_path(manifest_path, spec)?;
             let opts = ReadOptions { reference: matches!(spec.motion, MotionSpec::Reference), strict };
             let rec = match spec.rows {
                 None => read_recording(&path, &manifest.units, manifest.g_m_s2, opts)?,
@@ -295,6 +279,24 @@ impl Session {
     pub fn warnings(&self) -> Vec<String> {
         self.runs.iter().flat_map(|r| r.rec.warnings.iter().cloned()).collect()
     }
+}
+
+/// The CSV of a run (relative to the manifest's folder); an error naming the manifest's
+/// line when it does not exist.
+pub fn run_path(manifest_path: &Path, spec: &RunSpec) -> Result<PathBuf, SessionError> {
+    let dir = manifest_path.parent().unwrap_or(Path::new("."));
+    let path = dir.join(&spec.file);
+    if !path.is_file() {
+        let (line, column) = locate(&std::fs::read_to_string(manifest_path).unwrap_or_default(), &spec.file);
+        return Err(SessionError::Manifest {
+            problem: Problem::MissingFile,
+            path: manifest_path.to_path_buf(),
+            line,
+            column,
+            msg: format!("run '{}': file '{}' does not exist (looked for {})", spec.name, spec.file, path.display()),
+        });
+    }
+    Ok(path)
 }
 
 /// Best-effort 1-based (line, column) of the first occurrence of `"needle"` in `text`.

@@ -1,0 +1,174 @@
+//! Fitting straight from the recordings, in bounded memory: each run's CSV is parsed row by
+//! row (one reused record), the reference motion is evaluated per sample (conic: paper eq. 1
+//! with the spec's eq. 2; static: constant) and every design row goes into a QR
+//! accumulator; a second read gives the residual statistics. Memory is O(parameters² +
+//! chunk) per run in flight, whatever the recordings' length; runs are read in parallel.
+//!
+//! The arithmetic is that of the in-memory fit ([`super::fit`]): the same rows in the same
+//! order through the same accumulators, so the two agree to the last bit.
+
+use super::{fit_samples, FitOptions, SampleFn, Samples, SamplesError};
+use crate::model::{Model, State};
+use crate::motion::{Conic, Kinematics, V3};
+use crate::profile::RunUsed;
+use crate::session::{
+    read_manifest, run_path, Manifest, MotionSpec, ReadOptions, Row, RowReader, RunSpec, SessionError,
+};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// One run read from its file on demand.
+pub struct StreamRun<'a> {
+    spec: &'a RunSpec,
+    path: PathBuf,
+    manifest: &'a Manifest,
+    /// (SHA-256, samples) once the file has been read.
+    seen: Mutex<Option<(String, usize)>>,
+}
+
+impl<'a> StreamRun<'a> {
+    /// A conic or static run of a manifest; `None` for kinds that need the whole run in
+    /// memory (reference motion with a derived ε, protocol runs).
+    pub fn new(manifest_path: &Path, manifest: &'a Manifest, spec: &'a RunSpec) -> Result<Option<Self>, SessionError> {
+        if !matches!(spec.motion, MotionSpec::Conic { .. } | MotionSpec::Static { .. }) {
+            return Ok(None);
+        }
+        let path = run_path(manifest_path, spec)?;
+        Ok(Some(Self { spec, path, manifest, seen: Mutex::new(None) }))
+    }
+
+    /// What the profile records of this run (after a fit has read it).
+    pub fn used(&self) -> RunUsed {
+        let (sha256, samples) = self.seen.lock().ok().and_then(|s| s.clone()).unwrap_or_default();
+        RunUsed { name: self.spec.name.clone(), file: self.spec.file.clone(), sha256, samples }
+    }
+}
+
+impl Samples for StreamRun<'_> {
+    fn run_name(&self) -> &str {
+        &self.spec.name
+    }
+
+    fn for_each_sample(&self, f: &mut SampleFn<'_>) -> Result<(), SessionError> {
+        let io = |source| SessionError::Io { path: self.path.clone(), source };
+        let file = std::fs::File::open(&self.path).map_err(io)?;
+        let input = std::io::BufReader::with_capacity(1 << 20, file);
+        let g = self.manifest.g_m_s2;
+        let mut rdr = RowReader::new(&self.path, input, &self.manifest.units, g, ReadOptions::default())?;
+        let has_temp = rdr.has_temp();
+        let known = self.seen.lock().ok().and_then(|s| s.clone());
+        if known.is_some() {
+            rdr.stop_hashing();
+        }
+        let (start, end) = self.spec.rows.unwrap_or((0, usize::MAX));
+        let mount = &self.spec.mount;
+        let to_sensor = |k: Kinematics| {
+            (mount.to_sensor(k.w_rad_s).xyz, mount.to_sensor(k.e_rad_s2).xyz, mount.to_sensor(k.a_m_s2).xyz)
+        };
+        let conic = match self.spec.motion {
+            MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
+                Some(Conic::from_deg(cone_angle_deg, rate_deg_s, phase_deg))
+            }
+            _ => None,
+        };
+        let still = match self.spec.motion {
+            MotionSpec::Static { up_stand, earth_rate_rad_s } => to_sensor(Kinematics {
+                w_rad_s: V3::new(earth_rate_rad_s),
+                e_rad_s2: V3::new([0.0; 3]),
+                a_m_s2: V3::new(up_stand.map(|u| u * g)),
+            }),
+            _ => ([0.0; 3], [0.0; 3], [0.0; 3]),
+        };
+        let mut row = Row::default();
+        let mut k = 0usize;
+        let mut t0 = f64::NAN;
+        let mut used = 0usize;
+        while rdr.read_row(&mut row)? {
+            if k >= start && k < end {
+                if used == 0 {
+                    t0 = row.t_s;
+                }
+                let (w, e, a) = match &conic {
+                    Some(c) => to_sensor(c.at(row.t_s, g)),
+                    None => still,
+                };
+                let temp_c = if has_temp { row.temp_c } else { self.spec.temperature_c.unwrap_or(f64::NAN) };
+                let s = State { t_s: row.t_s - t0, w, e, a, temp_c };
+                f(&s, &row.gyro, &row.accel);
+                used += 1;
+            }
+            k += 1;
+        }
+        if known.is_none() {
+            if let Ok(mut seen) = self.seen.lock() {
+                *seen = Some((rdr.sha256(), used));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A fit streamed from the files of a session.
+#[derive(Debug, Clone)]
+pub struct StreamedFit {
+    /// The manifest.
+    pub manifest: Manifest,
+    /// The fit.
+    pub fit: super::Fit,
+    /// The runs as the profile records them.
+    pub runs: Vec<RunUsed>,
+}
+
+/// Errors of [`fit_streaming`].
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum StreamError {
+    /// Reading the manifest or a recording failed.
+    #[error(transparent)]
+    Read(#[from] SessionError),
+    /// The estimate failed.
+    #[error(transparent)]
+    Estimate(#[from] super::EstimateError),
+    /// A run or the model needs the samples in memory.
+    #[error("{0}")]
+    NotStreamable(String),
+}
+
+/// Fits a linear model to a session read straight from its files (see the module docs).
+pub fn fit_streaming(manifest_path: &Path, model: &Model, opts: &FitOptions) -> Result<StreamedFit, StreamError> {
+    if !model.nonlinear().is_empty() || opts.robust {
+        return Err(StreamError::NotStreamable(
+            "nonlinear effects and the robust fit need the samples in memory: fit without --stream".into(),
+        ));
+    }
+    let manifest = read_manifest(manifest_path)?;
+    let mut runs = Vec::with_capacity(manifest.runs.len());
+    for spec in &manifest.runs {
+        match StreamRun::new(manifest_path, &manifest, spec)? {
+            Some(r) => runs.push(r),
+            None => {
+                return Err(StreamError::NotStreamable(format!(
+                    "run '{}' is not conic or static: its reference must be held in memory; fit without --stream",
+                    spec.name
+                )))
+            }
+        }
+    }
+    if let Some(e) = model.effects().iter().find(|e| e.needs_temperature()) {
+        if manifest.runs.iter().any(|r| r.temperature_c.is_none()) {
+            return Err(StreamError::NotStreamable(format!(
+                "effect '{}' needs temperatures: fit without --stream to use a temp column",
+                e.id()
+            )));
+        }
+    }
+    let sources: Vec<&dyn Samples> = runs.iter().map(|r| r as &dyn Samples).collect();
+    let fit = fit_samples(model, &sources, &[], opts).map_err(|e| match e {
+        SamplesError::Read(e) => StreamError::Read(e),
+        SamplesError::Estimate(e) => StreamError::Estimate(e),
+    })?;
+    let used = runs.iter().map(StreamRun::used).collect();
+    drop(sources);
+    drop(runs);
+    Ok(StreamedFit { manifest, fit, runs: used })
+}
