@@ -404,17 +404,31 @@ pub fn resample_to_stamps(c: &Corrected, t_s: &[f64]) -> Corrected {
 }
 
 /// Causal sample-by-sample corrector with fixed memory.
+///
+/// The last `window` time stamps and corrected rates live in rings stored twice over (entry
+/// at `i` and `i + window`), so the window is always one contiguous slice in time order and
+/// nothing is shifted per sample. While the sampling stays uniform (every step within 1e-9
+/// of the previous one) the slope weights of the full window are reused without looking at
+/// the stamps again.
 #[derive(Debug, Clone)]
 pub struct Streaming {
     cal: Calibration,
     window: usize,
     times: Vec<f64>,
     past_w: Vec<[f64; 3]>,
+    /// Next ring slot.
+    head: usize,
     filled: usize,
     weights: SlopeWeights,
+    /// Slope weights of a full uniform window with step `dt`, once known.
+    uniform_weights: Vec<f64>,
+    dt: f64,
+    /// Consecutive steps equal to `dt` (within 1e-9 relative).
+    steady: usize,
     cached_w0: f64,
     cached_inv: Matrix3<f64>,
     t_first: Option<f64>,
+    t_last: f64,
     last_flags: u8,
 }
 
@@ -427,13 +441,18 @@ impl Streaming {
         Self {
             cal,
             window,
-            times: vec![0.0; window],
-            past_w: vec![[0.0; 3]; window],
+            times: vec![0.0; 2 * window],
+            past_w: vec![[0.0; 3]; 2 * window],
+            head: 0,
             filled: 0,
             weights: SlopeWeights::new(degree, window),
+            uniform_weights: Vec::with_capacity(window),
+            dt: f64::NAN,
+            steady: 0,
             cached_w0: 0.0,
             cached_inv: inv,
             t_first: None,
+            t_last: f64::NAN,
             last_flags: 0,
         }
     }
@@ -451,27 +470,47 @@ impl Streaming {
     /// Forgets the history (start of a new record).
     pub fn reset(&mut self) {
         self.filled = 0;
+        self.head = 0;
+        self.steady = 0;
         self.t_first = None;
+        self.t_last = f64::NAN;
     }
 
     /// Corrects one sample (SI in, SI out): returns (ω rad/s, a m/s²).
     #[inline]
     pub fn push(&mut self, t_s: f64, gyro: [f64; 3], accel: [f64; 3], temp_c: f64) -> ([f64; 3], [f64; 3]) {
         let t0 = *self.t_first.get_or_insert(t_s);
-        // Shift the window left by one when full; the current sample goes last.
-        if self.filled == self.window {
-            self.times.copy_within(1.., 0);
-            self.past_w.copy_within(1.., 0);
-            self.filled -= 1;
+        let n = self.window;
+        // Uniform sampling: count consecutive steps equal to the last one.
+        let step = t_s - self.t_last;
+        if (step - self.dt).abs() <= 1e-9 * self.dt.abs() {
+            self.steady += 1;
+        } else {
+            self.dt = step;
+            self.steady = 0;
+            self.uniform_weights.clear();
         }
-        let len = self.filled + 1;
-        self.times[len - 1] = t_s;
+        self.t_last = t_s;
+        let slot = self.head;
+        self.times[slot] = t_s;
+        self.times[slot + n] = t_s;
+        let len = (self.filled + 1).min(n);
+        // The window in time order ends at this sample: ring[slot + n - len + 1 ..= slot + n].
+        let first = slot + n + 1 - len;
         let g = &self.cal.gyro;
         let a = &self.cal.accel;
-        let weights = self.weights.compute(&self.times[..len], t_s);
+        let weights: &[f64] = if len == n && self.steady + 1 >= n && !self.uniform_weights.is_empty() {
+            &self.uniform_weights
+        } else {
+            let w = self.weights.compute(&self.times[first..first + len], t_s);
+            if len == n && self.steady + 1 >= n && w.len() == n {
+                self.uniform_weights.extend_from_slice(w);
+            }
+            self.weights.last()
+        };
         let (w0, p) = if weights.len() == len {
             let mut p = [0.0; 3];
-            for (wj, x) in weights[..len - 1].iter().zip(&self.past_w[..len - 1]) {
+            for (wj, x) in weights[..len - 1].iter().zip(&self.past_w[first..first + len - 1]) {
                 p[0] += wj * x[0];
                 p[1] += wj * x[1];
                 p[2] += wj * x[2];
@@ -507,9 +546,31 @@ impl Streaming {
         if !self.cal.nonlinear.is_empty() {
             self.last_flags = self.cal.invert_nonlinear(&mut w, &mut acc);
         }
-        self.past_w[len - 1] = w;
+        self.past_w[slot] = w;
+        self.past_w[slot + n] = w;
+        self.head = if slot + 1 == n { 0 } else { slot + 1 };
         self.filled = len;
         (w, acc)
+    }
+
+    /// Corrects a block of samples into caller-owned buffers (no allocation): `w_out[k]`,
+    /// `a_out[k]` receive sample k's rate and specific force; stops at the shortest slice.
+    /// Returns the number of samples corrected.
+    pub fn push_block(
+        &mut self,
+        t_s: &[f64],
+        gyro: &[[f64; 3]],
+        accel: &[[f64; 3]],
+        w_out: &mut [[f64; 3]],
+        a_out: &mut [[f64; 3]],
+    ) -> usize {
+        let n = t_s.len().min(gyro.len()).min(accel.len()).min(w_out.len()).min(a_out.len());
+        for k in 0..n {
+            let (w, a) = self.push(t_s[k], gyro[k], accel[k], f64::NAN);
+            w_out[k] = w;
+            a_out[k] = a;
+        }
+        n
     }
 }
 

@@ -61,6 +61,15 @@ impl SlopeWeights {
         }
     }
 
+    /// The weights of the last [`Self::compute`] (empty when it failed).
+    pub fn last(&self) -> &[f64] {
+        if self.valid {
+            &self.weights
+        } else {
+            &[]
+        }
+    }
+
     /// Weights `w` such that `Σ w_j y_j` is the slope at `t0` of the polynomial fitted to
     /// `(times[j], y_j)`. Returns an empty slice when the window has too few distinct times.
     pub fn compute(&mut self, times: &[f64], t0: f64) -> &[f64] {

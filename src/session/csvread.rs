@@ -186,7 +186,7 @@ impl<R: std::io::Read> RowReader<R> {
             .has_headers(false)
             .comment(Some(b'#'))
             .flexible(true)
-            .trim(csv::Trim::All)
+            .trim(csv::Trim::None)
             .buffer_capacity(1 << 16)
             .from_reader(Hashing { inner: input, hash: Sha256::new(), nonblank: false, skip: false });
         let mut rec = csv::ByteRecord::new();
@@ -215,7 +215,7 @@ impl<R: std::io::Read> RowReader<R> {
                     ));
                 }
                 Ok(true) => {
-                    if rec.len() == 1 && rec.get(0).is_some_and(|f| f.is_empty()) {
+                    if rec.len() == 1 && rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()) {
                         continue;
                     }
                     header_line = rec.position().map_or(1, |p| p.line());
@@ -325,8 +325,10 @@ impl<R: std::io::Read> RowReader<R> {
         self.last_line
     }
 
+    #[inline]
     fn field(&self, k: usize, line: u64) -> Result<f64, SessionError> {
-        let field = self.rec.get(k).unwrap_or(b"");
+        // Trimmed here, per field parsed: trimming whole records in the reader rewrote them.
+        let field = self.rec.get(k).unwrap_or(b"").trim_ascii();
         // Straight from the bytes (Eisel–Lemire, as std's parser, without the UTF-8 pass).
         let parsed = fast_float2::parse::<f64, _>(field).ok();
         match parsed {
@@ -348,6 +350,7 @@ impl<R: std::io::Read> RowReader<R> {
         }
     }
 
+    #[inline]
     fn triple(&self, idx: &[usize], k: f64, line: u64) -> Result<[f64; 3], SessionError> {
         Ok([self.field(idx[0], line)? * k, self.field(idx[1], line)? * k, self.field(idx[2], line)? * k])
     }
@@ -362,7 +365,7 @@ impl<R: std::io::Read> RowReader<R> {
             }
             let line = self.rec.position().map_or(self.last_line + 1, |p| p.line());
             self.last_line = line;
-            if self.rec.len() == 1 && self.rec.get(0).is_some_and(|f| f.is_empty()) {
+            if self.rec.len() == 1 && self.rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()) {
                 continue;
             }
             if self.rec.len() < self.width {
@@ -501,7 +504,7 @@ fn line_of_sample(input: impl std::io::Read, k: usize) -> Option<u64> {
     let mut seen = 0usize;
     let mut header = true;
     while rdr.read_byte_record(&mut rec).ok()? {
-        if rec.len() == 1 && rec.get(0).is_some_and(|f| f.is_empty()) {
+        if rec.len() == 1 && rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()) {
             continue;
         }
         if header {
@@ -559,6 +562,15 @@ mod tests {
 
     fn parse(text: &str) -> Result<Recording, SessionError> {
         parse_recording(Path::new("run.csv"), text.as_bytes(), &Units::default(), 9.80665, ReadOptions::default())
+    }
+
+    #[test]
+    fn spaces_around_fields_and_blank_lines_are_accepted() {
+        let r = parse(" t , gx,gy ,gz,ax,ay,az\n\n 0 , 1,2 ,3,0,0,1\n   \n0.5,\t4,5,6,0,0,1 \n").unwrap();
+        assert_eq!(r.len(), 2);
+        assert!((r.gyro[1][0] - 4f64.to_radians()).abs() < 1e-15 && (r.t_s[1] - 0.5).abs() < 1e-15);
+        let e = parse("t,gx,gy,gz,ax,ay,az\n0,1, x ,3,0,0,1\n").unwrap_err();
+        assert!(e.to_string().contains("found 'x'"), "{e}");
     }
 
     #[test]
