@@ -93,15 +93,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         eprintln!("warning: {w}");
     }
     let run = Run {
-        spec: RunSpec {
-            name: a.input.display().to_string(),
-            file: a.input.display().to_string(),
-            motion: MotionSpec::Reference,
-            mount: crosscal::motion::Mount::identity(),
-            temperature_c: None,
-            note: None,
-            rows: None,
-        },
+        spec: RunSpec::new(a.input.display().to_string(), a.input.display().to_string(), MotionSpec::Reference, None),
         path: a.input.clone(),
         rec,
     };

@@ -67,18 +67,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if session.is_protocol() {
         return run_protocol(&a, &session);
     }
-    let model = match &a.profile {
-        Some(p) => {
-            let prof = crosscal::profile::Profile::read(p)?;
-            prof.ensure_unit(p, &session.manifest.serial)?;
-            let mut m = prof.model().with_context(|| format!("using profile {}", p.display()))?;
-            for e in &a.effects {
-                m.add_effect(e)?;
-            }
-            m
-        }
-        None => build_model(&a.model, &a.effects, &[])?,
-    };
+    let model = start_model(&a, &session)?;
     let tr = tracks(&session, &DerivativeConfig::default());
     let runs = fit_runs(&session, &tr);
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
@@ -173,27 +162,7 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
     if a.report.is_some() {
         anyhow::bail!("--report draws stand-run residuals; for a protocol session use the text or --json output");
     }
-    let model = match &a.profile {
-        Some(p) => {
-            let prof = crosscal::profile::Profile::read(p)?;
-            prof.ensure_unit(p, &session.manifest.serial)?;
-            let mut m = prof.model().with_context(|| format!("using profile {}", p.display()))?;
-            for e in &a.effects {
-                m.add_effect(e)?;
-            }
-            m
-        }
-        None => {
-            let preset = if a.model != "default" {
-                a.model.as_str()
-            } else if crosscal::estimate::protocol::is_multi_position(session) {
-                "tedaldi"
-            } else {
-                "ferraris"
-            };
-            build_model(preset, &a.effects, &[])?
-        }
-    };
+    let model = start_model(a, session)?;
     let d = crosscal::diagnose::protocol::diagnose_protocol(session, &model)
         .with_context(|| format!("diagnosing {}", a.session.display()))?;
     if a.json {
@@ -257,4 +226,27 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
         ),
     }
     Ok(Outcome::Ok)
+}
+
+/// The model to start from: the profile's (with `--effect`s added) or the preset; protocol
+/// sessions start from their protocol's preset unless `--model` names another.
+fn start_model(a: &Args, session: &Session) -> anyhow::Result<crosscal::model::Model> {
+    match &a.profile {
+        Some(p) => {
+            let prof = crosscal::profile::Profile::read(p)?;
+            prof.ensure_unit(p, &session.manifest.serial)?;
+            let mut m = prof.model().with_context(|| format!("using profile {}", p.display()))?;
+            for e in &a.effects {
+                m.add_effect(e)?;
+            }
+            Ok(m)
+        }
+        None => {
+            let preset = match a.model.as_str() {
+                "default" if session.is_protocol() => crosscal::estimate::protocol::default_preset(session),
+                other => other,
+            };
+            build_model(preset, &a.effects, &[])
+        }
+    }
 }

@@ -109,9 +109,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     for (run, t) in session.runs.iter().zip(&tr) {
         notes.push(format!("run {}: ε reference {}", run.spec.name, t.epsilon_source));
     }
-    for u in fit.gyro.unidentifiable.iter().chain(&fit.accel.unidentifiable) {
-        notes.push(format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy));
-    }
+    notes.extend(unidentifiable_notes(&fit));
     let mut profile = Profile::from_fit(&session, &model, fit, notes);
     attach_noise(&a, &mut profile)?;
     if !a.holdout.is_empty() {
@@ -136,13 +134,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if a.json {
         print!("{}", profile.to_json());
     } else {
-        println!(
-            "unit {}: {} runs, {} samples, model '{}'",
-            profile.serial,
-            session.runs.len(),
-            session.n_samples(),
-            profile.model
-        );
+        println!("{}", headline(&profile, session.n_samples(), ""));
         for w in session.warnings() {
             println!("warning: {w}");
         }
@@ -154,21 +146,6 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     Ok(Outcome::Ok)
 }
 
-/// The default model of a protocol session: `tedaldi` when the poses' orientations are
-/// unknown, else `ferraris`.
-fn protocol_preset(session: &Session) -> &'static str {
-    use crosscal::session::MotionSpec;
-    if session
-        .runs
-        .iter()
-        .any(|r| matches!(r.spec.motion, MotionSpec::MultiPosition { .. } | MotionSpec::StaticUnknown))
-    {
-        "tedaldi"
-    } else {
-        "ferraris"
-    }
-}
-
 /// `fit` on a protocol session (Ferraris or multi-position).
 fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
     if a.stand || !a.holdout.is_empty() || a.robust {
@@ -177,7 +154,10 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
             a.session.display()
         );
     }
-    let preset = if a.model == "default" { protocol_preset(session) } else { a.model.as_str() };
+    let preset = match a.model.as_str() {
+        "default" => crosscal::estimate::protocol::default_preset(session),
+        other => other,
+    };
     let model = build_model(preset, &a.effects, &a.disable)?;
     let popts = crosscal::estimate::protocol::ProtocolOptions { classic_six_position: a.classic_six_position };
     let (fit, report) = crosscal::estimate::protocol::fit_protocol(session, &model, &popts)
@@ -187,21 +167,13 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
     }
     let mut notes = session.warnings();
     notes.extend(report.warnings.iter().cloned());
-    for u in fit.gyro.unidentifiable.iter().chain(&fit.accel.unidentifiable) {
-        notes.push(format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy));
-    }
+    notes.extend(unidentifiable_notes(&fit));
     let mut profile = Profile::from_fit(session, &model, fit, notes);
     profile.protocol = Some(report);
     if a.json {
         print!("{}", profile.to_json());
     } else {
-        println!(
-            "unit {}: {} runs, {} samples, model '{}'",
-            profile.serial,
-            session.runs.len(),
-            session.n_samples(),
-            profile.model
-        );
+        println!("{}", headline(&profile, session.n_samples(), ""));
         if let Some(r) = &profile.protocol {
             print!("{}", format::protocol(r));
         }
@@ -240,21 +212,14 @@ fn run_streaming(a: &Args) -> anyhow::Result<Outcome> {
         };
         notes.push(format!("run {}: ε reference {eps}", run.name));
     }
-    for u in sf.fit.gyro.unidentifiable.iter().chain(&sf.fit.accel.unidentifiable) {
-        notes.push(format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy));
-    }
+    notes.extend(unidentifiable_notes(&sf.fit));
     let samples: usize = sf.runs.iter().map(|r| r.samples).sum();
     let mut profile = Profile::from_fit_of(&sf.manifest, sf.runs, &model, sf.fit, notes);
     attach_noise(a, &mut profile)?;
     if a.json {
         print!("{}", profile.to_json());
     } else {
-        println!(
-            "unit {}: {} runs, {samples} samples (streamed), model '{}'",
-            profile.serial,
-            profile.runs.len(),
-            profile.model
-        );
+        println!("{}", headline(&profile, samples, " (streamed)"));
         print!("{}", format::profile_fits(&profile));
     }
     save_unless_dry(a, &profile)?;
@@ -272,4 +237,19 @@ fn save_unless_dry(a: &Args, profile: &Profile) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Notes for the profile on the coefficients held because the runs cannot identify them.
+fn unidentifiable_notes(fit: &crosscal::estimate::Fit) -> Vec<String> {
+    fit.gyro
+        .unidentifiable
+        .iter()
+        .chain(&fit.accel.unidentifiable)
+        .map(|u| format!("{} unidentifiable, held at {}: {}; remedy: {}", u.held, u.held_at, u.reason, u.remedy))
+        .collect()
+}
+
+/// The first line `fit` prints: unit, runs, samples, model.
+fn headline(profile: &Profile, samples: usize, how: &str) -> String {
+    format!("unit {}: {} runs, {samples} samples{how}, model '{}'", profile.serial, profile.runs.len(), profile.model)
 }

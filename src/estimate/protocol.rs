@@ -79,6 +79,16 @@ pub fn is_multi_position(session: &Session) -> bool {
     session.runs.iter().any(|r| matches!(r.spec.motion, MotionSpec::MultiPosition { .. } | MotionSpec::StaticUnknown))
 }
 
+/// The model preset a protocol session starts from: `tedaldi` when the poses' orientations
+/// are unknown, else `ferraris`.
+pub fn default_preset(session: &Session) -> &'static str {
+    if is_multi_position(session) {
+        "tedaldi"
+    } else {
+        "ferraris"
+    }
+}
+
 /// Whether [`fit_protocol`] can fit `model` on `session`, and why not.
 pub fn can_fit(session: &Session, model: &Model) -> Result<(), String> {
     supports(model, is_multi_position(session))

@@ -12,7 +12,6 @@
 //! (and y, z) are turns about +axis through `turn_angle_deg`.
 
 use super::{AccelUnit, GyroUnit, Manifest, MotionSpec, Problem, RunSpec, SessionError, TimeUnit, Units};
-use crate::motion::Mount;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -85,6 +84,29 @@ fn field(path: &Path, line: usize, fields: &[&str], i: usize, name: &str) -> Res
     })
 }
 
+/// The remaining comma-separated lines (numbered from 0): of each non-blank one, the six
+/// fields at `idx` (named `names`) as numbers, handed to `push` in order.
+fn six_columns<'a>(
+    path: &Path,
+    lines: impl Iterator<Item = (usize, &'a str)>,
+    idx: &[usize],
+    names: &[&str; 6],
+    mut push: impl FnMut([f64; 6]),
+) -> Result<(), SessionError> {
+    for (i, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let f: Vec<&str> = line.split(',').collect();
+        let mut v = [0.0; 6];
+        for c in 0..6 {
+            v[c] = field(path, i + 1, &f, idx[c], names[c])?;
+        }
+        push(v);
+    }
+    Ok(())
+}
+
 /// Header columns by name: index of each of `names`.
 fn columns(path: &Path, header: &str, names: &[&str]) -> Result<Vec<usize>, SessionError> {
     let cols: Vec<&str> = header.split(',').map(str::trim).collect();
@@ -135,15 +157,7 @@ fn write_session(
 }
 
 fn run(name: &str, motion: MotionSpec, rows: Option<(usize, usize)>) -> RunSpec {
-    RunSpec {
-        name: name.to_string(),
-        file: "recording.csv".into(),
-        motion,
-        mount: Mount::identity(),
-        temperature_c: None,
-        note: None,
-        rows,
-    }
+    RunSpec::new(name, "recording.csv", motion, rows)
 }
 
 /// The motion of an imucal section name (`x_p`, `y_a`, `z_rot`, …).
@@ -190,22 +204,14 @@ pub fn imucal_ferraris(
     let text = read(csv)?;
     let mut lines = text.lines().enumerate();
     let header = lines.next().map(|(_, l)| l).unwrap_or("");
-    let idx = columns(csv, header, &["gyr_x", "gyr_y", "gyr_z", "acc_x", "acc_y", "acc_z"])?;
     let names = ["gyr_x", "gyr_y", "gyr_z", "acc_x", "acc_y", "acc_z"];
+    let idx = columns(csv, header, &names)?;
     let mut table = Table { t: Vec::new(), gyro: Vec::new(), accel: Vec::new() };
-    for (i, line) in lines {
-        if line.trim().is_empty() {
-            continue;
-        }
-        let f: Vec<&str> = line.split(',').collect();
-        let mut v = [0.0; 6];
-        for c in 0..6 {
-            v[c] = field(csv, i + 1, &f, idx[c], names[c])?;
-        }
+    six_columns(csv, lines, &idx, &names, |v| {
         table.t.push(table.t.len() as f64 / rate);
         table.gyro.push([v[0], v[1], v[2]]);
         table.accel.push([v[3], v[4], v[5]]);
-    }
+    })?;
     let json_text = read(sections)?;
     let json: serde_json::Value = serde_json::from_str(&json_text).map_err(|e| SessionError::Json {
         path: sections.to_path_buf(),
@@ -428,19 +434,11 @@ pub fn tedaldi_csv(
         .filter(|r| *r > 0.0)
         .ok_or_else(|| csv_err(csv, 1, "-", Problem::Header, "no 'Fs,<Hz>' line: give the sample rate".into()))?;
     let mut table = Table { t: Vec::new(), gyro: Vec::new(), accel: Vec::new() };
-    for (i, line) in lines {
-        if line.trim().is_empty() {
-            continue;
-        }
-        let f: Vec<&str> = line.split(',').collect();
-        let mut v = [0.0; 6];
-        for c in 0..6 {
-            v[c] = field(csv, i + 1, &f, idx[c], names[c])?;
-        }
+    six_columns(csv, lines, &idx, &names, |v| {
         table.t.push(table.t.len() as f64 / rate);
         table.accel.push([v[0], v[1], v[2]]);
         table.gyro.push([v[3], v[4], v[5]]);
-    }
+    })?;
     let poses = match intervals {
         None => None,
         Some(p) => Some(read_intervals(p, table.t.len())?),

@@ -120,6 +120,25 @@ impl MotionSpec {
 }
 
 impl RunSpec {
+    /// A run of `file` (rows `[start, end)` of it, or all) on the identity mount, without
+    /// temperature or note.
+    pub fn new(
+        name: impl Into<String>,
+        file: impl Into<String>,
+        motion: MotionSpec,
+        rows: Option<(usize, usize)>,
+    ) -> Self {
+        Self {
+            name: name.into(),
+            file: file.into(),
+            motion,
+            mount: Mount::identity(),
+            temperature_c: None,
+            note: None,
+            rows,
+        }
+    }
+
     /// The manifest's entry for this run.
     pub fn to_json(&self) -> Value {
         let mut v = serde_json::json!({

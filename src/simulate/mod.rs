@@ -266,13 +266,8 @@ impl SimConfig {
             elapsed += plan.duration_s;
             runs.push(Run {
                 spec: RunSpec {
-                    name: plan.name.clone(),
-                    file: format!("{}.csv", plan.name),
-                    motion: plan.motion.clone(),
                     mount: plan.mount.clone(),
-                    temperature_c: None,
-                    note: None,
-                    rows: None,
+                    ..RunSpec::new(plan.name.clone(), format!("{}.csv", plan.name), plan.motion.clone(), None)
                 },
                 path: PathBuf::from(format!("{}.csv", plan.name)),
                 rec,

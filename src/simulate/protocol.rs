@@ -5,7 +5,6 @@
 //! Forward model (sensor frame): `u_a = b_a + K a + n_a`, `u_g = b_g + C ω + G a + n_g`;
 //! the hand is idealised as a pure rotation (no linear acceleration), so `a = Rᵀ g_up`.
 
-use crate::motion::Mount;
 use crate::session::{AccelUnit, GyroUnit, Manifest, MotionSpec, Recording, Run, RunSpec, Session, TimeUnit, Units};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
@@ -155,15 +154,7 @@ impl ProtocolSession {
 }
 
 fn spec(name: &str, motion: MotionSpec, rows: Option<(usize, usize)>) -> RunSpec {
-    RunSpec {
-        name: name.into(),
-        file: "recording.csv".into(),
-        motion,
-        mount: Mount::identity(),
-        temperature_c: None,
-        note: None,
-        rows,
-    }
+    RunSpec::new(name, "recording.csv", motion, rows)
 }
 
 fn raw_units() -> Units {
