@@ -97,6 +97,46 @@ where
     }
 }
 
+/// A residual function `r(p)` as an argmin problem: [`Operator`] gives the residuals,
+/// [`Jacobian`] central differences with steps `1e-6 · max(|p_k|, scale_k)`, [`CostFunction`]
+/// `½ Σ r²`.
+#[derive(Clone)]
+pub struct LeastSquares<F> {
+    residuals: F,
+    scale: Vec<f64>,
+}
+
+impl<F: Fn(&[f64]) -> Vec<f64>> LeastSquares<F> {
+    /// The problem of `residuals`, with a typical magnitude per parameter for the steps.
+    pub fn new(residuals: F, scale: Vec<f64>) -> Self {
+        Self { residuals, scale }
+    }
+}
+
+impl<F: Fn(&[f64]) -> Vec<f64>> Operator for LeastSquares<F> {
+    type Param = Vec<f64>;
+    type Output = Vec<f64>;
+    fn apply(&self, p: &Vec<f64>) -> Result<Vec<f64>, Error> {
+        Ok((self.residuals)(p))
+    }
+}
+
+impl<F: Fn(&[f64]) -> Vec<f64>> Jacobian for LeastSquares<F> {
+    type Param = Vec<f64>;
+    type Jacobian = Vec<Vec<f64>>;
+    fn jacobian(&self, p: &Vec<f64>) -> Result<Vec<Vec<f64>>, Error> {
+        numeric_jacobian(|q| Ok((self.residuals)(q)), p, &self.scale, 1e-6)
+    }
+}
+
+impl<F: Fn(&[f64]) -> Vec<f64>> CostFunction for LeastSquares<F> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, p: &Vec<f64>) -> Result<f64, Error> {
+        Ok(half_sum_sq(&(self.residuals)(p)))
+    }
+}
+
 /// Result of [`minimise`]: the parameters, the residuals there, the Jacobian there and the
 /// number of iterations.
 #[derive(Debug, Clone)]
@@ -172,39 +212,13 @@ where
 mod tests {
     use super::*;
 
-    /// Fits y = a·exp(b·x) to exact data: LM must find (a, b) to 1e-9.
-    #[derive(Clone)]
-    struct Exp {
-        x: Vec<f64>,
-        y: Vec<f64>,
-    }
-    impl Operator for Exp {
-        type Param = Vec<f64>;
-        type Output = Vec<f64>;
-        fn apply(&self, p: &Vec<f64>) -> Result<Vec<f64>, Error> {
-            Ok(self.x.iter().zip(&self.y).map(|(x, y)| p[0] * (p[1] * x).exp() - y).collect())
-        }
-    }
-    impl Jacobian for Exp {
-        type Param = Vec<f64>;
-        type Jacobian = Vec<Vec<f64>>;
-        fn jacobian(&self, p: &Vec<f64>) -> Result<Vec<Vec<f64>>, Error> {
-            numeric_jacobian(|q| self.apply(&q.to_vec()), p, &[1.0, 1.0], 1e-6)
-        }
-    }
-    impl CostFunction for Exp {
-        type Param = Vec<f64>;
-        type Output = f64;
-        fn cost(&self, p: &Vec<f64>) -> Result<f64, Error> {
-            Ok(half_sum_sq(&self.apply(p)?))
-        }
-    }
-
     #[test]
     fn recovers_an_exponential() {
+        // y = a·exp(b·x) from exact data: LM must find (a, b) to 1e-9.
         let x: Vec<f64> = (0..30).map(|i| i as f64 * 0.1).collect();
-        let y = x.iter().map(|x| 2.5 * (-1.3 * x).exp()).collect();
-        let r = minimise(Exp { x, y }, vec![1.0, 0.0], 200).unwrap();
+        let y: Vec<f64> = x.iter().map(|x| 2.5 * (-1.3 * x).exp()).collect();
+        let f = |p: &[f64]| x.iter().zip(&y).map(|(x, y)| p[0] * (p[1] * x).exp() - y).collect::<Vec<f64>>();
+        let r = minimise(LeastSquares::new(f, vec![1.0, 1.0]), vec![1.0, 0.0], 200).unwrap();
         assert!((r.param[0] - 2.5).abs() < 1e-9 && (r.param[1] + 1.3).abs() < 1e-9, "{:?}", r.param);
         assert!(r.cost() < 1e-20);
     }

@@ -21,13 +21,12 @@
 //! (`u = b + K a`, `u = b + C ω + G a`, sensor frame, row-major, `K = M⁻¹`, `C = W⁻¹`), with
 //! a [`ProtocolReport`] of per-pose and per-turn residuals.
 
-use super::lm::{minimise, numeric_jacobian};
+use super::lm::{minimise, numeric_jacobian, LeastSquares};
 use super::{fit, ChannelFit, CoefStatus, Coefficient, EstimateError, Fit, FitOptions, FitRun, SensorFit};
 use crate::model::{Model, SensorKind, TermStatus, AXES};
 use crate::motion::statics::{moving_variance_norm, static_intervals, variance_norm};
 use crate::motion::{Track, V3};
 use crate::session::{MotionSpec, Run, Session};
-use argmin::core::{CostFunction, Error as ArgminError, Jacobian, Operator};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -528,53 +527,20 @@ impl GyroCal {
 // Multi-position (Tedaldi)
 // ---------------------------------------------------------------------------------------
 
-/// Accelerometer problem: residuals g − |M (u − b)| over pose samples; p = [m00, m01, m02,
-/// m11, m12, m22, b0, b1, b2] (M upper triangular).
-#[derive(Clone)]
-struct AccelProblem<'a> {
-    samples: &'a [[f64; 3]],
-    g: f64,
-    scale: [f64; 9],
+/// Accelerometer residuals `g − |M (u − b)|` over pose samples; p = [m00, m01, m02, m11,
+/// m12, m22, b0, b1, b2] (M upper triangular).
+fn accel_residuals(samples: &[[f64; 3]], g: f64, p: &[f64]) -> Vec<f64> {
+    let m = upper(p);
+    let b = Vector3::new(p[6], p[7], p[8]);
+    samples.iter().map(|u| g - (m * (Vector3::from(*u) - b)).norm()).collect()
 }
 
 fn upper(p: &[f64]) -> Matrix3<f64> {
     Matrix3::new(p[0], p[1], p[2], 0.0, p[3], p[4], 0.0, 0.0, p[5])
 }
 
-impl Operator for AccelProblem<'_> {
-    type Param = Vec<f64>;
-    type Output = Vec<f64>;
-    fn apply(&self, p: &Vec<f64>) -> Result<Vec<f64>, ArgminError> {
-        let m = upper(p);
-        let b = Vector3::new(p[6], p[7], p[8]);
-        Ok(self.samples.iter().map(|u| self.g - (m * (Vector3::from(*u) - b)).norm()).collect())
-    }
-}
-
-impl Jacobian for AccelProblem<'_> {
-    type Param = Vec<f64>;
-    type Jacobian = Vec<Vec<f64>>;
-    fn jacobian(&self, p: &Vec<f64>) -> Result<Vec<Vec<f64>>, ArgminError> {
-        numeric_jacobian(|q| self.apply(&q.to_vec()), p, &self.scale, 1e-6)
-    }
-}
-
-impl CostFunction for AccelProblem<'_> {
-    type Param = Vec<f64>;
-    type Output = f64;
-    fn cost(&self, p: &Vec<f64>) -> Result<f64, ArgminError> {
-        Ok(0.5 * self.apply(p)?.iter().map(|r| r * r).sum::<f64>())
-    }
-}
-
-/// Gyro problem: for each motion between poses, the unbiased samples `u − b − G a` with their
-/// time steps, and the two gravity directions; p = W row-major (ω = W u).
-#[derive(Clone)]
-struct GyroProblem<'a> {
-    segments: &'a [Segment],
-    scale: [f64; 9],
-}
-
+/// A motion between two poses: the unbiased gyro samples `u − b − G a`, their time steps,
+/// and the gravity directions before and after.
 struct Segment {
     u: Vec<[f64; 3]>,
     dt: Vec<f64>,
@@ -597,40 +563,15 @@ fn integrate(w: &Matrix3<f64>, seg: &Segment) -> nalgebra::UnitQuaternion<f64> {
     q
 }
 
-impl GyroProblem<'_> {
-    fn residuals_w(&self, w: &Matrix3<f64>) -> Vec<f64> {
-        let mut r = Vec::with_capacity(3 * self.segments.len());
-        for s in self.segments {
-            let q = integrate(w, s);
-            let d = q.inverse_transform_vector(&s.v0) - s.v1;
-            r.extend_from_slice(&[d[0], d[1], d[2]]);
-        }
-        r
+/// Gyro residuals `Rᵀv₀ − v₁` of every motion for `ω = W u` (W row-major in p).
+fn gyro_residuals(segments: &[Segment], w: &Matrix3<f64>) -> Vec<f64> {
+    let mut r = Vec::with_capacity(3 * segments.len());
+    for s in segments {
+        let q = integrate(w, s);
+        let d = q.inverse_transform_vector(&s.v0) - s.v1;
+        r.extend_from_slice(&[d[0], d[1], d[2]]);
     }
-}
-
-impl Operator for GyroProblem<'_> {
-    type Param = Vec<f64>;
-    type Output = Vec<f64>;
-    fn apply(&self, p: &Vec<f64>) -> Result<Vec<f64>, ArgminError> {
-        Ok(self.residuals_w(&Matrix3::from_row_slice(p)))
-    }
-}
-
-impl Jacobian for GyroProblem<'_> {
-    type Param = Vec<f64>;
-    type Jacobian = Vec<Vec<f64>>;
-    fn jacobian(&self, p: &Vec<f64>) -> Result<Vec<Vec<f64>>, ArgminError> {
-        numeric_jacobian(|q| self.apply(&q.to_vec()), p, &self.scale, 1e-6)
-    }
-}
-
-impl CostFunction for GyroProblem<'_> {
-    type Param = Vec<f64>;
-    type Output = f64;
-    fn cost(&self, p: &Vec<f64>) -> Result<f64, ArgminError> {
-        Ok(0.5 * self.apply(p)?.iter().map(|r| r * r).sum::<f64>())
-    }
+    r
 }
 
 /// Initial accelerometer guess: the axis-aligned ellipsoid through the pose means
@@ -669,7 +610,7 @@ fn fit_accel(samples: &[[f64; 3]], means: &[[f64; 3]], g: f64) -> Result<AccelSo
     let s = p0[0].abs().max(p0[3].abs()).max(p0[5].abs());
     let range = g / s;
     let scale = [s, s, s, s, s, s, range, range, range];
-    let prob = AccelProblem { samples, g, scale };
+    let prob = LeastSquares::new(|p: &[f64]| accel_residuals(samples, g, p), scale.to_vec());
     let r = minimise(prob, p0.to_vec(), 200).map_err(|e| EstimateError::NotConverged(e.to_string()))?;
     let cov = r.covariance();
     Ok(AccelSolution {
@@ -832,9 +773,9 @@ fn multi_position(session: &Session, model: &Model) -> Result<(Fit, ProtocolRepo
     }
     let s0 = gyro_scale_guess(&segments);
     let scale = [s0; 9];
-    let prob = GyroProblem { segments: &segments, scale };
+    let prob = LeastSquares::new(|p: &[f64]| gyro_residuals(&segments, &Matrix3::from_row_slice(p)), scale.to_vec());
     let p0 = vec![s0, 0.0, 0.0, 0.0, s0, 0.0, 0.0, 0.0, s0];
-    let gyro = minimise(prob.clone(), p0, 100).map_err(|e| EstimateError::NotConverged(e.to_string()))?;
+    let gyro = minimise(prob, p0, 100).map_err(|e| EstimateError::NotConverged(e.to_string()))?;
     let w = Matrix3::from_row_slice(&gyro.param);
     let w_cov = gyro.covariance();
 
@@ -1006,10 +947,9 @@ fn gyro_scale_guess(segments: &[Segment]) -> f64 {
     }
     ratios.sort_by(f64::total_cmp);
     let s0 = ratios[ratios.len() / 2];
-    let prob = GyroProblem { segments, scale: [s0; 9] };
     let cost = |ls: f64| -> f64 {
         let s = ls.exp();
-        let r = prob.residuals_w(&Matrix3::from_diagonal_element(s));
+        let r = gyro_residuals(segments, &Matrix3::from_diagonal_element(s));
         r.iter().map(|x| x * x).sum()
     };
     let (mut lo, mut hi) = ((s0 / 1.5).ln(), (s0 * 3.0).ln());
