@@ -77,6 +77,10 @@ fn imucal_ferraris_example_matches_imucal() {
         ],
     );
     let import_s = t0.elapsed().as_secs_f64();
+    // `noise` reads only the rows of the face it analyses (x_p: rows 540..1271).
+    let (code, out, err) = run_in(tmp.path(), &["noise", "s/session.json"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("run x_p (731 samples"), "{out}");
     // imucal's published result (dataset README).
     let k_a = [0.996746, 1.002438, 1.023395];
     let b_a = [0.537117, -0.616203, 0.398867];

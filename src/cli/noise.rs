@@ -2,7 +2,7 @@
 
 use super::Outcome;
 use anyhow::Context;
-use crosscal::noise::{analyse, read_channels, report, NoiseOptions, NoiseReport, CHANNELS};
+use crosscal::noise::{analyse, read_channels, report, NoiseOptions, NoiseReport, Span, CHANNELS};
 use crosscal::profile::{latest, save};
 use crosscal::session::{read_manifest, AccelUnit, GyroUnit, MotionSpec, Units};
 use std::path::{Path, PathBuf};
@@ -48,8 +48,18 @@ pub struct Args {
     serial: Option<String>,
 }
 
-/// The CSV, units, gravity, serial and a label of what is analysed.
-fn locate(a: &Args) -> anyhow::Result<(PathBuf, Units, f64, Option<String>, String)> {
+/// What `noise` analyses: the CSV and its part, units, gravity, serial and a label.
+struct Source {
+    csv: PathBuf,
+    span: Span,
+    units: Units,
+    g: f64,
+    serial: Option<String>,
+    label: String,
+}
+
+/// The recording (or the part of a session's run) to analyse.
+fn locate(a: &Args) -> anyhow::Result<Source> {
     if a.recording.extension().is_some_and(|x| x == "json") {
         let m = read_manifest(&a.recording)?;
         let run = match &a.run {
@@ -58,16 +68,33 @@ fn locate(a: &Args) -> anyhow::Result<(PathBuf, Units, f64, Option<String>, Stri
                 .iter()
                 .find(|r| &r.name == name)
                 .ok_or_else(|| anyhow::anyhow!("--run {name}: no such run in {}", a.recording.display()))?,
-            None => m.runs.iter().find(|r| matches!(r.motion, MotionSpec::Static { .. })).ok_or_else(|| {
-                anyhow::anyhow!(
-                    "{} has no static run: record the unit at rest, or name a run with --run",
-                    a.recording.display()
-                )
-            })?,
+            None => m
+                .runs
+                .iter()
+                .find(|r| matches!(r.motion, MotionSpec::Static { .. } | MotionSpec::StaticUnknown))
+                .or_else(|| m.runs.iter().find(|r| matches!(r.motion, MotionSpec::MultiPosition { .. })))
+                .ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "{} has no static run: record the unit at rest, or name a run with --run",
+                        a.recording.display()
+                    )
+                })?,
         };
         let dir = a.recording.parent().unwrap_or(Path::new("."));
-        let label = format!("{} run {}", a.recording.display(), run.name);
-        Ok((dir.join(&run.file), m.units, m.g_m_s2, a.serial.clone().or(Some(m.serial)), label))
+        // A multi-position run is at rest only during its initial rest.
+        let first_s = match run.motion {
+            MotionSpec::MultiPosition { init_rest_s, .. } => Some(init_rest_s),
+            _ => None,
+        };
+        let what = if first_s.is_some() { " (initial rest)" } else { "" };
+        Ok(Source {
+            csv: dir.join(&run.file),
+            span: Span { rows: run.rows, first_s },
+            units: m.units,
+            g: m.g_m_s2,
+            serial: a.serial.clone().or(Some(m.serial)),
+            label: format!("{} run {}{what}", a.recording.display(), run.name),
+        })
     } else {
         let gyro = GyroUnit::parse(&a.gyro_unit)
             .filter(|u| *u != GyroUnit::Raw)
@@ -76,7 +103,14 @@ fn locate(a: &Args) -> anyhow::Result<(PathBuf, Units, f64, Option<String>, Stri
             .filter(|u| *u != AccelUnit::Raw)
             .ok_or_else(|| anyhow::anyhow!("--accel-unit '{}': expected g or m/s^2", a.accel_unit))?;
         let units = Units { gyro, accel, ..Units::default() };
-        Ok((a.recording.clone(), units, a.g, a.serial.clone(), a.recording.display().to_string()))
+        Ok(Source {
+            csv: a.recording.clone(),
+            span: Span::default(),
+            units,
+            g: a.g,
+            serial: a.serial.clone(),
+            label: a.recording.display().to_string(),
+        })
     }
 }
 
@@ -88,11 +122,11 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         })?;
         chans.push(k);
     }
-    let (csv, units, g, serial, label) = locate(&a)?;
+    let Source { csv, span, units, g, serial, label } = locate(&a)?;
     if units.gyro == GyroUnit::Raw || units.accel == AccelUnit::Raw {
         anyhow::bail!("{label}: raw (uncalibrated) units have no physical noise density; record in deg/s and g");
     }
-    let data = read_channels(&csv, &units, g, &chans).with_context(|| format!("reading {}", csv.display()))?;
+    let data = read_channels(&csv, &units, g, &chans, span).with_context(|| format!("reading {}", csv.display()))?;
     for w in &data.warnings {
         eprintln!("warning: {w}");
     }

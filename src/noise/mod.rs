@@ -289,6 +289,15 @@ pub struct StaticData {
     pub warnings: Vec<String>,
 }
 
+/// Which part of a recording a noise analysis reads.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Span {
+    /// Data rows `[start, end)` (a run's `rows`), or all.
+    pub rows: Option<(usize, usize)>,
+    /// Only the first this many seconds (a multi-position run's initial rest).
+    pub first_s: Option<f64>,
+}
+
 /// Reads channels `channels` (indices into [`CHANNELS`]) of a recording CSV without holding
 /// anything but those columns: rows are streamed and validated like every recording.
 pub fn read_channels(
@@ -296,6 +305,7 @@ pub fn read_channels(
     units: &crate::session::Units,
     g_m_s2: f64,
     channels: &[usize],
+    span: Span,
 ) -> Result<StaticData, crate::session::SessionError> {
     use crate::session::{ReadOptions, Row, RowReader, SessionError};
     let file = std::fs::File::open(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
@@ -305,7 +315,16 @@ pub fn read_channels(
     let mut row = Row::default();
     let mut steps = Vec::with_capacity(100_000);
     let (mut first, mut last, mut n) = (f64::NAN, f64::NAN, 0usize);
+    let (start, end) = span.rows.unwrap_or((0, usize::MAX));
+    let mut k = 0usize;
     while rows.read_row(&mut row)? {
+        k += 1;
+        if k <= start {
+            continue;
+        }
+        if k > end || span.first_s.is_some_and(|d| n > 0 && row.t_s - first >= d) {
+            break;
+        }
         if n == 0 {
             first = row.t_s;
         } else if steps.len() < 100_000 {
