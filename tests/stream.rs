@@ -51,6 +51,14 @@ fn streamed_fit_equals_the_in_memory_fit() {
     c.accel_noise_g = 2e-5;
     let tmp = tempfile::tempdir().unwrap();
     let manifest = write_session(&c.generate(), tmp.path()).unwrap();
+    // A format-2 run that uses part of another run's file (`rows`).
+    let mut m: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
+    m["format"] = "crosscal-session/2".into();
+    let mut part = m["runs"][0].clone();
+    part["name"] = "part-of-first".into();
+    part["rows"] = serde_json::json!([100, 700]);
+    m["runs"].as_array_mut().unwrap().push(part);
+    std::fs::write(&manifest, serde_json::to_string_pretty(&m).unwrap()).unwrap();
     let mut model = Model::default_model();
     model.add_effect("gyro-g-sensitivity").unwrap();
     let session = Session::load(&manifest).unwrap();
@@ -63,6 +71,7 @@ fn streamed_fit_equals_the_in_memory_fit() {
     // The runs as the profile records them: same hashes and sample counts.
     let used = crosscal::profile::runs_used(&session);
     assert_eq!(used, streamed.runs);
+    assert_eq!(streamed.runs.last().map(|r| r.samples), Some(600));
 }
 
 #[test]
