@@ -241,3 +241,26 @@ fn importers_name_file_line_and_column_of_bad_input() {
     assert!(err.contains("g.mat:2:1 (t)"), "{err}");
     assert!(!tmp.path().join("o/session.json").exists() && !tmp.path().join("o2/session.json").exists());
 }
+
+#[test]
+fn ferraris_sections_are_found_from_the_data() {
+    use crosscal::motion::statics::detect_ferraris;
+    let truth = ProtocolTruth::mems(false);
+    for (turn, sign) in [(-360.0, -1.0), (360.0, 1.0)] {
+        let sim = ferraris(&truth, 3.0, turn, 9);
+        let r = &sim.recording;
+        // The simulated rests around each turn last 1 s (100 samples): a 21-sample window
+        // and 50-sample poses see them.
+        let found = detect_ferraris(&r.t_s, &r.gyro, &r.accel, 21, 10.0, 50).unwrap();
+        assert_eq!(found.len(), 9);
+        for sec in &found {
+            let declared = sim.manifest.runs.iter().find(|s| s.name == sec.name).unwrap();
+            let (s0, e0) = declared.rows.unwrap();
+            let overlap = sec.rows.1.min(e0).saturating_sub(sec.rows.0.max(s0));
+            assert!(overlap * 2 > e0 - s0, "{}: found {:?}, declared {:?}", sec.name, sec.rows, (s0, e0));
+            if sec.name.ends_with("_rot") {
+                assert_eq!(sec.sign, sign, "{}", sec.name);
+            }
+        }
+    }
+}

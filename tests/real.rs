@@ -133,6 +133,27 @@ fn imucal_ferraris_example_matches_imucal() {
             );
         }
     }
+    // Without the section list: faces and turns found from the data, each turn's sense from
+    // its gyro integral (−360°, as the dataset README says), and the same agreement.
+    let auto = tempfile::tempdir().unwrap();
+    let m_auto = import(
+        auto.path(),
+        &["imucal-ferraris", d.join("example_ferraris_session.csv").to_str().unwrap(), "--rate-hz", "102.4"],
+    );
+    let manifest = std::fs::read_to_string(&m_auto).unwrap();
+    assert_eq!(manifest.matches("\"angle_deg\": -360.0").count(), 3, "{manifest}");
+    let (_, f, r, _) = fit(&m_auto, &Model::ferraris(), true);
+    let (ka, _) = k_r(&matrix(&f, SensorKind::Accel, "k"));
+    let (kg, _) = k_r(&matrix(&f, SensorKind::Gyro, "c"));
+    let (ba, bg) = (vector(&f, "accel.b"), vector(&f, "gyro.b") / DEG);
+    println!(
+        "sections found from the data: K_a {ka:?} b_a {ba:?} K_g {kg:?} b_g {bg:?}; |a|−g rms {:.2e}",
+        r.gravity_rms_m_s2
+    );
+    for i in 0..3 {
+        assert!(rel(ka[i], k_a[i]) < 1e-3 && rel(kg[i], k_g[i]) < 1e-3, "scales {i}");
+        assert!((ba[i] - b_a[i]).abs() < 0.005 && (bg[i] - b_g[i]).abs() < 0.01, "biases {i}");
+    }
     // imucal's own calibrated output of the first 50 samples, reproduced by crosscal's
     // correction with the classic profile.
     let (s, f, _, _) = fit(&m, &Model::ferraris(), true);

@@ -27,8 +27,9 @@ enum Layout {
     ImucalFerraris {
         /// The recording.
         csv: PathBuf,
-        /// The section list ({"x_p": {"start":…, "end":…}, …}).
-        sections: PathBuf,
+        /// The section list ({"x_p": {"start":…, "end":…}, …}); without it the faces and
+        /// turns are found from the data (each turn's sign from its gyro integral).
+        sections: Option<PathBuf>,
         /// Sample rate, Hz.
         #[arg(long)]
         rate_hz: f64,
@@ -74,7 +75,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             opts.rate_hz = Some(*rate_hz);
             opts.turn_angle_deg = *turn_angle_deg;
             opts.g_m_s2 = a.g.unwrap_or(9.81);
-            imucal_ferraris(csv, sections, &a.out, &opts)
+            imucal_ferraris(csv, sections.as_deref(), &a.out, &opts)
         }
         Layout::ImucalAnnotated { csv, rate_hz, turn_angle_deg } => {
             opts.rate_hz = Some(*rate_hz);

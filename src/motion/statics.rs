@@ -108,3 +108,123 @@ mod tests {
         assert_eq!(iv[1], (310, 590));
     }
 }
+
+/// A section of a Ferraris recording found by [`detect_ferraris`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct FerrarisSection {
+    /// imucal's name: `x_p`, `x_a`, …, `x_rot`, ….
+    pub name: String,
+    /// Rows `[start, end)`.
+    pub rows: (usize, usize),
+    /// Axis index (0..3) of the face's up or the turn.
+    pub axis: usize,
+    /// +1 or −1: the face's up direction, or the turn's sense (from the gyro's integral).
+    pub sign: f64,
+}
+
+/// Finds the six faces and three turns of a Ferraris recording without annotations: static
+/// intervals where the accelerometer's moving-variance norm (window `window`) stays below
+/// `multiplier` × its 10th percentile, at least `min_len` samples long; each interval on a
+/// face when one axis carries at least 90 % of the mean specific force (the longest per
+/// face is kept); for each axis, the motion between consecutive static intervals whose gyro
+/// integral (bias from the faces removed) is largest along that axis and at least 80 % along
+/// it is the turn, its sense the integral's sign.
+pub fn detect_ferraris(
+    t_s: &[f64],
+    gyro: &[[f64; 3]],
+    accel: &[[f64; 3]],
+    window: usize,
+    multiplier: f64,
+    min_len: usize,
+) -> Result<Vec<FerrarisSection>, String> {
+    let norms = moving_variance_norm(accel, window);
+    let mut finite: Vec<f64> = norms.iter().copied().filter(|x| x.is_finite()).collect();
+    if finite.is_empty() {
+        return Err(format!("the recording is shorter than the detector window ({window} samples)"));
+    }
+    let baseline = crate::session::sanity::median(&mut finite[..]).max(0.0);
+    finite.sort_by(f64::total_cmp);
+    let quiet = finite[finite.len() / 10].max(baseline * 1e-6).max(f64::MIN_POSITIVE);
+    let intervals: Vec<(usize, usize)> =
+        static_intervals(&norms, multiplier * quiet).into_iter().filter(|(s, e)| e - s >= min_len).collect();
+    let mean = |x: &[[f64; 3]], s: usize, e: usize| {
+        let mut m = [0.0; 3];
+        for v in &x[s..e] {
+            for i in 0..3 {
+                m[i] += v[i];
+            }
+        }
+        m.map(|v| v / (e - s) as f64)
+    };
+    let mut faces: [[Option<(usize, usize)>; 2]; 3] = [[None; 2]; 3];
+    for &(s, e) in &intervals {
+        let m = mean(accel, s, e);
+        let n = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+        let (i, v) = (0..3).map(|i| (i, m[i])).max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).unwrap_or((0, 0.0));
+        if n > 0.0 && v.abs() >= 0.9 * n {
+            let slot = &mut faces[i][usize::from(v < 0.0)];
+            if slot.is_none_or(|(s0, e0)| e - s > e0 - s0) {
+                *slot = Some((s, e));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    let mut bias = [0.0; 3];
+    let mut count = 0usize;
+    for (i, pair) in faces.iter().enumerate() {
+        for (k, face) in pair.iter().enumerate() {
+            let (s, e) = face.ok_or_else(|| {
+                format!(
+                    "no static interval with {}{} up (found {} static intervals of at least {min_len} samples): hold each face still longer, or give the section list",
+                    if k == 0 { "+" } else { "-" },
+                    ['x', 'y', 'z'][i],
+                    intervals.len()
+                )
+            })?;
+            let g = mean(gyro, s, e);
+            for j in 0..3 {
+                bias[j] += g[j] * (e - s) as f64;
+            }
+            count += e - s;
+            out.push(FerrarisSection {
+                name: format!("{}_{}", ['x', 'y', 'z'][i], if k == 0 { "p" } else { "a" }),
+                rows: (s, e),
+                axis: i,
+                sign: if k == 0 { 1.0 } else { -1.0 },
+            });
+        }
+    }
+    let bias = bias.map(|b| b / count.max(1) as f64);
+    let mut best: [Option<(f64, (usize, usize))>; 3] = [None; 3];
+    for w in intervals.windows(2) {
+        let (s, e) = (w[0].1, w[1].0);
+        if e <= s + 1 {
+            continue;
+        }
+        let mut integral = [0.0; 3];
+        for k in s..e {
+            let dt = t_s[k + 1] - t_s[k];
+            for j in 0..3 {
+                integral[j] += (gyro[k][j] - bias[j]) * dt;
+            }
+        }
+        let n = (integral[0] * integral[0] + integral[1] * integral[1] + integral[2] * integral[2]).sqrt();
+        for i in 0..3 {
+            if integral[i].abs() >= 0.8 * n && best[i].is_none_or(|(b, _)| integral[i].abs() > b.abs()) {
+                best[i] = Some((integral[i], (s, e)));
+            }
+        }
+    }
+    for (i, b) in best.iter().enumerate() {
+        let (integral, rows) = b.ok_or_else(|| {
+            format!("no turn about {} found between the static intervals: give the section list", ['x', 'y', 'z'][i])
+        })?;
+        out.push(FerrarisSection {
+            name: format!("{}_rot", ['x', 'y', 'z'][i]),
+            rows,
+            axis: i,
+            sign: integral.signum(),
+        });
+    }
+    Ok(out)
+}

@@ -156,6 +156,40 @@ fn write_session(
     Ok(Imported { manifest_path, runs: manifest.runs.len(), samples: table.t.len() })
 }
 
+fn bad_list(path: &Path, msg: String) -> SessionError {
+    SessionError::Manifest { problem: Problem::Invalid, path: path.to_path_buf(), line: 0, column: 0, msg }
+}
+
+/// imucal's section list `{"x_p": {"start": …, "end": …}, …}`: the nine sections in
+/// protocol order, each checked against the recording's `n` samples.
+fn section_list(path: &Path, n: usize) -> Result<Vec<(String, (usize, usize))>, SessionError> {
+    let json_text = read(path)?;
+    let json: serde_json::Value = serde_json::from_str(&json_text).map_err(|e| SessionError::Json {
+        path: path.to_path_buf(),
+        line: e.line(),
+        column: e.column(),
+        msg: format!("the section list is not valid JSON: {e}"),
+    })?;
+    let mut out = Vec::new();
+    for name in FERRARIS_SECTIONS {
+        let sec = json.get(name).ok_or_else(|| {
+            bad_list(path, format!("section '{name}' is missing: expected {}", FERRARIS_SECTIONS.join(", ")))
+        })?;
+        let get = |k: &str| sec.get(k).and_then(serde_json::Value::as_u64).map(|x| x as usize);
+        let (Some(s), Some(e)) = (get("start"), get("end")) else {
+            return Err(bad_list(path, format!("section '{name}' needs integer \"start\" and \"end\"")));
+        };
+        if e <= s || e > n {
+            return Err(bad_list(
+                path,
+                format!("section '{name}' [{s}, {e}) is empty or past the recording's {n} samples"),
+            ));
+        }
+        out.push((name.to_string(), (s, e)));
+    }
+    Ok(out)
+}
+
 fn run(name: &str, motion: MotionSpec, rows: Option<(usize, usize)>) -> RunSpec {
     RunSpec::new(name, "recording.csv", motion, rows)
 }
@@ -185,10 +219,12 @@ const FERRARIS_SECTIONS: [&str; 9] = ["x_p", "x_a", "y_p", "y_a", "z_p", "z_a", 
 
 /// imucal's example layout: `n_samples,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z` (deg/s, m/s²,
 /// no time column: `rate_hz` is required) and a section list `{"x_p": {"start": …, "end":
-/// …}, …}` (iloc, end exclusive).
+/// …}, …}` (iloc, end exclusive). Without a section list the six faces and three turns are
+/// found from the data ([`crate::motion::statics::detect_ferraris`]), each turn's sign from
+/// its gyro integral (the magnitude of `turn_angle_deg` is used).
 pub fn imucal_ferraris(
     csv: &Path,
-    sections: &Path,
+    sections: Option<&Path>,
     out_dir: &Path,
     opts: &ImportOptions,
 ) -> Result<Imported, SessionError> {
@@ -212,38 +248,42 @@ pub fn imucal_ferraris(
         table.gyro.push([v[0], v[1], v[2]]);
         table.accel.push([v[3], v[4], v[5]]);
     })?;
-    let json_text = read(sections)?;
-    let json: serde_json::Value = serde_json::from_str(&json_text).map_err(|e| SessionError::Json {
-        path: sections.to_path_buf(),
-        line: e.line(),
-        column: e.column(),
-        msg: format!("the section list is not valid JSON: {e}"),
-    })?;
-    let bad = |msg: String| SessionError::Manifest {
-        problem: Problem::Invalid,
-        path: sections.to_path_buf(),
-        line: 0,
-        column: 0,
-        msg,
-    };
     let mut runs = Vec::new();
-    for name in FERRARIS_SECTIONS {
-        let sec = json
-            .get(name)
-            .ok_or_else(|| bad(format!("section '{name}' is missing: expected {}", FERRARIS_SECTIONS.join(", "))))?;
-        let get = |k: &str| sec.get(k).and_then(serde_json::Value::as_u64).map(|x| x as usize);
-        let (Some(s), Some(e)) = (get("start"), get("end")) else {
-            return Err(bad(format!("section '{name}' needs integer \"start\" and \"end\"")));
-        };
-        if e <= s || e > table.t.len() {
-            return Err(bad(format!(
-                "section '{name}' [{s}, {e}) is empty or past the recording's {} samples",
-                table.t.len()
-            )));
+    match sections {
+        Some(list) => {
+            for (name, (s, e)) in section_list(list, table.t.len())? {
+                let motion = ferraris_motion(&name, opts.turn_angle_deg)
+                    .ok_or_else(|| bad_list(list, format!("unknown section '{name}'")))?;
+                runs.push(run(&name, motion, Some((s, e))));
+            }
         }
-        let motion =
-            ferraris_motion(name, opts.turn_angle_deg).ok_or_else(|| bad(format!("unknown section '{name}'")))?;
-        runs.push(run(name, motion, Some((s, e))));
+        None => {
+            // Sections found from the data; each turn's sense from its gyro integral.
+            let window = ((0.5 * rate).round() as usize).max(11) | 1;
+            let min_len = (rate.round() as usize).max(window);
+            let found = [10.0, 5.0, 20.0]
+                .iter()
+                .map(|&m| {
+                    crate::motion::statics::detect_ferraris(&table.t, &table.gyro, &table.accel, window, m, min_len)
+                })
+                .find(Result::is_ok)
+                .unwrap_or_else(|| {
+                    crate::motion::statics::detect_ferraris(&table.t, &table.gyro, &table.accel, window, 10.0, min_len)
+                })
+                .map_err(|e| csv_err(csv, 1, "-", Problem::Value, format!("finding the Ferraris sections: {e}")))?;
+            for sec in found {
+                let motion = if sec.name.ends_with("_rot") {
+                    let mut axis = [0.0; 3];
+                    axis[sec.axis] = 1.0;
+                    MotionSpec::Rotation { axis_stand: axis, angle_deg: sec.sign * opts.turn_angle_deg.abs() }
+                } else {
+                    let mut up = [0.0; 3];
+                    up[sec.axis] = sec.sign;
+                    MotionSpec::Static { up_stand: up, earth_rate_rad_s: [0.0; 3] }
+                };
+                runs.push(run(&sec.name, motion, Some(sec.rows)));
+            }
+        }
     }
     let units = Units { gyro: GyroUnit::DegPerS, accel: AccelUnit::MPerS2, time: TimeUnit::S };
     write_session(out_dir, units, opts, &table, runs)
