@@ -160,9 +160,12 @@ fn bad_list(path: &Path, msg: String) -> SessionError {
     SessionError::Manifest { problem: Problem::Invalid, path: path.to_path_buf(), line: 0, column: 0, msg }
 }
 
+/// A named section: rows `[start, end)`.
+type Section = (String, (usize, usize));
+
 /// imucal's section list `{"x_p": {"start": …, "end": …}, …}`: the nine sections in
 /// protocol order, each checked against the recording's `n` samples.
-fn section_list(path: &Path, n: usize) -> Result<Vec<(String, (usize, usize))>, SessionError> {
+fn section_list(path: &Path, n: usize) -> Result<Vec<Section>, SessionError> {
     let json_text = read(path)?;
     let json: serde_json::Value = serde_json::from_str(&json_text).map_err(|e| SessionError::Json {
         path: path.to_path_buf(),
