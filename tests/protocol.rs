@@ -259,7 +259,7 @@ fn ferraris_sections_are_found_from_the_data() {
             let overlap = sec.rows.1.min(e0).saturating_sub(sec.rows.0.max(s0));
             assert!(overlap * 2 > e0 - s0, "{}: found {:?}, declared {:?}", sec.name, sec.rows, (s0, e0));
             if sec.name.ends_with("_rot") {
-                assert_eq!(sec.sign, sign, "{}", sec.name);
+                assert!(sec.sign * sign > 0.0, "{}: sign {}", sec.name, sec.sign);
             }
         }
     }
