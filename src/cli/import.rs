@@ -23,7 +23,7 @@ pub struct Args {
 
 #[derive(Debug, clap::Subcommand)]
 enum Layout {
-    /// imucal's example: CSV `n_samples,gyr_*,acc_*` (deg/s, m/s²) and its section-list JSON.
+    /// imucal's example: CSV `n_samples,gyr_*,acc_*` (deg/s, m/s²) and, optionally, its section list.
     ImucalFerraris {
         /// The recording.
         csv: PathBuf,
