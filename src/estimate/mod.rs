@@ -299,10 +299,7 @@ pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit,
         return nonlinear::fit(model, runs, opts);
     }
     let sources: Vec<&dyn Samples> = runs.iter().map(|r| r as &dyn Samples).collect();
-    fit_samples(model, &sources, runs, opts).map_err(|e| match e {
-        SamplesError::Estimate(e) => e,
-        SamplesError::Read(e) => EstimateError::NotConverged(format!("reading samples: {e}")),
-    })
+    fit_samples(model, &sources, runs, opts).map_err(SamplesError::in_memory)
 }
 
 /// Fits both sensors of a linear model to any [`Samples`] (streamed files or in-memory
@@ -418,6 +415,16 @@ pub enum SamplesError {
     /// The estimate failed.
     #[error(transparent)]
     Estimate(#[from] EstimateError),
+}
+
+impl SamplesError {
+    /// The estimate's error of a fit over in-memory runs (which cannot fail to read).
+    fn in_memory(self) -> EstimateError {
+        match self {
+            Self::Estimate(e) => e,
+            Self::Read(e) => EstimateError::NotConverged(format!("reading samples: {e}")),
+        }
+    }
 }
 
 /// One sensor's regressors.
@@ -586,11 +593,7 @@ fn fit_sensor(
     opts: &FitOptions,
 ) -> Result<SensorFit, EstimateError> {
     let sources: Vec<&dyn Samples> = runs.iter().map(|r| r as &dyn Samples).collect();
-    match fit_core(model, &[sensor], &sources, runs, opts) {
-        Ok(mut v) => Ok(v.remove(0)),
-        Err(SamplesError::Estimate(e)) => Err(e),
-        Err(SamplesError::Read(e)) => Err(EstimateError::NotConverged(format!("reading samples: {e}"))),
-    }
+    fit_core(model, &[sensor], &sources, runs, opts).map(|mut v| v.remove(0)).map_err(SamplesError::in_memory)
 }
 
 /// Solves one sensor from its accumulated R factor: identifiability, coefficients,

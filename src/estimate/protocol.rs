@@ -24,7 +24,7 @@
 use super::lm::{minimise, numeric_jacobian, LeastSquares};
 use super::{fit, ChannelFit, CoefStatus, Coefficient, EstimateError, Fit, FitOptions, FitRun, SensorFit};
 use crate::model::{Model, SensorKind, TermStatus, AXES};
-use crate::motion::statics::{moving_variance_norm, static_intervals, variance_norm};
+use crate::motion::statics::{mean3, moving_variance_norm, static_intervals, variance_norm};
 use crate::motion::{Track, V3};
 use crate::session::{MotionSpec, Run, Session};
 use nalgebra::{DMatrix, Matrix3, Vector3};
@@ -162,17 +162,6 @@ pub struct ProtocolReport {
     pub warnings: Vec<String>,
 }
 
-fn mean3(x: &[[f64; 3]]) -> [f64; 3] {
-    let mut m = [0.0; 3];
-    for v in x {
-        for i in 0..3 {
-            m[i] += v[i];
-        }
-    }
-    let n = x.len().max(1) as f64;
-    m.map(|s| s / n)
-}
-
 fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
@@ -187,8 +176,7 @@ fn median_dt(t: &[f64]) -> f64 {
     if d.is_empty() {
         return f64::NAN;
     }
-    d.sort_by(f64::total_cmp);
-    d[d.len() / 2]
+    crate::session::sanity::median(&mut d)
 }
 
 /// Choices of a protocol fit.

@@ -3,6 +3,18 @@
 //! centred window is below a threshold, the threshold being a multiple of the same norm over
 //! the initial rest.
 
+/// Per-axis mean of a run of triads (zeros when empty).
+pub fn mean3(x: &[[f64; 3]]) -> [f64; 3] {
+    let mut m = [0.0; 3];
+    for v in x {
+        for i in 0..3 {
+            m[i] += v[i];
+        }
+    }
+    let n = x.len().max(1) as f64;
+    m.map(|s| s / n)
+}
+
 /// Norm of the per-axis unbiased variance of `x[start..end]`.
 pub fn variance_norm(x: &[[f64; 3]], start: usize, end: usize) -> f64 {
     let n = end.saturating_sub(start);
@@ -147,15 +159,7 @@ pub fn detect_ferraris(
     let quiet = finite[finite.len() / 10].max(baseline * 1e-6).max(f64::MIN_POSITIVE);
     let intervals: Vec<(usize, usize)> =
         static_intervals(&norms, multiplier * quiet).into_iter().filter(|(s, e)| e - s >= min_len).collect();
-    let mean = |x: &[[f64; 3]], s: usize, e: usize| {
-        let mut m = [0.0; 3];
-        for v in &x[s..e] {
-            for i in 0..3 {
-                m[i] += v[i];
-            }
-        }
-        m.map(|v| v / (e - s) as f64)
-    };
+    let mean = |x: &[[f64; 3]], s: usize, e: usize| mean3(&x[s..e]);
     let mut faces: [[Option<(usize, usize)>; 2]; 3] = [[None; 2]; 3];
     for &(s, e) in &intervals {
         let m = mean(accel, s, e);

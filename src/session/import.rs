@@ -275,15 +275,9 @@ pub fn imucal_ferraris(
                 })
                 .map_err(|e| csv_err(csv, 1, "-", Problem::Value, format!("finding the Ferraris sections: {e}")))?;
             for sec in found {
-                let motion = if sec.name.ends_with("_rot") {
-                    let mut axis = [0.0; 3];
-                    axis[sec.axis] = 1.0;
-                    MotionSpec::Rotation { axis_stand: axis, angle_deg: sec.sign * opts.turn_angle_deg.abs() }
-                } else {
-                    let mut up = [0.0; 3];
-                    up[sec.axis] = sec.sign;
-                    MotionSpec::Static { up_stand: up, earth_rate_rad_s: [0.0; 3] }
-                };
+                // The face's up is in its name; a turn's sense is the one found.
+                let motion = ferraris_motion(&sec.name, sec.sign * opts.turn_angle_deg.abs())
+                    .ok_or_else(|| csv_err(csv, 1, "-", Problem::Value, format!("unknown section '{}'", sec.name)))?;
                 runs.push(run(&sec.name, motion, Some(sec.rows)));
             }
         }
