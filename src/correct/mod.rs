@@ -403,19 +403,131 @@ pub fn resample_to_stamps(c: &Corrected, t_s: &[f64]) -> Corrected {
     }
 }
 
+/// A 3-vector padded to four lanes (the last is 0) so that the streaming loops vectorize.
+type Lanes = [f64; 4];
+
+/// A 3×3 matrix by columns of [`Lanes`]: `M v = c₀v₀ + c₁v₁ + c₂v₂`, lane by lane, as
+/// fused multiply-adds in that order (IEEE fma is exactly rounded on every processor, so
+/// every path through the corrector gives the same bits).
+#[derive(Debug, Clone, Copy, Default)]
+struct Cols([Lanes; 3]);
+
+impl Cols {
+    fn of(m: &Matrix3<f64>) -> Self {
+        Self([0, 1, 2].map(|j| [m[(0, j)], m[(1, j)], m[(2, j)], 0.0]))
+    }
+
+    #[inline(always)]
+    fn apply(&self, v: &[f64]) -> Lanes {
+        let [c0, c1, c2] = &self.0;
+        let mut r = [0.0; 4];
+        for i in 0..4 {
+            r[i] = c2[i].mul_add(v[2], c1[i].mul_add(v[1], c0[i] * v[0]));
+        }
+        r
+    }
+
+    /// `acc − M v` as fused multiply-adds with the columns negated (exact): c₀, c₁, c₂ in turn.
+    #[inline(always)]
+    fn sub_from(&self, acc: Lanes, v: &[f64]) -> Lanes {
+        let [c0, c1, c2] = &self.0;
+        let mut r = acc;
+        for i in 0..4 {
+            r[i] = (-c2[i]).mul_add(v[2], (-c1[i]).mul_add(v[1], (-c0[i]).mul_add(v[0], r[i])));
+        }
+        r
+    }
+}
+
+/// The gyro's linear inverse for one set of slope weights. With the window's weights h
+/// (h₀ on the newest sample, h₁ and h₂ on the two before, the rest on older ones), the
+/// estimate ε̂ = h₀ω_k + h₁ω_{k−1} + h₂ω_{k−2} + p_old, and the model u = Aω + Eε̂ + b + g
+/// gives ω_k = M(u − b − g) − D p_old − G₂ ω_{k−2} − G₁ ω_{k−1} with M = (A + h₀E)⁻¹,
+/// D = M E, G₁ = h₁ D, G₂ = h₂ D: the two newest past samples enter through their own 3×3
+/// products, which keeps the chain from one sample to the next short.
+#[derive(Debug, Clone, Copy, Default)]
+struct GyroStep {
+    h: [f64; 3],
+    m: Cols,
+    d: Cols,
+    g1: Cols,
+    g2: Cols,
+    bias: Lanes,
+}
+
+impl GyroStep {
+    fn new(s: &SensorInverse) -> Self {
+        let mut step = Self { h: [f64::NAN; 3], bias: [s.bias[0], s.bias[1], s.bias[2], 0.0], ..Self::default() };
+        step.set(s, [0.0; 3]);
+        step
+    }
+
+    /// Makes the matrices those of weights [h₀, h₁, h₂] (recomputed only when they change).
+    #[allow(clippy::float_cmp)]
+    #[inline]
+    fn set(&mut self, s: &SensorInverse, h: [f64; 3]) {
+        if h == self.h {
+            return;
+        }
+        if h[0] != self.h[0] {
+            let m = (s.scale + s.eps * h[0]).try_inverse().unwrap_or(s.scale_inv);
+            self.m = Cols::of(&m);
+            self.d = Cols::of(&(m * s.eps));
+        }
+        let times = |k: f64| Cols(self.d.0.map(|c| c.map(|x| x * k)));
+        self.g1 = times(h[1]);
+        self.g2 = times(h[2]);
+        self.h = h;
+    }
+
+    /// ω_k from the output `u`, the other effects' contribution `other`, the older weights
+    /// `h_old` with their samples `old` (oldest first) and the two previous samples `x2`, `x1`.
+    /// Lane by lane, as fused multiply-adds in this order: p = Σ h_j x_j (oldest first);
+    /// ω = M(u − b − other), then − D p, − G₂x₂, − G₁x₁ (each [`Cols::sub_from`]): the
+    /// previous sample enters last. The AVX2 loop of [`Streaming::push_block`] does the same
+    /// operations.
+    #[inline(always)]
+    fn apply(&self, u: &[f64; 3], other: &[f64; 3], h_old: &[f64], old: &[Lanes], x2: &Lanes, x1: &Lanes) -> Lanes {
+        let mut p = [0.0; 4];
+        for (hj, x) in h_old.iter().zip(old) {
+            for i in 0..4 {
+                p[i] = hj.mul_add(x[i], p[i]);
+            }
+        }
+        let b = &self.bias;
+        let v = self.m.apply(&[u[0] - b[0] - other[0], u[1] - b[1] - other[1], u[2] - b[2] - other[2]]);
+        let w = self.d.sub_from(v, &p);
+        let w = self.g2.sub_from(w, x2);
+        self.g1.sub_from(w, x1)
+    }
+}
+
+/// Stores a sample in the doubled rings (entry `slot` and `slot + window`) and advances.
+#[inline(always)]
+fn remember(times: &mut [f64], past_w: &mut [Lanes], slot: &mut usize, t_s: f64, w: Lanes) {
+    let n = times.len() / 2;
+    times[*slot] = t_s;
+    times[*slot + n] = t_s;
+    past_w[*slot] = w;
+    past_w[*slot + n] = w;
+    *slot = if *slot + 1 == n { 0 } else { *slot + 1 };
+}
+
 /// Causal sample-by-sample corrector with fixed memory.
 ///
 /// The last `window` time stamps and corrected rates live in rings stored twice over (entry
 /// at `i` and `i + window`), so the window is always one contiguous slice in time order and
 /// nothing is shifted per sample. While the sampling stays uniform (every step within 1e-9
 /// of the previous one) the slope weights of the full window are reused without looking at
-/// the stamps again.
+/// the stamps again, and [`Self::push_block`] runs a loop with nothing else in it.
 #[derive(Debug, Clone)]
 pub struct Streaming {
     cal: Calibration,
     window: usize,
     times: Vec<f64>,
-    past_w: Vec<[f64; 3]>,
+    past_w: Vec<Lanes>,
+    /// Work space of the uniform loop: the window's history, then a block of new rates.
+    line: Vec<Lanes>,
     /// Next ring slot.
     head: usize,
     filled: usize,
@@ -425,8 +537,9 @@ pub struct Streaming {
     dt: f64,
     /// Consecutive steps equal to `dt` (within 1e-9 relative).
     steady: usize,
-    cached_w0: f64,
-    cached_inv: Matrix3<f64>,
+    step: GyroStep,
+    accel_inv: Cols,
+    accel_bias: Lanes,
     t_first: Option<f64>,
     t_last: f64,
     last_flags: u8,
@@ -437,20 +550,24 @@ impl Streaming {
     pub fn new(cal: Calibration) -> Self {
         let window = cal.settings.streaming_window.max(2);
         let degree = cal.settings.streaming_degree;
-        let inv = cal.gyro.scale_inv;
+        let step = GyroStep::new(&cal.gyro);
+        let accel_inv = Cols::of(&cal.accel.scale_inv);
+        let b = cal.accel.bias;
         Self {
             cal,
             window,
             times: vec![0.0; 2 * window],
-            past_w: vec![[0.0; 3]; 2 * window],
+            past_w: vec![[0.0; 4]; 2 * window],
+            line: vec![[0.0; 4]; window + LINE_BLOCK],
             head: 0,
             filled: 0,
             weights: SlopeWeights::new(degree, window),
             uniform_weights: Vec::with_capacity(window),
             dt: f64::NAN,
             steady: 0,
-            cached_w0: 0.0,
-            cached_inv: inv,
+            step,
+            accel_inv,
+            accel_bias: [b[0], b[1], b[2], 0.0],
             t_first: None,
             t_last: f64::NAN,
             last_flags: 0,
@@ -476,9 +593,29 @@ impl Streaming {
         self.t_last = f64::NAN;
     }
 
+    /// The accelerometer's linear inverse `A⁻¹(u − b − other)`.
+    #[inline(always)]
+    fn accel(&self, u: &[f64; 3], other: &[f64; 3]) -> [f64; 3] {
+        let b = &self.accel_bias;
+        let v = self.accel_inv.apply(&[u[0] - b[0] - other[0], u[1] - b[1] - other[1], u[2] - b[2] - other[2]]);
+        [v[0], v[1], v[2]]
+    }
+
     /// Corrects one sample (SI in, SI out): returns (ω rad/s, a m/s²).
     #[inline]
     pub fn push(&mut self, t_s: f64, gyro: [f64; 3], accel: [f64; 3], temp_c: f64) -> ([f64; 3], [f64; 3]) {
+        // With FMA in the processor the fused multiply-adds become single instructions
+        // (chosen at run time); without, they are computed exactly in software.
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = pulp::x86::V3::try_new() {
+            return simd.vectorize(|| self.push_one(t_s, gyro, accel, temp_c));
+        }
+        self.push_one(t_s, gyro, accel, temp_c)
+    }
+
+    /// The body of [`Self::push`].
+    #[inline(always)]
+    fn push_one(&mut self, t_s: f64, gyro: [f64; 3], accel: [f64; 3], temp_c: f64) -> ([f64; 3], [f64; 3]) {
         let t0 = *self.t_first.get_or_insert(t_s);
         let n = self.window;
         // Uniform sampling: count consecutive steps equal to the last one.
@@ -497,8 +634,6 @@ impl Streaming {
         let len = (self.filled + 1).min(n);
         // The window in time order ends at this sample: ring[slot + n - len + 1 ..= slot + n].
         let first = slot + n + 1 - len;
-        let g = &self.cal.gyro;
-        let a = &self.cal.accel;
         let weights: &[f64] = if len == n && self.steady + 1 >= n && !self.uniform_weights.is_empty() {
             &self.uniform_weights
         } else {
@@ -508,54 +643,59 @@ impl Streaming {
             }
             self.weights.last()
         };
-        let (w0, p) = if weights.len() == len {
-            let mut p = [0.0; 3];
-            for (wj, x) in weights[..len - 1].iter().zip(&self.past_w[first..first + len - 1]) {
-                p[0] += wj * x[0];
-                p[1] += wj * x[1];
-                p[2] += wj * x[2];
-            }
-            (weights[len - 1], p)
-        } else {
-            (0.0, [0.0; 3])
-        };
-        #[allow(clippy::float_cmp)]
-        if w0 != self.cached_w0 {
-            self.cached_w0 = w0;
-            self.cached_inv = (g.scale + g.eps * w0).try_inverse().unwrap_or(g.scale_inv);
-        }
-        let ep = mv(&g.eps, p);
-        let mut w = solve(&self.cached_inv, gyro, g.bias, ep, [0.0; 3]);
-        let mut acc = solve(&a.scale_inv, accel, a.bias, [0.0; 3], [0.0; 3]);
+        // Older weights and samples, the two previous samples' weights and values, the newest's.
+        let zero: Lanes = [0.0; 4];
+        let ok = weights.len() == len && len >= 2;
+        let (h_old, old): (&[f64], &[Lanes]) =
+            if ok && len >= 3 { (&weights[..len - 3], &self.past_w[first..first + len - 3]) } else { (&[], &[]) };
+        let (h2, x2) = if ok && len >= 3 { (weights[len - 3], &self.past_w[first + len - 3]) } else { (0.0, &zero) };
+        let (h1, x1) = if ok { (weights[len - 2], &self.past_w[first + len - 2]) } else { (0.0, &zero) };
+        let h0 = if ok { weights[len - 1] } else { 0.0 };
+        self.step.set(&self.cal.gyro, [h0, h1, h2]);
+        let none = [0.0; 3];
+        let mut w4 = self.step.apply(&gyro, &none, h_old, old, x2, x1);
+        let mut acc = self.accel(&accel, &none);
+        let (g, a) = (&self.cal.gyro, &self.cal.accel);
         if g.has_other_terms() || a.has_other_terms() {
+            // ε̂ without the newest sample's share, for the effects' regressors.
+            let mut p = [0.0; 3];
+            for (hj, x) in h_old.iter().zip(old) {
+                for i in 0..3 {
+                    p[i] += hj * x[i];
+                }
+            }
+            for i in 0..3 {
+                p[i] += h2 * x2[i];
+                p[i] += h1 * x1[i];
+            }
             // Fixed-point passes for the remaining effects, from the linear solution.
             for _ in 0..4 {
                 let s = State {
                     t_s: t_s - t0,
-                    w,
-                    e: [p[0] + w0 * w[0], p[1] + w0 * w[1], p[2] + w0 * w[2]],
+                    w: [w4[0], w4[1], w4[2]],
+                    e: [p[0] + h0 * w4[0], p[1] + h0 * w4[1], p[2] + h0 * w4[2]],
                     a: acc,
                     temp_c,
                 };
                 let og = g.other(&s);
                 let oa = a.other(&s);
-                w = solve(&self.cached_inv, gyro, g.bias, ep, og);
-                acc = solve(&a.scale_inv, accel, a.bias, oa, [0.0; 3]);
+                w4 = self.step.apply(&gyro, &og, h_old, old, x2, x1);
+                acc = self.accel(&accel, &oa);
             }
         }
+        let mut w = [w4[0], w4[1], w4[2]];
         if !self.cal.nonlinear.is_empty() {
             self.last_flags = self.cal.invert_nonlinear(&mut w, &mut acc);
         }
-        self.past_w[slot] = w;
-        self.past_w[slot + n] = w;
-        self.head = if slot + 1 == n { 0 } else { slot + 1 };
+        remember(&mut self.times, &mut self.past_w, &mut self.head, t_s, [w[0], w[1], w[2], 0.0]);
         self.filled = len;
         (w, acc)
     }
 
     /// Corrects a block of samples into caller-owned buffers (no allocation): `w_out[k]`,
     /// `a_out[k]` receive sample k's rate and specific force; stops at the shortest slice.
-    /// Returns the number of samples corrected.
+    /// Returns the number of samples corrected. Results equal those of [`Self::push`]
+    /// sample by sample, bit for bit.
     pub fn push_block(
         &mut self,
         t_s: &[f64],
@@ -565,12 +705,149 @@ impl Streaming {
         a_out: &mut [[f64; 3]],
     ) -> usize {
         let n = t_s.len().min(gyro.len()).min(accel.len()).min(w_out.len()).min(a_out.len());
-        for k in 0..n {
-            let (w, a) = self.push(t_s[k], gyro[k], accel[k], f64::NAN);
-            w_out[k] = w;
-            a_out[k] = a;
+        let linear =
+            !self.cal.gyro.has_other_terms() && !self.cal.accel.has_other_terms() && self.cal.nonlinear.is_empty();
+        let mut k = 0;
+        while k < n {
+            if linear
+                && self.window >= 3
+                && self.filled == self.window
+                && self.steady + 1 >= self.window
+                && self.uniform_weights.len() == self.window
+            {
+                k += self.uniform_run(&t_s[k..n], &gyro[k..n], &mut w_out[k..n]);
+            }
+            if k < n {
+                let (w, a) = self.push(t_s[k], gyro[k], accel[k], f64::NAN);
+                w_out[k] = w;
+                a_out[k] = a;
+                k += 1;
+            }
+        }
+        if linear {
+            // A linear accelerometer has no memory: one pass over the block.
+            let this = &*self;
+            let mut pass = || {
+                for (out, u) in a_out[..n].iter_mut().zip(&accel[..n]) {
+                    *out = this.accel(u, &[0.0; 3]);
+                }
+            };
+            #[cfg(target_arch = "x86_64")]
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                simd.vectorize(pass);
+            } else {
+                pass();
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            pass();
+            self.last_flags = 0;
         }
         n
+    }
+
+    /// The gyro of a linear calibration, full window, uniform sampling: corrects samples
+    /// from the start of the slices until a step breaks the uniform sampling (that sample
+    /// is left to [`Self::push`]); returns how many it did.
+    fn uniform_run(&mut self, t_s: &[f64], gyro: &[[f64; 3]], w_out: &mut [[f64; 3]]) -> usize {
+        let n = self.window;
+        // Weights run oldest → newest over the window.
+        let u = &self.uniform_weights;
+        self.step.set(&self.cal.gyro, [u[n - 1], u[n - 2], u[n - 3]]);
+        let (step, dt, tol) = (self.step, self.dt, 1e-9 * self.dt.abs());
+        // How many samples keep the uniform step.
+        let mut len = 0;
+        let mut last = self.t_last;
+        while len < t_s.len() && ((t_s[len] - last) - dt).abs() <= tol {
+            last = t_s[len];
+            len += 1;
+        }
+        // The history in time order (oldest first) opens the line; each block of new rates
+        // follows it, and the last n − 1 rates move to the front before the next block.
+        let h = n - 1;
+        let head = self.head;
+        self.line[..h].copy_from_slice(&self.past_w[head + 1..head + n]);
+        let h_old = &self.uniform_weights[..n - 3];
+        let mut done = 0;
+        while done < len {
+            let m = (len - done).min(LINE_BLOCK);
+            let (gyro, out) = (&gyro[done..done + m], &mut w_out[done..done + m]);
+            #[cfg(target_arch = "x86_64")]
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                simd.vectorize(|| uniform_block_v3(simd, &step, h_old, &mut self.line, gyro, out));
+            } else {
+                uniform_block(&step, h_old, &mut self.line, gyro, out);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            uniform_block(&step, h_old, &mut self.line, gyro, out);
+            self.line.copy_within(m..m + h, 0);
+            done += m;
+        }
+        // The rings as `push` would have left them: the last n samples (fewer if fewer).
+        let first = len.saturating_sub(n);
+        for k in first..len {
+            let w = [w_out[k][0], w_out[k][1], w_out[k][2], 0.0];
+            remember(&mut self.times, &mut self.past_w, &mut self.head, t_s[k], w);
+        }
+        self.t_last = last;
+        self.steady += len;
+        len
+    }
+}
+
+/// Samples per block of the uniform loop.
+const LINE_BLOCK: usize = 256;
+
+/// One block of the uniform loop: `line` holds the window's history (oldest first) and
+/// receives the block's rates after it (one slot per sample of `gyro`).
+#[inline(always)]
+fn uniform_block(step: &GyroStep, h_old: &[f64], line: &mut [Lanes], gyro: &[[f64; 3]], out: &mut [[f64; 3]]) {
+    let h = h_old.len() + 2;
+    for (i, (u, o)) in gyro.iter().zip(out.iter_mut()).enumerate() {
+        let (past, new) = line[i..].split_at_mut(h);
+        let w = step.apply(u, &[0.0; 3], h_old, &past[..h - 2], &past[h - 2], &past[h - 1]);
+        *o = [w[0], w[1], w[2]];
+        new[0] = w;
+    }
+}
+
+/// [`uniform_block`] four lanes per instruction (AVX2 and FMA: the same fused operations in
+/// the same order as [`GyroStep::apply`], so the bits are the same). The two newest rates
+/// stay in registers.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn uniform_block_v3(
+    simd: pulp::x86::V3,
+    step: &GyroStep,
+    h_old: &[f64],
+    line: &mut [Lanes],
+    gyro: &[[f64; 3]],
+    out: &mut [[f64; 3]],
+) {
+    use pulp::{f64x4, Simd};
+    let v4 = |x: &Lanes| -> f64x4 { pulp::bytemuck::cast(*x) };
+    let neg = |c: &Cols| c.0.map(|c| v4(&c.map(|x| -x)));
+    let [m0, m1, m2] = step.m.0.map(|c| v4(&c));
+    let [d0, d1, d2] = neg(&step.d);
+    let [e0, e1, e2] = neg(&step.g1);
+    let [f0, f1, f2] = neg(&step.g2);
+    let b = step.bias;
+    let (mul, fma, splat) = (|a, b| simd.mul_f64s(a, b), |a, b, c| simd.mul_add_f64s(a, b, c), |x| simd.splat_f64s(x));
+    let h = h_old.len() + 2;
+    let (mut x2, mut x1) = (v4(&line[h - 2]), v4(&line[h - 1]));
+    for (i, (u, o)) in gyro.iter().zip(out.iter_mut()).enumerate() {
+        let (past, new) = line[i..].split_at_mut(h);
+        let mut p = splat(0.0);
+        for (hj, x) in h_old.iter().zip(&past[..h - 2]) {
+            p = fma(splat(*hj), v4(x), p);
+        }
+        let v = fma(m2, splat(u[2] - b[2]), fma(m1, splat(u[1] - b[1]), mul(m0, splat(u[0] - b[0]))));
+        let w = fma(d2, splat(p.2), fma(d1, splat(p.1), fma(d0, splat(p.0), v)));
+        let w = fma(f2, splat(x2.2), fma(f1, splat(x2.1), fma(f0, splat(x2.0), w)));
+        let w = fma(e2, splat(x1.2), fma(e1, splat(x1.1), fma(e0, splat(x1.0), w)));
+        *o = [w.0, w.1, w.2];
+        new[0] = pulp::bytemuck::cast(w);
+        x2 = x1;
+        x1 = w;
     }
 }
 
