@@ -480,18 +480,32 @@ fn residual_pass(
     let mut acov: Vec<AutoCov> = (0..3 * designs.len()).map(|_| AutoCov::new(lags + 1)).collect();
     let mut max = vec![0.0_f64; 3 * designs.len()];
     let mut pred = [0.0; 3];
+    // Per sensor: the design row's regressor columns once per sample, then the fitted
+    // coefficients (channel, column, value) in term order.
+    let mut rows: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; d.cols.len() + 3]).collect();
+    let coefs: Vec<Vec<(usize, usize, f64)>> = designs
+        .iter()
+        .zip(solved)
+        .map(|(d, sol)| {
+            d.terms
+                .iter()
+                .enumerate()
+                .filter(|&(ti, _)| sol.values[ti] != 0.0)
+                .map(|(ti, t)| (t.term.channel, d.cols.of_term[ti], sol.values[ti]))
+                .collect()
+        })
+        .collect();
     src.for_each_sample(&mut |s, g, a| {
-        for (di, (d, sol)) in designs.iter().zip(solved).enumerate() {
-            pred.fill(0.0);
-            for (ti, t) in d.terms.iter().enumerate() {
-                if sol.values[ti] != 0.0 {
-                    pred[t.term.channel] += sol.values[ti] * t.regressor(s);
-                }
-            }
+        for (di, ((d, row), coefs)) in designs.iter().zip(rows.iter_mut()).zip(&coefs).enumerate() {
             let u = match d.sensor {
                 SensorKind::Gyro => g,
                 SensorKind::Accel => a,
             };
+            d.cols.fill_state_row(&d.terms, s, u, row);
+            pred.fill(0.0);
+            for &(ch, c, v) in coefs {
+                pred[ch] += v * row[c];
+            }
             for ch in 0..3 {
                 let e = u[ch] - pred[ch];
                 acov[3 * di + ch].push(e);
@@ -499,6 +513,9 @@ fn residual_pass(
             }
         }
     })?;
+    for a in &mut acov {
+        a.finish();
+    }
     Ok((acov, max))
 }
 
@@ -752,35 +769,66 @@ fn newey_west_lags(n: usize) -> usize {
     ((4.0 * (n as f64 / 100.0).powf(2.0 / 9.0)) as usize).clamp(1, (n / 4).max(1))
 }
 
-/// Autocovariance sums Σ r_k r_{k−l} of a residual stream for lags 0..=L+1, from a ring
-/// buffer of the last L + 2 values (no allocation per sample).
+/// Autocovariance sums Σ r_k r_{k−l} of a residual stream for lags 0..=L+1. Values are
+/// gathered in blocks behind the last L + 1 of the previous block and summed a lag at a time
+/// over each block (contiguous dot products, four partial sums each): fixed memory, no
+/// allocation per sample; [`AutoCov::finish`] sums the last, partial block.
 struct AutoCov {
-    ring: Vec<f64>,
+    buf: Vec<f64>,
+    /// Values in `buf` (history first).
+    fill: usize,
+    /// How many of them are history already summed.
+    hist: usize,
     sums: Vec<f64>,
     n: usize,
 }
 
+/// Values per block of [`AutoCov`].
+const ACOV_BLOCK: usize = 2048;
+
 impl AutoCov {
     fn new(max_lag: usize) -> Self {
-        // The ring is stored twice over (value at p and p + len) so that the last L + 2
-        // values are always one contiguous slice: no modulo in the per-sample loop.
-        Self { ring: vec![0.0; 2 * (max_lag + 1)], sums: vec![0.0; max_lag + 1], n: 0 }
+        Self { buf: vec![0.0; max_lag + 1 + ACOV_BLOCK], fill: 0, hist: 0, sums: vec![0.0; max_lag + 1], n: 0 }
     }
 
     #[inline]
     fn push(&mut self, r: f64) {
-        let len = self.sums.len();
-        let pos = self.n % len;
-        self.ring[pos] = r;
-        self.ring[pos + len] = r;
-        // ring[pos + len - l] is the value l samples back, l = 0..len.
-        let window = &self.ring[pos + 1..pos + len + 1];
-        let have = len.min(self.n + 1);
-        for (l, s) in self.sums.iter_mut().enumerate().take(have) {
-            *s += r * window[len - 1 - l];
-        }
+        self.buf[self.fill] = r;
+        self.fill += 1;
         self.n += 1;
+        if self.fill == self.buf.len() {
+            self.finish();
+        }
     }
+
+    /// Sums the values gathered since the last block; keeps the last L + 1 as history.
+    fn finish(&mut self) {
+        let (new, fill) = (self.hist, self.fill);
+        for (l, s) in self.sums.iter_mut().enumerate() {
+            let from = new.max(l);
+            if from < fill {
+                *s += dot(&self.buf[from..fill], &self.buf[from - l..fill - l]);
+            }
+        }
+        let keep = fill.min(self.sums.len());
+        self.buf.copy_within(fill - keep..fill, 0);
+        self.fill = keep;
+        self.hist = keep;
+    }
+}
+
+/// Σ a_k b_k with four partial sums ((s₀ + s₁) + (s₂ + s₃) + the tail), for equal lengths.
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut s = [0.0; 4];
+    let (ac, bc) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ac.remainder().iter().zip(bc.remainder()).map(|(x, y)| x * y).sum();
+    for (x, y) in ac.zip(bc) {
+        for i in 0..4 {
+            s[i] += x[i] * y[i];
+        }
+    }
+    (s[0] + s[1]) + (s[2] + s[3]) + tail
 }
 
 /// Pooled long-run variance of residuals over runs, by AR(1) prewhitening followed by a
@@ -1009,6 +1057,32 @@ fn robust_refit(
         }
         if moved < 1e-10 {
             break;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{AutoCov, ACOV_BLOCK};
+
+    #[test]
+    fn blocked_autocovariances_equal_the_direct_sums() {
+        // A deterministic, correlated stream; lengths around the block size and shorter
+        // than the lags.
+        for n in [0, 3, 17, ACOV_BLOCK - 1, ACOV_BLOCK, ACOV_BLOCK + 5, 3 * ACOV_BLOCK + 123] {
+            let r: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin() + 0.3 * (k as f64 * 1.91).cos()).collect();
+            let lags = 19;
+            let mut a = AutoCov::new(lags);
+            for &x in &r {
+                a.push(x);
+            }
+            a.finish();
+            assert_eq!(a.n, n);
+            for l in 0..=lags {
+                let direct: f64 = (l..n).map(|k| r[k] * r[k - l]).sum();
+                let tol = 1e-12 * (1.0 + direct.abs() + n as f64);
+                assert!((a.sums[l] - direct).abs() <= tol, "n {n} lag {l}: {} vs {direct}", a.sums[l]);
+            }
         }
     }
 }

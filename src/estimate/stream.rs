@@ -67,7 +67,7 @@ impl Samples for StreamRun<'_> {
         };
         let conic = match self.spec.motion {
             MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
-                Some(Conic::from_deg(cone_angle_deg, rate_deg_s, phase_deg))
+                Some(Conic::from_deg(cone_angle_deg, rate_deg_s, phase_deg).fixed(g))
             }
             _ => None,
         };
@@ -89,7 +89,7 @@ impl Samples for StreamRun<'_> {
                     t0 = row.t_s;
                 }
                 let (w, e, a) = match &conic {
-                    Some(c) => to_sensor(c.at(row.t_s, g)),
+                    Some(c) => to_sensor(c.at(row.t_s)),
                     None => still,
                 };
                 let temp_c = if has_temp { row.temp_c } else { self.spec.temperature_c.unwrap_or(f64::NAN) };

@@ -65,9 +65,33 @@ impl Conic {
     /// Kinematics at time t (paper eq. 1; eq. 2 with the spec's sign), g in m/s².
     #[inline]
     pub fn at(&self, t_s: f64, g_m_s2: f64) -> Kinematics {
+        self.fixed(g_m_s2).at(t_s)
+    }
+
+    /// The motion with the cone angle's sine and cosine and g worked out once, for
+    /// evaluating many samples (the same numbers as [`Self::at`]).
+    pub fn fixed(&self, g_m_s2: f64) -> ConicAt {
         let (sa, ca) = self.cone_angle_rad.sin_cos();
-        let (st, ct) = self.theta(t_s).sin_cos();
-        let ws = self.rate_rad_s;
+        ConicAt { conic: *self, sa, ca, g_m_s2 }
+    }
+}
+
+/// [`Conic`] ready to evaluate: see [`Conic::fixed`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ConicAt {
+    conic: Conic,
+    sa: f64,
+    ca: f64,
+    g_m_s2: f64,
+}
+
+impl ConicAt {
+    /// Kinematics at time t (paper eq. 1; eq. 2 with the spec's sign).
+    #[inline]
+    pub fn at(&self, t_s: f64) -> Kinematics {
+        let (sa, ca, g_m_s2) = (self.sa, self.ca, self.g_m_s2);
+        let (st, ct) = self.conic.theta(t_s).sin_cos();
+        let ws = self.conic.rate_rad_s;
         Kinematics {
             w_rad_s: V3::new([ws * sa * ct, -ws * sa * st, ws * (1.0 - ca)]),
             e_rad_s2: V3::new([-ws * ws * sa * st, -ws * ws * sa * ct, 0.0]),
@@ -119,9 +143,9 @@ pub fn track_for(
     };
     match motion {
         MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
-            let c = Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
+            let c = Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg).fixed(g_m_s2);
             for &t in &rec.t_s {
-                push(&mut tr, c.at(t, g_m_s2));
+                push(&mut tr, c.at(t));
             }
             tr.epsilon_source = EPSILON_CONIC.into();
         }
