@@ -1,8 +1,11 @@
 //! Fitting straight from the recordings, in bounded memory: each run's CSV is parsed row by
 //! row (one reused record), the reference motion is evaluated per sample (conic: paper eq. 1
 //! with the spec's eq. 2; static: constant) and every design row goes into a QR
-//! accumulator; a second read gives the residual statistics. Memory is O(parameters² +
-//! chunk) per run in flight, whatever the recordings' length; runs are read in parallel.
+//! accumulator; a second read gives the residual statistics, from the rows the first read
+//! spilled in binary to an anonymous temporary file (64 bytes a sample on disk, none in
+//! memory; without a writable temporary directory the text is parsed again). Memory is
+//! O(parameters² + chunk) per run in flight, whatever the recordings' length; runs are
+//! read in parallel.
 //!
 //! The arithmetic is that of the in-memory fit ([`super::fit`]): the same rows in the same
 //! order through the same accumulators, so the two agree to the last bit.
@@ -24,7 +27,13 @@ pub struct StreamRun<'a> {
     manifest: &'a Manifest,
     /// (SHA-256, samples) once the file has been read.
     seen: Mutex<Option<(String, usize)>>,
+    /// The used rows as parsed, in binary (an anonymous temporary file, written by the
+    /// first read): later reads take them from here instead of parsing the text again.
+    spill: Mutex<Option<std::fs::File>>,
 }
+
+/// f64 values per spilled row: t, gyro x y z, accel x y z, temperature.
+const SPILL_VALUES: usize = 8;
 
 impl<'a> StreamRun<'a> {
     /// A conic or static run of a manifest; `None` for kinds that need the whole run in
@@ -34,7 +43,7 @@ impl<'a> StreamRun<'a> {
             return Ok(None);
         }
         let path = run_path(manifest_path, spec)?;
-        Ok(Some(Self { spec, path, manifest, seen: Mutex::new(None) }))
+        Ok(Some(Self { spec, path, manifest, seen: Mutex::new(None), spill: Mutex::new(None) }))
     }
 
     /// What the profile records of this run (after a fit has read it).
@@ -51,16 +60,7 @@ impl Samples for StreamRun<'_> {
 
     fn for_each_sample(&self, f: &mut SampleFn<'_>) -> Result<(), SessionError> {
         let io = |source| SessionError::Io { path: self.path.clone(), source };
-        let file = std::fs::File::open(&self.path).map_err(io)?;
-        let input = std::io::BufReader::with_capacity(1 << 20, file);
         let g = self.manifest.g_m_s2;
-        let mut rdr = RowReader::new(&self.path, input, &self.manifest.units, g, ReadOptions::default())?;
-        let has_temp = rdr.has_temp();
-        let known = self.seen.lock().ok().and_then(|s| s.clone());
-        if known.is_some() {
-            rdr.stop_hashing();
-        }
-        let (start, end) = self.spec.rows.unwrap_or((0, usize::MAX));
         let mount = &self.spec.mount;
         let to_sensor = |k: Kinematics| {
             (mount.to_sensor(k.w_rad_s).xyz, mount.to_sensor(k.e_rad_s2).xyz, mount.to_sensor(k.a_m_s2).xyz)
@@ -79,29 +79,104 @@ impl Samples for StreamRun<'_> {
             }),
             _ => ([0.0; 3], [0.0; 3], [0.0; 3]),
         };
-        let mut row = Row::default();
-        let mut k = 0usize;
         let mut t0 = f64::NAN;
         let mut used = 0usize;
+        // One used row (temperature already chosen): its reference state, then `f`.
+        let mut emit = |row: &Row| {
+            if used == 0 {
+                t0 = row.t_s;
+            }
+            let (w, e, a) = match &conic {
+                Some(c) => to_sensor(c.at(row.t_s)),
+                None => still,
+            };
+            let s = State { t_s: row.t_s - t0, w, e, a, temp_c: row.temp_c };
+            f(&s, &row.gyro, &row.accel);
+            used += 1;
+        };
+        let mut row = Row::default();
+
+        // A later read: the rows from the spill, bit for bit as parsed.
+        if let Some(file) = self.spill.lock().ok().and_then(|s| s.as_ref().and_then(|f| f.try_clone().ok())) {
+            use std::io::{Read, Seek};
+            let mut file = file;
+            file.seek(std::io::SeekFrom::Start(0)).map_err(io)?;
+            let mut input = std::io::BufReader::with_capacity(1 << 18, file);
+            let mut rec = [0u8; 8 * SPILL_VALUES];
+            let value = |rec: &[u8; 8 * SPILL_VALUES], i: usize| {
+                let mut b = [0u8; 8];
+                b.copy_from_slice(&rec[8 * i..8 * i + 8]);
+                f64::from_le_bytes(b)
+            };
+            loop {
+                match input.read_exact(&mut rec) {
+                    Ok(()) => {}
+                    Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => break,
+                    Err(e) => return Err(io(e)),
+                }
+                row.t_s = value(&rec, 0);
+                row.gyro = [value(&rec, 1), value(&rec, 2), value(&rec, 3)];
+                row.accel = [value(&rec, 4), value(&rec, 5), value(&rec, 6)];
+                row.temp_c = value(&rec, 7);
+                emit(&row);
+            }
+            return Ok(());
+        }
+
+        let file = std::fs::File::open(&self.path).map_err(io)?;
+        let input = std::io::BufReader::with_capacity(1 << 20, file);
+        let mut rdr = RowReader::new(&self.path, input, &self.manifest.units, g, ReadOptions::default())?;
+        let has_temp = rdr.has_temp();
+        let known = self.seen.lock().ok().and_then(|s| s.clone());
+        if known.is_some() {
+            rdr.stop_hashing();
+        }
+        // The first read spills the used rows (if no temporary file can be written, later
+        // reads parse the text again).
+        let mut spill = if known.is_none() {
+            tempfile::tempfile().ok().map(|f| std::io::BufWriter::with_capacity(1 << 18, f))
+        } else {
+            None
+        };
+        let (start, end) = self.spec.rows.unwrap_or((0, usize::MAX));
+        let mut k = 0usize;
         while rdr.read_row(&mut row)? {
             if k >= start && k < end {
-                if used == 0 {
-                    t0 = row.t_s;
+                if !has_temp {
+                    row.temp_c = self.spec.temperature_c.unwrap_or(f64::NAN);
                 }
-                let (w, e, a) = match &conic {
-                    Some(c) => to_sensor(c.at(row.t_s)),
-                    None => still,
-                };
-                let temp_c = if has_temp { row.temp_c } else { self.spec.temperature_c.unwrap_or(f64::NAN) };
-                let s = State { t_s: row.t_s - t0, w, e, a, temp_c };
-                f(&s, &row.gyro, &row.accel);
-                used += 1;
+                if let Some(w) = &mut spill {
+                    use std::io::Write;
+                    let mut rec = [0u8; 8 * SPILL_VALUES];
+                    let values = [
+                        row.t_s,
+                        row.gyro[0],
+                        row.gyro[1],
+                        row.gyro[2],
+                        row.accel[0],
+                        row.accel[1],
+                        row.accel[2],
+                        row.temp_c,
+                    ];
+                    for (chunk, v) in rec.chunks_exact_mut(8).zip(values) {
+                        chunk.copy_from_slice(&v.to_le_bytes());
+                    }
+                    if w.write_all(&rec).is_err() {
+                        spill = None;
+                    }
+                }
+                emit(&row);
             }
             k += 1;
         }
         if known.is_none() {
             if let Ok(mut seen) = self.seen.lock() {
                 *seen = Some((rdr.sha256(), used));
+            }
+            if let Some(file) = spill.and_then(|w| w.into_inner().ok()) {
+                if let Ok(mut s) = self.spill.lock() {
+                    *s = Some(file);
+                }
             }
         }
         Ok(())
