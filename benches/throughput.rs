@@ -189,7 +189,7 @@ fn parse_and_correct() {
         session.runs.iter().flat_map(|r| std::fs::read(tmp.path().join(&r.spec.file)).expect("csv")).collect();
     let one = std::fs::read(tmp.path().join(&session.runs[0].spec.file)).expect("csv");
     let reps = bytes.len() / one.len();
-    let (secs, n) = best_of(3, || {
+    let (secs, n) = best_of(10, || {
         let mut n = 0;
         for _ in 0..reps {
             n += parse_recording(
@@ -217,7 +217,7 @@ fn parse_and_correct() {
     let longest = session.runs.iter().map(|r| r.rec.len()).max().unwrap_or(0);
     let (mut w_out, mut a_out) = (vec![[0.0; 3]; longest], vec![[0.0; 3]; longest]);
     let mut corrector = crosscal::correct::Streaming::new(cal.clone());
-    let (secs, n) = best_of(3, || {
+    let (secs, n) = best_of(10, || {
         let mut n = 0;
         for r in session.runs.iter().cycle().take(50 * session.runs.len()) {
             corrector.reset();
@@ -238,7 +238,7 @@ fn parse_and_correct() {
     let (gyro, accel) = (&session.runs[0].rec.gyro[..block], &session.runs[0].rec.accel[..block]);
     let mut t = vec![0.0; block];
     let (mut w_out, mut a_out) = (vec![[0.0; 3]; block], vec![[0.0; 3]; block]);
-    let (secs, n) = best_of(3, || {
+    let (secs, n) = best_of(10, || {
         corrector.reset();
         let mut n = 0;
         for b in 0..1000 {
