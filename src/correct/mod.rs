@@ -417,14 +417,21 @@ impl Cols {
         Self([0, 1, 2].map(|j| [m[(0, j)], m[(1, j)], m[(2, j)], 0.0]))
     }
 
+    /// `acc + M v` as fused multiply-adds in the order c₀, c₁, c₂.
     #[inline(always)]
-    fn apply(&self, v: &[f64]) -> Lanes {
+    fn apply_from(&self, acc: Lanes, v: &[f64]) -> Lanes {
         let [c0, c1, c2] = &self.0;
-        let mut r = [0.0; 4];
+        let mut r = acc;
         for i in 0..4 {
-            r[i] = c2[i].mul_add(v[2], c1[i].mul_add(v[1], c0[i] * v[0]));
+            r[i] = c2[i].mul_add(v[2], c1[i].mul_add(v[1], c0[i].mul_add(v[0], r[i])));
         }
         r
+    }
+
+    /// `−M v` (the columns negated, exact): a vector to start [`Self::apply_from`] with.
+    fn neg_apply(m: &Matrix3<f64>, v: [f64; 3]) -> Lanes {
+        let r = -(m * nalgebra::Vector3::from(v));
+        [r[0], r[1], r[2], 0.0]
     }
 
     /// `acc − M v` as fused multiply-adds with the columns negated (exact): c₀, c₁, c₂ in turn.
@@ -441,10 +448,11 @@ impl Cols {
 
 /// The gyro's linear inverse for one set of slope weights. With the window's weights h
 /// (h₀ on the newest sample, h₁ and h₂ on the two before, the rest on older ones), the
-/// estimate ε̂ = h₀ω_k + h₁ω_{k−1} + h₂ω_{k−2} + p_old, and the model u = Aω + Eε̂ + b + g
-/// gives ω_k = M(u − b − g) − D p_old − G₂ ω_{k−2} − G₁ ω_{k−1} with M = (A + h₀E)⁻¹,
-/// D = M E, G₁ = h₁ D, G₂ = h₂ D: the two newest past samples enter through their own 3×3
-/// products, which keeps the chain from one sample to the next short.
+/// estimate ε̂ = h₀ω_k + h₁ω_{k−1} + h₂ω_{k−2} + p, p = Σ_{j≥3} h_j ω_{k−j}, and the model
+/// u = Aω + Eε̂ + b + g give ω_k = M(u − g) − Mb − D p − G₂ ω_{k−2} − G₁ ω_{k−1} with
+/// M = (A + h₀E)⁻¹, D = M E, G_i = h_i D: the two newest past samples enter through their
+/// own 3×3 products, which keeps the chain from one sample to the next three fused
+/// multiply-adds long.
 #[derive(Debug, Clone, Copy, Default)]
 struct GyroStep {
     h: [f64; 3],
@@ -452,12 +460,14 @@ struct GyroStep {
     d: Cols,
     g1: Cols,
     g2: Cols,
-    bias: Lanes,
+    /// −M b.
+    neg_mb: Lanes,
+    bias: [f64; 3],
 }
 
 impl GyroStep {
     fn new(s: &SensorInverse) -> Self {
-        let mut step = Self { h: [f64::NAN; 3], bias: [s.bias[0], s.bias[1], s.bias[2], 0.0], ..Self::default() };
+        let mut step = Self { h: [f64::NAN; 3], bias: s.bias, ..Self::default() };
         step.set(s, [0.0; 3]);
         step
     }
@@ -473,6 +483,7 @@ impl GyroStep {
             let m = (s.scale + s.eps * h[0]).try_inverse().unwrap_or(s.scale_inv);
             self.m = Cols::of(&m);
             self.d = Cols::of(&(m * s.eps));
+            self.neg_mb = Cols::neg_apply(&m, self.bias);
         }
         let times = |k: f64| Cols(self.d.0.map(|c| c.map(|x| x * k)));
         self.g1 = times(h[1]);
@@ -483,7 +494,7 @@ impl GyroStep {
     /// ω_k from the output `u`, the other effects' contribution `other`, the older weights
     /// `h_old` with their samples `old` (oldest first) and the two previous samples `x2`, `x1`.
     /// Lane by lane, as fused multiply-adds in this order: p = Σ h_j x_j (oldest first);
-    /// ω = M(u − b − other), then − D p, − G₂x₂, − G₁x₁ (each [`Cols::sub_from`]): the
+    /// ω = −Mb + M(u − other), then − D p, − G₂x₂, − G₁x₁ (each [`Cols::sub_from`]): the
     /// previous sample enters last. The AVX2 loop of [`Streaming::push_block`] does the same
     /// operations.
     #[inline(always)]
@@ -494,8 +505,7 @@ impl GyroStep {
                 p[i] = hj.mul_add(x[i], p[i]);
             }
         }
-        let b = &self.bias;
-        let v = self.m.apply(&[u[0] - b[0] - other[0], u[1] - b[1] - other[1], u[2] - b[2] - other[2]]);
+        let v = self.m.apply_from(self.neg_mb, &[u[0] - other[0], u[1] - other[1], u[2] - other[2]]);
         let w = self.d.sub_from(v, &p);
         let w = self.g2.sub_from(w, x2);
         self.g1.sub_from(w, x1)
@@ -539,7 +549,8 @@ pub struct Streaming {
     steady: usize,
     step: GyroStep,
     accel_inv: Cols,
-    accel_bias: Lanes,
+    /// −A⁻¹ b of the accelerometer.
+    accel_neg_ab: Lanes,
     t_first: Option<f64>,
     t_last: f64,
     last_flags: u8,
@@ -552,7 +563,7 @@ impl Streaming {
         let degree = cal.settings.streaming_degree;
         let step = GyroStep::new(&cal.gyro);
         let accel_inv = Cols::of(&cal.accel.scale_inv);
-        let b = cal.accel.bias;
+        let accel_neg_ab = Cols::neg_apply(&cal.accel.scale_inv, cal.accel.bias);
         Self {
             cal,
             window,
@@ -567,7 +578,7 @@ impl Streaming {
             steady: 0,
             step,
             accel_inv,
-            accel_bias: [b[0], b[1], b[2], 0.0],
+            accel_neg_ab,
             t_first: None,
             t_last: f64::NAN,
             last_flags: 0,
@@ -593,11 +604,10 @@ impl Streaming {
         self.t_last = f64::NAN;
     }
 
-    /// The accelerometer's linear inverse `A⁻¹(u − b − other)`.
+    /// The accelerometer's linear inverse `−A⁻¹b + A⁻¹(u − other)`.
     #[inline(always)]
     fn accel(&self, u: &[f64; 3], other: &[f64; 3]) -> [f64; 3] {
-        let b = &self.accel_bias;
-        let v = self.accel_inv.apply(&[u[0] - b[0] - other[0], u[1] - b[1] - other[1], u[2] - b[2] - other[2]]);
+        let v = self.accel_inv.apply_from(self.accel_neg_ab, &[u[0] - other[0], u[1] - other[1], u[2] - other[2]]);
         [v[0], v[1], v[2]]
     }
 
@@ -715,7 +725,7 @@ impl Streaming {
                 && self.steady + 1 >= self.window
                 && self.uniform_weights.len() == self.window
             {
-                k += self.uniform_run(&t_s[k..n], &gyro[k..n], &mut w_out[k..n]);
+                k += self.uniform_run(&t_s[k..n], &gyro[k..n], &accel[k..n], &mut w_out[k..n], &mut a_out[k..n]);
             }
             if k < n {
                 let (w, a) = self.push(t_s[k], gyro[k], accel[k], f64::NAN);
@@ -724,36 +734,25 @@ impl Streaming {
                 k += 1;
             }
         }
-        if linear {
-            // A linear accelerometer has no memory: one pass over the block.
-            let this = &*self;
-            let mut pass = || {
-                for (out, u) in a_out[..n].iter_mut().zip(&accel[..n]) {
-                    *out = this.accel(u, &[0.0; 3]);
-                }
-            };
-            #[cfg(target_arch = "x86_64")]
-            if let Some(simd) = pulp::x86::V3::try_new() {
-                simd.vectorize(pass);
-            } else {
-                pass();
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            pass();
-            self.last_flags = 0;
-        }
         n
     }
 
-    /// The gyro of a linear calibration, full window, uniform sampling: corrects samples
-    /// from the start of the slices until a step breaks the uniform sampling (that sample
-    /// is left to [`Self::push`]); returns how many it did.
-    fn uniform_run(&mut self, t_s: &[f64], gyro: &[[f64; 3]], w_out: &mut [[f64; 3]]) -> usize {
+    /// A linear calibration, full window, uniform sampling: corrects samples from the start
+    /// of the slices until a step breaks the uniform sampling (that sample is left to
+    /// [`Self::push`]); returns how many it did.
+    fn uniform_run(
+        &mut self,
+        t_s: &[f64],
+        gyro: &[[f64; 3]],
+        accel: &[[f64; 3]],
+        w_out: &mut [[f64; 3]],
+        a_out: &mut [[f64; 3]],
+    ) -> usize {
         let n = self.window;
         // Weights run oldest → newest over the window.
         let u = &self.uniform_weights;
         self.step.set(&self.cal.gyro, [u[n - 1], u[n - 2], u[n - 3]]);
-        let (step, dt, tol) = (self.step, self.dt, 1e-9 * self.dt.abs());
+        let (dt, tol) = (self.dt, 1e-9 * self.dt.abs());
         // How many samples keep the uniform step.
         let mut len = 0;
         let mut last = self.t_last;
@@ -766,19 +765,30 @@ impl Streaming {
         let h = n - 1;
         let head = self.head;
         self.line[..h].copy_from_slice(&self.past_w[head + 1..head + n]);
-        let h_old = &self.uniform_weights[..n - 3];
+        let kernel = Kernel {
+            step: &self.step,
+            accel_inv: &self.accel_inv,
+            accel_neg_ab: &self.accel_neg_ab,
+            h_old: &self.uniform_weights[..n - 3],
+        };
         let mut done = 0;
         while done < len {
             let m = (len - done).min(LINE_BLOCK);
-            let (gyro, out) = (&gyro[done..done + m], &mut w_out[done..done + m]);
+            let r = done..done + m;
+            let (line, gyro, accel) = (&mut self.line, &gyro[r.clone()], &accel[r.clone()]);
+            let (w, a) = (&mut w_out[r.clone()], &mut a_out[r]);
             #[cfg(target_arch = "x86_64")]
-            if let Some(simd) = pulp::x86::V3::try_new() {
-                simd.vectorize(|| uniform_block_v3(simd, &step, h_old, &mut self.line, gyro, out));
+            if let Some(simd) = pulp::x86::V4::try_new() {
+                // The same AVX2 code with AVX-512's 32 vector registers (the loop's
+                // constants then stay in registers).
+                kernel.block_v3(simd, *simd, line, gyro, accel, w, a);
+            } else if let Some(simd) = pulp::x86::V3::try_new() {
+                kernel.block_v3(simd, simd, line, gyro, accel, w, a);
             } else {
-                uniform_block(&step, h_old, &mut self.line, gyro, out);
+                kernel.block(line, gyro, accel, w, a);
             }
             #[cfg(not(target_arch = "x86_64"))]
-            uniform_block(&step, h_old, &mut self.line, gyro, out);
+            kernel.block(line, gyro, accel, w, a);
             self.line.copy_within(m..m + h, 0);
             done += m;
         }
@@ -790,6 +800,7 @@ impl Streaming {
         }
         self.t_last = last;
         self.steady += len;
+        self.last_flags = 0;
         len
     }
 }
@@ -797,57 +808,136 @@ impl Streaming {
 /// Samples per block of the uniform loop.
 const LINE_BLOCK: usize = 256;
 
-/// One block of the uniform loop: `line` holds the window's history (oldest first) and
-/// receives the block's rates after it (one slot per sample of `gyro`).
-#[inline(always)]
-fn uniform_block(step: &GyroStep, h_old: &[f64], line: &mut [Lanes], gyro: &[[f64; 3]], out: &mut [[f64; 3]]) {
-    let h = h_old.len() + 2;
-    for (i, (u, o)) in gyro.iter().zip(out.iter_mut()).enumerate() {
-        let (past, new) = line[i..].split_at_mut(h);
-        let w = step.apply(u, &[0.0; 3], h_old, &past[..h - 2], &past[h - 2], &past[h - 1]);
-        *o = [w[0], w[1], w[2]];
-        new[0] = w;
-    }
+/// The loop of [`Streaming::uniform_run`]: a linear calibration on uniform sampling.
+struct Kernel<'a> {
+    step: &'a GyroStep,
+    accel_inv: &'a Cols,
+    accel_neg_ab: &'a Lanes,
+    /// Weights of the window's samples older than the two newest, oldest first.
+    h_old: &'a [f64],
 }
 
-/// [`uniform_block`] four lanes per instruction (AVX2 and FMA: the same fused operations in
-/// the same order as [`GyroStep::apply`], so the bits are the same). The two newest rates
-/// stay in registers.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn uniform_block_v3(
-    simd: pulp::x86::V3,
-    step: &GyroStep,
-    h_old: &[f64],
-    line: &mut [Lanes],
-    gyro: &[[f64; 3]],
-    out: &mut [[f64; 3]],
-) {
-    use pulp::{f64x4, Simd};
-    let v4 = |x: &Lanes| -> f64x4 { pulp::bytemuck::cast(*x) };
-    let neg = |c: &Cols| c.0.map(|c| v4(&c.map(|x| -x)));
-    let [m0, m1, m2] = step.m.0.map(|c| v4(&c));
-    let [d0, d1, d2] = neg(&step.d);
-    let [e0, e1, e2] = neg(&step.g1);
-    let [f0, f1, f2] = neg(&step.g2);
-    let b = step.bias;
-    let (mul, fma, splat) = (|a, b| simd.mul_f64s(a, b), |a, b, c| simd.mul_add_f64s(a, b, c), |x| simd.splat_f64s(x));
-    let h = h_old.len() + 2;
-    let (mut x2, mut x1) = (v4(&line[h - 2]), v4(&line[h - 1]));
-    for (i, (u, o)) in gyro.iter().zip(out.iter_mut()).enumerate() {
-        let (past, new) = line[i..].split_at_mut(h);
-        let mut p = splat(0.0);
-        for (hj, x) in h_old.iter().zip(&past[..h - 2]) {
-            p = fma(splat(*hj), v4(x), p);
+impl Kernel<'_> {
+    /// One block: `line` holds the window's history (oldest first) and receives the block's
+    /// rates after it (one slot per sample of `gyro`); `accel` is corrected alongside.
+    #[inline(always)]
+    fn block(
+        &self,
+        line: &mut [Lanes],
+        gyro: &[[f64; 3]],
+        accel: &[[f64; 3]],
+        w_out: &mut [[f64; 3]],
+        a_out: &mut [[f64; 3]],
+    ) {
+        let h = self.h_old.len() + 2;
+        let none = [0.0; 3];
+        let (ai, ab) = (self.accel_inv, *self.accel_neg_ab);
+        for (i, (((u, f), o), q)) in gyro.iter().zip(accel).zip(w_out.iter_mut()).zip(a_out.iter_mut()).enumerate() {
+            let (past, new) = line[i..].split_at_mut(h);
+            let w = self.step.apply(u, &none, self.h_old, &past[..h - 2], &past[h - 2], &past[h - 1]);
+            *o = [w[0], w[1], w[2]];
+            new[0] = w;
+            let a = ai.apply_from(ab, f);
+            *q = [a[0], a[1], a[2]];
         }
-        let v = fma(m2, splat(u[2] - b[2]), fma(m1, splat(u[1] - b[1]), mul(m0, splat(u[0] - b[0]))));
-        let w = fma(d2, splat(p.2), fma(d1, splat(p.1), fma(d0, splat(p.0), v)));
-        let w = fma(f2, splat(x2.2), fma(f1, splat(x2.1), fma(f0, splat(x2.0), w)));
-        let w = fma(e2, splat(x1.2), fma(e1, splat(x1.1), fma(e0, splat(x1.0), w)));
-        *o = [w.0, w.1, w.2];
-        new[0] = pulp::bytemuck::cast(w);
-        x2 = x1;
-        x1 = w;
+    }
+
+    /// [`Self::block`] four lanes per instruction (AVX2 and FMA: the same fused operations
+    /// in the same order as [`GyroStep::apply`] and [`Cols::apply`], so the bits are the
+    /// same). Only the previous rate stays in a register and is spread over the lanes by
+    /// shuffles (it is the loop's critical path); every other scalar is broadcast straight
+    /// from memory, which keeps the shuffle port free.
+    #[cfg(target_arch = "x86_64")]
+    #[allow(clippy::too_many_arguments)]
+    fn block_v3(
+        &self,
+        arch: impl pulp::Simd,
+        simd: pulp::x86::V3,
+        line: &mut [Lanes],
+        gyro: &[[f64; 3]],
+        accel: &[[f64; 3]],
+        w_out: &mut [[f64; 3]],
+        a_out: &mut [[f64; 3]],
+    ) {
+        // Windows of up to 17 samples get a loop with the window's length fixed at compile
+        // time (the sum over the older samples unrolled, no inner loop); longer ones the same
+        // loop with the length read at run time.
+        macro_rules! fixed {
+            ($($n:literal)*) => {$(
+                if let Ok(h_old) = <&[f64; $n]>::try_from(self.h_old) {
+                    return arch.vectorize(|| {
+                        // The weights spread over the lanes once, held in registers.
+                        let h = h_old.map(|h| pulp::Simd::splat_f64s(simd, h));
+                        self.block_v3_with(simd, $n, |j| h[j], line, gyro, accel, w_out, a_out)
+                    });
+                }
+            )*};
+        }
+        fixed!(0 1 2 3 4 5 6 7 8 9 10 11 12 13 14);
+        let h_old = self.h_old;
+        arch.vectorize(|| {
+            self.block_v3_with(
+                simd,
+                h_old.len(),
+                |j| pulp::Simd::splat_f64s(simd, h_old[j]),
+                line,
+                gyro,
+                accel,
+                w_out,
+                a_out,
+            )
+        });
+    }
+
+    /// The body of [`Self::block_v3`] for `n_old` older samples, whose weights `h_old(j)`
+    /// gives spread over the lanes.
+    #[cfg(target_arch = "x86_64")]
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn block_v3_with(
+        &self,
+        simd: pulp::x86::V3,
+        n_old: usize,
+        h_old: impl Fn(usize) -> pulp::f64x4,
+        line: &mut [Lanes],
+        gyro: &[[f64; 3]],
+        accel: &[[f64; 3]],
+        w_out: &mut [[f64; 3]],
+        a_out: &mut [[f64; 3]],
+    ) {
+        use pulp::{f64x4, Simd};
+        let v4 = |x: &Lanes| -> f64x4 { pulp::bytemuck::cast(*x) };
+        let neg = |c: &Cols| c.0.map(|c| v4(&c.map(|x| -x)));
+        let step = self.step;
+        let [m0, m1, m2] = step.m.0.map(|c| v4(&c));
+        let [d0, d1, d2] = neg(&step.d);
+        let [e0, e1, e2] = neg(&step.g1);
+        let [k0, k1, k2] = self.accel_inv.0.map(|c| v4(&c));
+        let (fma, splat) = (|a, b, c| simd.mul_add_f64s(a, b, c), |x| simd.splat_f64s(x));
+        let [f0, f1, f2] = neg(&step.g2);
+        let (nmb, nab) = (v4(&step.neg_mb), v4(self.accel_neg_ab));
+        let h = n_old + 2;
+        // The two previous rates, each spread over the lanes (x₁'s become x₂'s).
+        let spread = |x: f64x4| [splat(x.0), splat(x.1), splat(x.2)];
+        let mut x2 = spread(v4(&line[h - 2]));
+        let mut x1 = spread(v4(&line[h - 1]));
+        for (i, (((u, f), o), q)) in gyro.iter().zip(accel).zip(w_out.iter_mut()).zip(a_out.iter_mut()).enumerate() {
+            let (past, new) = line[i..].split_at_mut(h);
+            let mut p = splat(0.0);
+            for (j, x) in past[..n_old].iter().enumerate() {
+                p = fma(h_old(j), v4(x), p);
+            }
+            let v = fma(m2, splat(u[2]), fma(m1, splat(u[1]), fma(m0, splat(u[0]), nmb)));
+            let w = fma(d2, splat(p.2), fma(d1, splat(p.1), fma(d0, splat(p.0), v)));
+            let w = fma(f2, x2[2], fma(f1, x2[1], fma(f0, x2[0], w)));
+            let w = fma(e2, x1[2], fma(e1, x1[1], fma(e0, x1[0], w)));
+            *o = [w.0, w.1, w.2];
+            new[0] = pulp::bytemuck::cast(w);
+            x2 = x1;
+            x1 = spread(w);
+            let a = fma(k2, splat(f[2]), fma(k1, splat(f[1]), fma(k0, splat(f[0]), nab)));
+            *q = [a.0, a.1, a.2];
+        }
     }
 }
 
