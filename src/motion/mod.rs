@@ -90,7 +90,7 @@ impl ConicAt {
     #[inline]
     pub fn at(&self, t_s: f64) -> Kinematics {
         let (sa, ca, g_m_s2) = (self.sa, self.ca, self.g_m_s2);
-        let (st, ct) = self.conic.theta(t_s).sin_cos();
+        let (st, ct) = libm::sincos(self.conic.theta(t_s));
         let ws = self.conic.rate_rad_s;
         Kinematics {
             w_rad_s: V3::new([ws * sa * ct, -ws * sa * st, ws * (1.0 - ca)]),
