@@ -6,17 +6,39 @@
 //! Because `RᵀR = XᵀX` and R = QᵀX with Q orthonormal, any least-squares problem on a
 //! subset (or linear combination) of X's columns can be solved from R alone.
 
-use faer::Mat;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::qr::no_pivoting::factor::{qr_in_place, qr_in_place_scratch, recommended_block_size};
+use faer::{Mat, Par};
 
 /// Rows accumulated into an upper-triangular R (p × p).
-#[derive(Debug, Clone)]
 pub struct QrAccumulator {
     p: usize,
     chunk: usize,
     buf: Mat<f64>,
+    /// Householder block coefficients of a re-factoring (faer's `Q_coeff`).
+    q_coeff: Mat<f64>,
+    /// Work space of a re-factoring.
+    scratch: MemBuffer,
     filled: usize,
     rows: u64,
     col_sq: Vec<f64>,
+}
+
+impl std::fmt::Debug for QrAccumulator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("QrAccumulator").field("p", &self.p).field("chunk", &self.chunk).field("rows", &self.rows).finish()
+    }
+}
+
+impl Clone for QrAccumulator {
+    fn clone(&self) -> Self {
+        let mut c = Self::new(self.p, self.chunk);
+        c.buf.copy_from(&self.buf);
+        c.filled = self.filled;
+        c.rows = self.rows;
+        c.col_sq.clone_from(&self.col_sq);
+        c
+    }
 }
 
 impl QrAccumulator {
@@ -26,7 +48,19 @@ impl QrAccumulator {
         // latency, and crosscal parallelises across units and runs instead.
         faer::set_global_parallelism(faer::Par::Seq);
         let chunk = chunk.max(p).max(1);
-        Self { p, chunk, buf: Mat::zeros(p + chunk, p), filled: 0, rows: 0, col_sq: vec![0.0; p] }
+        // The block size grows with the matrix: the largest is that of a full chunk.
+        let block = recommended_block_size::<f64>(p + chunk, p).max(1);
+        let scratch = MemBuffer::new(qr_in_place_scratch::<f64>(p + chunk, p, block, Par::Seq, Default::default()));
+        Self {
+            p,
+            chunk,
+            buf: Mat::zeros(p + chunk, p),
+            q_coeff: Mat::zeros(block, p),
+            scratch,
+            filled: 0,
+            rows: 0,
+            col_sq: vec![0.0; p],
+        }
     }
 
     /// Row width.
@@ -60,13 +94,19 @@ impl QrAccumulator {
             return;
         }
         let m = self.p + self.filled;
-        let r = {
-            let qr = self.buf.as_ref().subrows(0, m).qr();
-            qr.thin_R().to_owned()
-        };
+        // Householder QR in place (what `Mat::qr` does, without its copies): R is left in
+        // the upper triangle of the first p rows, the reflectors below it.
+        let block = recommended_block_size::<f64>(m, self.p).clamp(1, self.q_coeff.nrows());
+        qr_in_place(
+            self.buf.as_mut().subrows_mut(0, m),
+            self.q_coeff.as_mut().subrows_mut(0, block),
+            Par::Seq,
+            MemStack::new(&mut self.scratch),
+            Default::default(),
+        );
         for i in 0..self.p {
-            for j in 0..self.p {
-                self.buf[(i, j)] = if j >= i && i < r.nrows() { r[(i, j)] } else { 0.0 };
+            for j in 0..i {
+                self.buf[(i, j)] = 0.0;
             }
         }
         self.filled = 0;
