@@ -512,12 +512,19 @@ impl GyroStep {
     }
 }
 
-/// Stores a sample in the doubled rings (entry `slot` and `slot + window`) and advances.
+/// Stores a time stamp in the doubled ring of stamps (entry `slot` and `slot + window`).
 #[inline(always)]
-fn remember(times: &mut [f64], past_w: &mut [Lanes], slot: &mut usize, t_s: f64, w: Lanes) {
+fn stamp(times: &mut [f64], slot: usize, t_s: f64) {
     let n = times.len() / 2;
-    times[*slot] = t_s;
-    times[*slot + n] = t_s;
+    times[slot] = t_s;
+    times[slot + n] = t_s;
+}
+
+/// Stores a rate in the doubled ring of rates (entry `slot` and `slot + window`) and
+/// advances the slot (the stamp is already in place: see [`stamp`]).
+#[inline(always)]
+fn remember(past_w: &mut [Lanes], slot: &mut usize, w: Lanes) {
+    let n = past_w.len() / 2;
     past_w[*slot] = w;
     past_w[*slot + n] = w;
     *slot = if *slot + 1 == n { 0 } else { *slot + 1 };
@@ -639,8 +646,7 @@ impl Streaming {
         }
         self.t_last = t_s;
         let slot = self.head;
-        self.times[slot] = t_s;
-        self.times[slot + n] = t_s;
+        stamp(&mut self.times, slot, t_s);
         let len = (self.filled + 1).min(n);
         // The window in time order ends at this sample: ring[slot + n - len + 1 ..= slot + n].
         let first = slot + n + 1 - len;
@@ -697,7 +703,7 @@ impl Streaming {
         if !self.cal.nonlinear.is_empty() {
             self.last_flags = self.cal.invert_nonlinear(&mut w, &mut acc);
         }
-        remember(&mut self.times, &mut self.past_w, &mut self.head, t_s, [w[0], w[1], w[2], 0.0]);
+        remember(&mut self.past_w, &mut self.head, [w[0], w[1], w[2], 0.0]);
         self.filled = len;
         (w, acc)
     }
@@ -796,7 +802,8 @@ impl Streaming {
         let first = len.saturating_sub(n);
         for k in first..len {
             let w = [w_out[k][0], w_out[k][1], w_out[k][2], 0.0];
-            remember(&mut self.times, &mut self.past_w, &mut self.head, t_s[k], w);
+            stamp(&mut self.times, self.head, t_s[k]);
+            remember(&mut self.past_w, &mut self.head, w);
         }
         self.t_last = last;
         self.steady += len;

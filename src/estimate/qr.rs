@@ -26,7 +26,11 @@ pub struct QrAccumulator {
 
 impl std::fmt::Debug for QrAccumulator {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("QrAccumulator").field("p", &self.p).field("chunk", &self.chunk).field("rows", &self.rows).finish()
+        f.debug_struct("QrAccumulator")
+            .field("p", &self.p)
+            .field("chunk", &self.chunk)
+            .field("rows", &self.rows)
+            .finish()
     }
 }
 
