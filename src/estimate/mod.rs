@@ -817,18 +817,26 @@ impl AutoCov {
     }
 }
 
-/// Σ a_k b_k with four partial sums ((s₀ + s₁) + (s₂ + s₃) + the tail), for equal lengths.
+/// Σ a_k b_k for equal lengths, with sixteen partial sums (so that the adds do not wait on
+/// each other), added pairwise, then the tail.
 #[inline]
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut s = [0.0; 4];
-    let (ac, bc) = (a.chunks_exact(4), b.chunks_exact(4));
+    let mut s = [0.0; 16];
+    let (ac, bc) = (a.chunks_exact(16), b.chunks_exact(16));
     let tail: f64 = ac.remainder().iter().zip(bc.remainder()).map(|(x, y)| x * y).sum();
     for (x, y) in ac.zip(bc) {
-        for i in 0..4 {
+        for i in 0..16 {
             s[i] += x[i] * y[i];
         }
     }
-    (s[0] + s[1]) + (s[2] + s[3]) + tail
+    let mut width = 16;
+    while width > 1 {
+        width /= 2;
+        for i in 0..width {
+            s[i] += s[i + width];
+        }
+    }
+    s[0] + tail
 }
 
 /// Pooled long-run variance of residuals over runs, by AR(1) prewhitening followed by a
