@@ -197,3 +197,27 @@ fn imucal_reference_calibration_imports_and_exports_to_the_same_matrices() {
         }
     }
 }
+
+#[test]
+fn history_orders_profiles_by_time_not_by_text() {
+    // Creation times are written to the millisecond without trailing zeros, so as text
+    // "…:34.9Z" sorts after "…:34.95Z" and "…:35Z" after "…:35.1Z", though each is earlier.
+    let session = SimConfig::paper().generate();
+    let (_, mut profile, _) = fit_and_calibrate(&session, &Model::default_model());
+    let dir = tempfile::tempdir().unwrap();
+    for t in ["2026-11-23T20:31:35.1Z", "2026-11-23T20:31:34.95Z", "2026-11-23T20:31:35Z", "2026-11-23T20:31:34.9Z"] {
+        profile.created_utc = t.to_string();
+        save(&profile, dir.path()).unwrap();
+    }
+    let order: Vec<String> = crosscal::profile::history(dir.path(), "I1426-0042")
+        .unwrap()
+        .into_iter()
+        .map(|(_, p)| p.unwrap().created_utc)
+        .collect();
+    assert_eq!(
+        order,
+        ["2026-11-23T20:31:34.9Z", "2026-11-23T20:31:34.95Z", "2026-11-23T20:31:35Z", "2026-11-23T20:31:35.1Z"]
+    );
+    let (_, at) = crosscal::profile::latest(dir.path(), "I1426-0042", Some("2026-11-23T20:31:35.05Z")).unwrap();
+    assert_eq!(at.created_utc, "2026-11-23T20:31:35Z");
+}

@@ -382,7 +382,8 @@ pub fn history(root: &Path, serial: &str) -> Result<Vec<StoredProfile>, ProfileE
     files.sort();
     let mut out: Vec<StoredProfile> = files.into_iter().map(|p| (p.clone(), Profile::read(&p))).collect();
     out.sort_by(|a, b| {
-        let key = |x: &StoredProfile| x.1.as_ref().map(|p| p.created_utc.clone()).ok();
+        // By time, not by text: "…:35Z" is earlier than "…:35.1Z" though it sorts after it.
+        let key = |x: &StoredProfile| x.1.as_ref().ok().and_then(|p| p.created_utc.parse::<jiff::Timestamp>().ok());
         key(a).cmp(&key(b)).then_with(|| a.0.cmp(&b.0))
     });
     Ok(out)
