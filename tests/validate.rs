@@ -312,6 +312,12 @@ fn block_correction_equals_sample_by_sample_bit_for_bit() {
             k0 = k1;
         }
     }
+    // The whole-record convenience (which takes the block path for such profiles) too.
+    let whole = crosscal::correct::correct_streaming(&cal, &t, &gyro, &accel, None).unwrap();
+    for k in 0..t.len() {
+        assert_eq!(whole.w_rad_s[k].map(f64::to_bits), singles[k].0.map(f64::to_bits), "ω {k}, whole record");
+        assert_eq!(whole.a_m_s2[k].map(f64::to_bits), singles[k].1.map(f64::to_bits), "a {k}, whole record");
+    }
     // And the streamed rates are the calibrated ones: after the warm-up, within a quarter of
     // the sensor noise of the offline correction of the first run.
     let r = &s.runs[0];

@@ -625,7 +625,7 @@ impl Streaming {
         // (chosen at run time); without, they are computed exactly in software.
         #[cfg(target_arch = "x86_64")]
         if let Some(simd) = pulp::x86::V3::try_new() {
-            return simd.vectorize(|| self.push_one(t_s, gyro, accel, temp_c));
+            return pulp::Simd::vectorize(simd, PushOne { s: self, t_s, gyro, accel, temp_c });
         }
         self.push_one(t_s, gyro, accel, temp_c)
     }
@@ -812,6 +812,26 @@ impl Streaming {
     }
 }
 
+/// [`Streaming::push_one`] as a `pulp` operation: its body is inlined into the function
+/// compiled for the processor's features (a closure as large is not, and its fused
+/// multiply-adds then become calls to the software `fma`).
+struct PushOne<'a> {
+    s: &'a mut Streaming,
+    t_s: f64,
+    gyro: [f64; 3],
+    accel: [f64; 3],
+    temp_c: f64,
+}
+
+impl pulp::WithSimd for PushOne<'_> {
+    type Output = ([f64; 3], [f64; 3]);
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+        self.s.push_one(self.t_s, self.gyro, self.accel, self.temp_c)
+    }
+}
+
 /// Samples per block of the uniform loop.
 const LINE_BLOCK: usize = 256;
 
@@ -968,6 +988,13 @@ pub fn correct_streaming(
         flags: Vec::new(),
         time_offset_s: cal.lag_s(),
     };
+    if temp_c.is_none() && cal.nonlinear.is_empty() {
+        // Nothing per sample but the samples: the block corrector (same bits as `push`).
+        out.w_rad_s.resize(n, [0.0; 3]);
+        out.a_m_s2.resize(n, [0.0; 3]);
+        s.push_block(t_s, gyro, accel, &mut out.w_rad_s, &mut out.a_m_s2);
+        return Ok(out);
+    }
     for k in 0..n {
         let (w, a) = s.push(t_s[k], gyro[k], accel[k], temp_c.map_or(f64::NAN, |t| t[k]));
         out.w_rad_s.push(w);
