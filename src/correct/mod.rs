@@ -870,10 +870,11 @@ impl Kernel<'_> {
     }
 
     /// [`Self::block`] four lanes per instruction (AVX2 and FMA: the same fused operations
-    /// in the same order as [`GyroStep::apply`] and [`Cols::apply`], so the bits are the
-    /// same). Only the previous rate stays in a register and is spread over the lanes by
-    /// shuffles (it is the loop's critical path); every other scalar is broadcast straight
-    /// from memory, which keeps the shuffle port free.
+    /// in the same order as [`GyroStep::apply`] and [`Cols::apply_from`], so the bits are
+    /// the same). Each new rate is spread over the lanes once by shuffles and kept so for
+    /// the next two samples (the loop's critical path), as is the older samples' sum p;
+    /// the raw sensor outputs are broadcast straight from memory, which keeps the shuffle
+    /// port free.
     #[cfg(target_arch = "x86_64")]
     #[allow(clippy::too_many_arguments)]
     fn block_v3(

@@ -6,7 +6,7 @@
 //!   accelerometer raw = K_a R_a a + b_a,  gyroscope raw = K_g R_g ω + K_ga a + b_g,
 //! K diagonal scales, R misalignment (rows ≈ unit vectors). crosscal's forward model is the
 //! same with K = K_a R_a (accelerometer), C_ω = K_g R_g and G = K_ga (gyro g-sensitivity):
-//! the export splits each row i as K_a[i][i] = |row i| and R_a row i = row i / |row i|.
+//! the export splits each row i as K_a\[i\]\[i\] = |row i| and R_a row i = row i / |row i|.
 //! What imucal cannot hold (C_ε, every other effect, standard errors) is listed and left
 //! out; the import fills the default model's C_ε with zeros, held.
 
