@@ -92,7 +92,12 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             anyhow::bail!("--holdout {h}: no such run in {}", a.session.display());
         }
     }
-    let session = crosscal::pipeline::subset(&full, |n| !a.holdout.iter().any(|h| h == n));
+    // Without held-out runs the fit uses the session as read (no copy of its samples).
+    let session = if a.holdout.is_empty() {
+        std::borrow::Cow::Borrowed(&full)
+    } else {
+        std::borrow::Cow::Owned(crosscal::pipeline::subset(&full, |n| !a.holdout.iter().any(|h| h == n)))
+    };
     let deriv = DerivativeConfig::default();
     let tr = tracks(&session, &deriv);
     let opts = FitOptions { robust: a.robust, ..FitOptions::default() };
