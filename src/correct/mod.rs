@@ -428,7 +428,7 @@ impl Cols {
         r
     }
 
-    /// `−M v` (the columns negated, exact): a vector to start [`Self::apply_from`] with.
+    /// `−M v` (the product, then negated): a vector to start [`Self::apply_from`] with.
     fn neg_apply(m: &Matrix3<f64>, v: [f64; 3]) -> Lanes {
         let r = -(m * nalgebra::Vector3::from(v));
         [r[0], r[1], r[2], 0.0]
@@ -462,12 +462,11 @@ struct GyroStep {
     g2: Cols,
     /// −M b.
     neg_mb: Lanes,
-    bias: [f64; 3],
 }
 
 impl GyroStep {
     fn new(s: &SensorInverse) -> Self {
-        let mut step = Self { h: [f64::NAN; 3], bias: s.bias, ..Self::default() };
+        let mut step = Self { h: [f64::NAN; 3], ..Self::default() };
         step.set(s, [0.0; 3]);
         step
     }
@@ -483,7 +482,7 @@ impl GyroStep {
             let m = (s.scale + s.eps * h[0]).try_inverse().unwrap_or(s.scale_inv);
             self.m = Cols::of(&m);
             self.d = Cols::of(&(m * s.eps));
-            self.neg_mb = Cols::neg_apply(&m, self.bias);
+            self.neg_mb = Cols::neg_apply(&m, s.bias);
         }
         let times = |k: f64| Cols(self.d.0.map(|c| c.map(|x| x * k)));
         self.g1 = times(h[1]);
