@@ -363,6 +363,27 @@ impl Columns {
         self.fill_state_row(terms, &run.state(k), &run.output(sensor, k), row);
     }
 
+    /// Design columns of a block of samples, column-major with stride [`BLOCK`]: regressor
+    /// column c at `cols[c·BLOCK..][..n]`, then the sensor's three outputs.
+    pub(crate) fn fill_block(
+        &self,
+        terms: &[crate::model::TermRef<'_>],
+        states: &[State],
+        outputs: &[[f64; 3]],
+        cols: &mut [f64],
+    ) {
+        let n = states.len();
+        for (c, &ti) in self.source.iter().enumerate() {
+            terms[ti].regressors(states, &mut cols[c * BLOCK..c * BLOCK + n]);
+        }
+        let q = self.source.len();
+        for ch in 0..3 {
+            for (o, u) in cols[(q + ch) * BLOCK..(q + ch) * BLOCK + n].iter_mut().zip(outputs) {
+                *o = u[ch];
+            }
+        }
+    }
+
     /// Design row at a state with the sensor's output.
     #[inline]
     pub(crate) fn fill_state_row(
@@ -379,17 +400,22 @@ impl Columns {
     }
 }
 
-/// The per-sample callback of [`Samples`]: state, gyro output, accelerometer output.
-pub type SampleFn<'f> = dyn FnMut(&State, &[f64; 3], &[f64; 3]) + 'f;
+/// Samples per block handed to the estimator by [`Samples`].
+pub const BLOCK: usize = 256;
+
+/// The per-block callback of [`Samples`]: true states, gyro outputs, accelerometer
+/// outputs (equal lengths, 1 to [`BLOCK`] samples).
+pub type BlockFn<'f> = dyn FnMut(&[State], &[[f64; 3]], &[[f64; 3]]) + 'f;
 
 /// A sequence of samples for the linear estimator: the true state and both outputs of
-/// each, in order. In memory ([`FitRun`]) or streamed from a file ([`stream`]); both go
-/// through the same arithmetic, so their fits are identical.
+/// each, in order, in blocks. In memory ([`FitRun`]) or streamed from a file ([`stream`]);
+/// both go through the same arithmetic sample by sample (block boundaries change nothing),
+/// so their fits are identical.
 pub trait Samples: Sync {
     /// Run name.
     fn run_name(&self) -> &str;
-    /// Calls `f(state, gyro, accel)` for every sample in order.
-    fn for_each_sample(&self, f: &mut SampleFn<'_>) -> Result<(), crate::session::SessionError>;
+    /// Calls `f(states, gyro, accel)` for consecutive blocks of samples, in order.
+    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError>;
 }
 
 impl Samples for FitRun<'_> {
@@ -397,9 +423,16 @@ impl Samples for FitRun<'_> {
         self.name
     }
 
-    fn for_each_sample(&self, f: &mut SampleFn<'_>) -> Result<(), crate::session::SessionError> {
-        for k in 0..self.len() {
-            f(&self.state(k), &self.gyro[k], &self.accel[k]);
+    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError> {
+        let n = self.len();
+        let mut states = Vec::with_capacity(BLOCK.min(n));
+        let mut k0 = 0;
+        while k0 < n {
+            let k1 = (k0 + BLOCK).min(n);
+            states.clear();
+            states.extend((k0..k1).map(|k| self.state(k)));
+            f(&states, &self.gyro[k0..k1], &self.accel[k0..k1]);
+            k0 = k1;
         }
         Ok(())
     }
@@ -452,18 +485,18 @@ fn accumulate(
     chunk: usize,
 ) -> Result<(Vec<QrAccumulator>, usize), crate::session::SessionError> {
     let mut accs: Vec<QrAccumulator> = designs.iter().map(|d| QrAccumulator::new(d.cols.len() + 3, chunk)).collect();
-    let mut rows: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; d.cols.len() + 3]).collect();
+    let mut cols: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; (d.cols.len() + 3) * BLOCK]).collect();
     let mut n = 0usize;
-    src.for_each_sample(&mut |s, g, a| {
-        for ((d, acc), row) in designs.iter().zip(accs.iter_mut()).zip(rows.iter_mut()) {
+    src.for_each_block(&mut |states, g, a| {
+        for ((d, acc), cols) in designs.iter().zip(accs.iter_mut()).zip(cols.iter_mut()) {
             let u = match d.sensor {
                 SensorKind::Gyro => g,
                 SensorKind::Accel => a,
             };
-            d.cols.fill_state_row(&d.terms, s, u, row);
-            acc.push(row);
+            d.cols.fill_block(&d.terms, states, u, cols);
+            acc.push_columns(cols, BLOCK, states.len());
         }
-        n += 1;
+        n += states.len();
     })?;
     Ok((accs, n))
 }
@@ -479,10 +512,10 @@ fn residual_pass(
     let lags = newey_west_lags(n);
     let mut acov: Vec<AutoCov> = (0..3 * designs.len()).map(|_| AutoCov::new(lags + 1)).collect();
     let mut max = vec![0.0_f64; 3 * designs.len()];
-    let mut pred = [0.0; 3];
-    // Per sensor: the design row's regressor columns once per sample, then the fitted
-    // coefficients (channel, column, value) in term order.
-    let mut rows: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; d.cols.len() + 3]).collect();
+    let mut pred = vec![0.0; 3 * BLOCK];
+    // Per sensor: the design's columns once per block, then the fitted coefficients
+    // (channel, column, value) in term order.
+    let mut blocks: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; (d.cols.len() + 3) * BLOCK]).collect();
     let coefs: Vec<Vec<(usize, usize, f64)>> = designs
         .iter()
         .zip(solved)
@@ -495,21 +528,28 @@ fn residual_pass(
                 .collect()
         })
         .collect();
-    src.for_each_sample(&mut |s, g, a| {
-        for (di, ((d, row), coefs)) in designs.iter().zip(rows.iter_mut()).zip(&coefs).enumerate() {
+    src.for_each_block(&mut |states, g, a| {
+        let n = states.len();
+        for (di, ((d, cols), coefs)) in designs.iter().zip(blocks.iter_mut()).zip(&coefs).enumerate() {
             let u = match d.sensor {
                 SensorKind::Gyro => g,
                 SensorKind::Accel => a,
             };
-            d.cols.fill_state_row(&d.terms, s, u, row);
+            d.cols.fill_block(&d.terms, states, u, cols);
+            // Per sample the same sum as term by term over a row: Σ v·x in term order.
             pred.fill(0.0);
             for &(ch, c, v) in coefs {
-                pred[ch] += v * row[c];
+                for (p, x) in pred[ch * BLOCK..ch * BLOCK + n].iter_mut().zip(&cols[c * BLOCK..c * BLOCK + n]) {
+                    *p += v * x;
+                }
             }
             for ch in 0..3 {
-                let e = u[ch] - pred[ch];
-                acov[3 * di + ch].push(e);
-                max[3 * di + ch] = max[3 * di + ch].max(e.abs());
+                let (acov, m) = (&mut acov[3 * di + ch], &mut max[3 * di + ch]);
+                for (p, u) in pred[ch * BLOCK..ch * BLOCK + n].iter().zip(u) {
+                    let e = u[ch] - p;
+                    acov.push(e);
+                    *m = m.max(e.abs());
+                }
             }
         }
     })?;

@@ -93,6 +93,31 @@ impl QrAccumulator {
         }
     }
 
+    /// Adds `n` rows given by columns: column j is `cols[j·stride..][..n]` (p columns).
+    /// The same arithmetic as [`Self::push`] row by row.
+    pub fn push_columns(&mut self, cols: &[f64], stride: usize, n: usize) {
+        let mut i0 = 0;
+        while i0 < n {
+            let take = (self.chunk - self.filled).min(n - i0);
+            let r0 = self.p + self.filled;
+            for j in 0..self.p {
+                let src = &cols[j * stride + i0..j * stride + i0 + take];
+                let mut sq = self.col_sq[j];
+                for (d, v) in self.buf.col_as_slice_mut(j)[r0..r0 + take].iter_mut().zip(src) {
+                    *d = *v;
+                    sq += v * v;
+                }
+                self.col_sq[j] = sq;
+            }
+            self.filled += take;
+            self.rows += take as u64;
+            i0 += take;
+            if self.filled == self.chunk {
+                self.flush();
+            }
+        }
+    }
+
     fn flush(&mut self) {
         if self.filled == 0 {
             return;

@@ -10,7 +10,7 @@
 //! The arithmetic is that of the in-memory fit ([`super::fit`]): the same rows in the same
 //! order through the same accumulators, so the two agree to the last bit.
 
-use super::{fit_samples, FitOptions, SampleFn, Samples, SamplesError};
+use super::{fit_samples, BlockFn, FitOptions, Samples, SamplesError, BLOCK};
 use crate::model::{Model, State};
 use crate::motion::{Conic, Kinematics, V3};
 use crate::profile::RunUsed;
@@ -58,7 +58,7 @@ impl Samples for StreamRun<'_> {
         &self.spec.name
     }
 
-    fn for_each_sample(&self, f: &mut SampleFn<'_>) -> Result<(), SessionError> {
+    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), SessionError> {
         let io = |source| SessionError::Io { path: self.path.clone(), source };
         let g = self.manifest.g_m_s2;
         let mount = &self.spec.mount;
@@ -81,18 +81,31 @@ impl Samples for StreamRun<'_> {
         };
         let mut t0 = f64::NAN;
         let mut used = 0usize;
-        // One used row (temperature already chosen): its reference state, then `f`.
-        let mut emit = |row: &Row| {
-            if used == 0 {
-                t0 = row.t_s;
+        let mut states: Vec<State> = Vec::with_capacity(BLOCK);
+        let mut gyro: Vec<[f64; 3]> = Vec::with_capacity(BLOCK);
+        let mut accel: Vec<[f64; 3]> = Vec::with_capacity(BLOCK);
+        // One used row (temperature already chosen): its reference state, then `f` once a
+        // block is full (and for the last, partial block: `emit(None)`).
+        let mut emit = |row: Option<&Row>| {
+            if let Some(row) = row {
+                if used == 0 {
+                    t0 = row.t_s;
+                }
+                let (w, e, a) = match &conic {
+                    Some(c) => to_sensor(c.at(row.t_s)),
+                    None => still,
+                };
+                states.push(State { t_s: row.t_s - t0, w, e, a, temp_c: row.temp_c });
+                gyro.push(row.gyro);
+                accel.push(row.accel);
+                used += 1;
             }
-            let (w, e, a) = match &conic {
-                Some(c) => to_sensor(c.at(row.t_s)),
-                None => still,
-            };
-            let s = State { t_s: row.t_s - t0, w, e, a, temp_c: row.temp_c };
-            f(&s, &row.gyro, &row.accel);
-            used += 1;
+            if states.len() == BLOCK || (row.is_none() && !states.is_empty()) {
+                f(&states, &gyro, &accel);
+                states.clear();
+                gyro.clear();
+                accel.clear();
+            }
         };
         let mut row = Row::default();
 
@@ -118,13 +131,14 @@ impl Samples for StreamRun<'_> {
                 row.gyro = [value(&rec, 1), value(&rec, 2), value(&rec, 3)];
                 row.accel = [value(&rec, 4), value(&rec, 5), value(&rec, 6)];
                 row.temp_c = value(&rec, 7);
-                emit(&row);
+                emit(Some(&row));
             }
+            emit(None);
             return Ok(());
         }
 
         let file = std::fs::File::open(&self.path).map_err(io)?;
-        let input = std::io::BufReader::with_capacity(1 << 20, file);
+        let input = file;
         let mut rdr = RowReader::new(&self.path, input, &self.manifest.units, g, ReadOptions::default())?;
         let has_temp = rdr.has_temp();
         let known = self.seen.lock().ok().and_then(|s| s.clone());
@@ -165,10 +179,11 @@ impl Samples for StreamRun<'_> {
                         spill = None;
                     }
                 }
-                emit(&row);
+                emit(Some(&row));
             }
             k += 1;
         }
+        emit(None);
         if known.is_none() {
             if let Ok(mut seen) = self.seen.lock() {
                 *seen = Some((rdr.sha256(), used));

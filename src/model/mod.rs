@@ -165,6 +165,13 @@ pub trait Effect: Send + Sync + fmt::Debug {
     fn terms(&self) -> &[Term];
     /// Regressor of term `k` at a true state.
     fn regressor(&self, k: usize, s: &State) -> f64;
+    /// Regressor of term `k` at each of `states`, into `out` (same length): one dynamic
+    /// call per block of samples, the per-sample [`Effect::regressor`] inlined in the loop.
+    fn regressors(&self, k: usize, states: &[State], out: &mut [f64]) {
+        for (o, s) in out.iter_mut().zip(states) {
+            *o = self.regressor(k, s);
+        }
+    }
     /// Whether the regressors need a temperature (a `temp` column or `temperature_c`).
     fn needs_temperature(&self) -> bool {
         false
@@ -481,6 +488,12 @@ impl TermRef<'_> {
     #[inline]
     pub fn regressor(&self, s: &State) -> f64 {
         self.effect.regressor(self.index, s)
+    }
+
+    /// Regressor values at each of `states`, into `out` (same length).
+    #[inline]
+    pub fn regressors(&self, states: &[State], out: &mut [f64]) {
+        self.effect.regressors(self.index, states, out);
     }
 }
 

@@ -309,8 +309,7 @@ pub fn read_channels(
 ) -> Result<StaticData, crate::session::SessionError> {
     use crate::session::{ReadOptions, Row, RowReader, SessionError};
     let file = std::fs::File::open(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
-    let mut rows =
-        RowReader::new(path, std::io::BufReader::with_capacity(1 << 20, file), units, g_m_s2, ReadOptions::default())?;
+    let mut rows = RowReader::new(path, file, units, g_m_s2, ReadOptions::default())?;
     let mut columns: Vec<(usize, Vec<f64>)> = channels.iter().map(|&c| (c, Vec::new())).collect();
     let mut row = Row::default();
     let mut steps = Vec::with_capacity(100_000);

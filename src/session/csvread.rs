@@ -112,9 +112,10 @@ pub fn read_recording(path: &Path, units: &Units, g_m_s2: f64, opts: ReadOptions
     let io = |source| SessionError::Io { path: path.to_path_buf(), source };
     let file = std::fs::File::open(path).map_err(io)?;
     let size = file.metadata().map_err(io)?.len() as usize;
-    // Streamed: the file is never held whole; a gap error re-reads it to name the line.
+    // Streamed (the reader buffers it): never held whole; a gap error re-reads it to name
+    // the line.
     let reopen = || std::fs::File::open(path).ok().map(std::io::BufReader::new);
-    read_stream(path, std::io::BufReader::with_capacity(1 << 20, file), size / 64, units, g_m_s2, opts, reopen)
+    read_stream(path, file, size / 64, units, g_m_s2, opts, reopen)
 }
 
 /// One CSV row converted to SI (stand-frame reference columns when requested).
@@ -159,12 +160,162 @@ impl<R: std::io::Read> std::io::Read for Hashing<R> {
     }
 }
 
-/// Streams the rows of a recording: one reused record, no allocation per row; every row
+/// Bytes read from the input at a time (the buffer grows for longer lines).
+const LINE_BUFFER: usize = 1 << 18;
+
+/// The lines of a text, from one reused buffer: `\n`, `\r\n` and a lone `\r` end a line
+/// (as for the csv crate); a UTF-8 byte-order mark at the start is skipped.
+struct Lines<R> {
+    input: Hashing<R>,
+    buf: Vec<u8>,
+    /// Unread bytes are `buf[start..end]`.
+    start: usize,
+    end: usize,
+    eof: bool,
+    /// 1-based number of the next line.
+    next_no: u64,
+    /// The byte-order mark has not been looked for yet.
+    fresh: bool,
+}
+
+impl<R: std::io::Read> Lines<R> {
+    fn new(input: Hashing<R>) -> Self {
+        Self { input, buf: vec![0; LINE_BUFFER], start: 0, end: 0, eof: false, next_no: 1, fresh: true }
+    }
+
+    /// Reads more input behind the unread bytes (moved to the front; the buffer doubles when
+    /// they fill it).
+    fn fill(&mut self) -> std::io::Result<()> {
+        if self.start > 0 {
+            self.buf.copy_within(self.start..self.end, 0);
+            self.end -= self.start;
+            self.start = 0;
+        }
+        if self.end == self.buf.len() {
+            self.buf.resize(2 * self.buf.len(), 0);
+        }
+        loop {
+            match std::io::Read::read(&mut self.input, &mut self.buf[self.end..]) {
+                Ok(0) => self.eof = true,
+                Ok(n) => self.end += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(e),
+            }
+            return Ok(());
+        }
+    }
+
+    /// The next line as a range of [`Self::buf`] (without its terminator) and its number.
+    fn next_line(&mut self) -> std::io::Result<Option<(std::ops::Range<usize>, u64)>> {
+        loop {
+            if self.fresh && (self.end - self.start >= 3 || self.eof) {
+                self.fresh = false;
+                if self.buf[self.start..self.end].starts_with(b"\xef\xbb\xbf") {
+                    self.start += 3;
+                }
+            }
+            if !self.fresh {
+                let hay = &self.buf[self.start..self.end];
+                if let Some(p) = memchr::memchr2(b'\n', b'\r', hay) {
+                    let after = match (hay[p], hay.get(p + 1)) {
+                        (b'\r', Some(b'\n')) => Some(p + 2),
+                        (b'\r', None) if !self.eof => None,
+                        _ => Some(p + 1),
+                    };
+                    if let Some(after) = after {
+                        let line = self.start..self.start + p;
+                        self.start += after;
+                        self.next_no += 1;
+                        return Ok(Some((line, self.next_no - 1)));
+                    }
+                } else if self.eof {
+                    if self.start == self.end {
+                        return Ok(None);
+                    }
+                    let line = self.start..self.end;
+                    self.start = self.end;
+                    self.next_no += 1;
+                    return Ok(Some((line, self.next_no - 1)));
+                }
+            }
+            if self.eof {
+                // Only the byte-order mark check can get here, with it done now.
+                continue;
+            }
+            self.fill()?;
+        }
+    }
+}
+
+/// Slot of a column that is not read.
+const SKIP: u8 = u8::MAX;
+/// Values a row can have: t, gyro ×3, accel ×3, temp, reference ω ×3, f ×3, ε ×3.
+const SLOTS: usize = 17;
+
+/// The fields of one data line, parsed straight from its bytes into `vals` by slot (see
+/// [`RowReader`]); false when the line needs the general path (anything but plain
+/// decimals separated by commas, with optional spaces or tabs around them).
+#[inline]
+fn fast_row(line: &[u8], slots: &[u8], vals: &mut [f64; SLOTS]) -> bool {
+    let n = line.len();
+    let blank = |i: &mut usize| {
+        while *i < n && matches!(line[*i], b' ' | b'\t') {
+            *i += 1;
+        }
+    };
+    let mut i = 0;
+    for (j, &slot) in slots.iter().enumerate() {
+        if slot == SKIP {
+            while i < n && line[i] != b',' {
+                if line[i] == b'"' {
+                    return false;
+                }
+                i += 1;
+            }
+        } else {
+            blank(&mut i);
+            let Some((v, len)) = super::number::scan(&line[i..]) else {
+                return false;
+            };
+            vals[slot as usize] = v;
+            i += len;
+            blank(&mut i);
+        }
+        if j + 1 < slots.len() {
+            if i < n && line[i] == b',' {
+                i += 1;
+            } else {
+                return false;
+            }
+        } else if i < n && line[i] != b',' {
+            return false;
+        }
+    }
+    true
+}
+
+/// Parses one line with the csv crate into `rec`: false for a line with no record.
+fn csv_line(line: &[u8], rec: &mut csv::ByteRecord) -> Result<bool, csv::Error> {
+    let mut rdr = csv::ReaderBuilder::new().has_headers(false).flexible(true).from_reader(line);
+    rdr.read_byte_record(rec)
+}
+
+/// Streams the rows of a recording: one reused buffer, no allocation per row; every row
 /// is validated (numbers, finite values, strictly increasing time) with errors naming
 /// file, line and column.
+///
+/// Lines of plain decimals are parsed straight from the buffer ([`super::number`]); any
+/// other line (quoted fields, a value that is not a number, a short row, time going back)
+/// goes through the csv crate and the checks that name the problem, with the same
+/// values: both paths round every number correctly.
 pub struct RowReader<R: std::io::Read> {
-    rdr: csv::Reader<Hashing<R>>,
+    lines: Lines<R>,
     rec: csv::ByteRecord,
+    /// A line on the general path, copied out of the buffer.
+    scratch: Vec<u8>,
+    /// Per column of the header: where its value goes in `vals`, or [`SKIP`].
+    slots: Vec<u8>,
+    vals: [f64; SLOTS],
     path: PathBuf,
     names: Vec<String>,
     idx: [usize; 7],
@@ -179,24 +330,20 @@ pub struct RowReader<R: std::io::Read> {
 }
 
 impl<R: std::io::Read> RowReader<R> {
-    /// Reads the header of `input` (named `path` in messages) and maps its columns.
+    /// Reads the header of `input` (named `path` in messages) and maps its columns. The
+    /// reader buffers `input` itself.
     pub fn new(path: &Path, input: R, units: &Units, g_m_s2: f64, opts: ReadOptions) -> Result<Self, SessionError> {
         let path: PathBuf = path.to_path_buf();
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .comment(Some(b'#'))
-            .flexible(true)
-            .trim(csv::Trim::None)
-            .buffer_capacity(1 << 16)
-            .from_reader(Hashing { inner: input, hash: Sha256::new(), nonblank: false, skip: false });
+        let io = |source| SessionError::Io { path: path.clone(), source };
+        let mut lines = Lines::new(Hashing { inner: input, hash: Sha256::new(), nonblank: false, skip: false });
         let mut rec = csv::ByteRecord::new();
 
-        // Header: the first record that is not empty/comment.
+        // Header: the first line that is not blank or a comment.
         let header_line;
         let mut names: Vec<String> = Vec::new();
         loop {
-            match rdr.read_byte_record(&mut rec) {
-                Ok(false) if !rdr.get_ref().nonblank => {
+            let Some((range, no)) = lines.next_line().map_err(io)? else {
+                if !lines.input.nonblank {
                     return Err(csv_err(
                         Problem::Empty,
                         &path,
@@ -205,27 +352,28 @@ impl<R: std::io::Read> RowReader<R> {
                         "the file is empty: expected a header line 't,gx,gy,gz,ax,ay,az[,temp]' and samples",
                     ));
                 }
-                Ok(false) => {
-                    return Err(csv_err(
-                        Problem::Header,
-                        &path,
-                        1,
-                        "-",
-                        "no header line found: expected 't,gx,gy,gz,ax,ay,az[,temp]'",
-                    ));
-                }
-                Ok(true) => {
-                    if rec.len() == 1 && rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()) {
-                        continue;
-                    }
-                    header_line = rec.position().map_or(1, |p| p.line());
-                    for f in rec.iter() {
-                        names.push(String::from_utf8_lossy(f).trim().to_string());
-                    }
-                    break;
-                }
-                Err(e) => return Err(map_csv_error(&path, &e)),
+                return Err(csv_err(
+                    Problem::Header,
+                    &path,
+                    1,
+                    "-",
+                    "no header line found: expected 't,gx,gy,gz,ax,ay,az[,temp]'",
+                ));
+            };
+            let line = &lines.buf[range];
+            if line.first() == Some(&b'#') {
+                continue;
             }
+            if !csv_line(line, &mut rec).map_err(|e| csv_error(&path, no, &e))?
+                || (rec.len() == 1 && rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()))
+            {
+                continue;
+            }
+            header_line = no;
+            for f in rec.iter() {
+                names.push(String::from_utf8_lossy(f).trim().to_string());
+            }
+            break;
         }
         let find = |name: &str| names.iter().position(|n| n == name);
         let mut idx = [0usize; 7];
@@ -278,14 +426,22 @@ impl<R: std::io::Read> RowReader<R> {
             }
         }
         let width = names.len();
+        let mut slots = vec![SKIP; width];
+        let used = idx.iter().chain(&temp_idx).chain(ref_idx.iter().flatten()).chain(eps_idx.iter().flatten());
+        for (slot, &col) in used.enumerate() {
+            slots[col] = slot as u8;
+        }
         let kg = units.gyro.to_rad_s();
         let ka = units.accel.to_m_s2(g_m_s2);
         // Reference columns of a raw session are read as deg/s and g.
         let kwr = if units.gyro == super::units::GyroUnit::Raw { std::f64::consts::PI / 180.0 } else { kg };
         let kar = if units.accel == super::units::AccelUnit::Raw { g_m_s2 } else { ka };
         Ok(Self {
-            rdr,
+            lines,
             rec,
+            scratch: Vec::new(),
+            slots,
+            vals: [0.0; SLOTS],
             path,
             names,
             idx,
@@ -325,6 +481,7 @@ impl<R: std::io::Read> RowReader<R> {
         self.last_line
     }
 
+    /// Field `k` of the record on the general path.
     #[inline]
     fn field(&self, k: usize, line: u64) -> Result<f64, SessionError> {
         // Trimmed here, per field parsed: trimming whole records in the reader rewrote them.
@@ -358,69 +515,111 @@ impl<R: std::io::Read> RowReader<R> {
     /// Reads the next sample into `row`; false at the end of the file.
     pub fn read_row(&mut self, row: &mut Row) -> Result<bool, SessionError> {
         loop {
-            match self.rdr.read_byte_record(&mut self.rec) {
-                Ok(false) => return Ok(false),
-                Ok(true) => {}
-                Err(e) => return Err(map_csv_error(&self.path, &e)),
-            }
-            let line = self.rec.position().map_or(self.last_line + 1, |p| p.line());
-            self.last_line = line;
-            if self.rec.len() == 1 && self.rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()) {
+            let Some((range, line)) =
+                self.lines.next_line().map_err(|source| SessionError::Io { path: self.path.clone(), source })?
+            else {
+                return Ok(false);
+            };
+            let bytes = &self.lines.buf[range];
+            if bytes.first() == Some(&b'#') {
                 continue;
             }
-            if self.rec.len() < self.width {
-                let n = self.rec.len();
-                return Err(csv_err(
-                    Problem::Truncated,
-                    &self.path,
-                    line,
-                    format!("{} ({})", n + 1, self.names[n]),
-                    format!("the row has {n} fields, the header has {}: a truncated or incomplete row", self.width),
-                ));
-            }
-            let [kt, kg, ka, kwr, kar] = self.factors;
-            let t = self.field(self.idx[0], line)? * kt;
-            if t <= self.last_t {
-                let what = if t >= self.last_t { "duplicate" } else { "decreasing" };
-                return Err(csv_err(
-                    Problem::Time,
-                    &self.path,
-                    line,
-                    format!("{} (t)", self.idx[0] + 1),
-                    format!(
-                        "{what} time stamp {}: t must be strictly increasing (previous sample had {})",
-                        t / kt,
-                        self.last_t / kt
-                    ),
-                ));
-            }
-            self.last_t = t;
-            row.t_s = t;
-            row.gyro = self.triple(&self.idx[1..4], kg, line)?;
-            row.accel = self.triple(&self.idx[4..7], ka, line)?;
-            row.temp_c = match self.temp_idx {
-                Some(k) => self.field(k, line)?,
-                None => f64::NAN,
-            };
-            if let Some(r) = self.ref_idx {
-                row.w_ref = self.triple(&r[0..3], kwr, line)?;
-                row.a_ref = self.triple(&r[3..6], kar, line)?;
-                if let Some(e) = self.eps_idx {
-                    row.e_ref = self.triple(&e, kwr, line)?;
+            self.last_line = line;
+            if fast_row(bytes, &self.slots, &mut self.vals) {
+                let [kt, kg, ka, kwr, kar] = self.factors;
+                let v = &self.vals;
+                let t = v[0] * kt;
+                if t > self.last_t {
+                    self.last_t = t;
+                    row.t_s = t;
+                    row.gyro = [v[1] * kg, v[2] * kg, v[3] * kg];
+                    row.accel = [v[4] * ka, v[5] * ka, v[6] * ka];
+                    let mut s = 7;
+                    row.temp_c = if self.temp_idx.is_some() {
+                        s += 1;
+                        v[7]
+                    } else {
+                        f64::NAN
+                    };
+                    if self.ref_idx.is_some() {
+                        row.w_ref = [v[s] * kwr, v[s + 1] * kwr, v[s + 2] * kwr];
+                        row.a_ref = [v[s + 3] * kar, v[s + 4] * kar, v[s + 5] * kar];
+                        if self.eps_idx.is_some() {
+                            row.e_ref = [v[s + 6] * kwr, v[s + 7] * kwr, v[s + 8] * kwr];
+                        }
+                    }
+                    return Ok(true);
                 }
             }
-            return Ok(true);
+            // The general path, which also names whatever is wrong with the line.
+            self.scratch.clear();
+            self.scratch.extend_from_slice(bytes);
+            if !csv_line(&self.scratch, &mut self.rec).map_err(|e| csv_error(&self.path, line, &e))? {
+                continue;
+            }
+            if self.general_row(line, row)? {
+                return Ok(true);
+            }
         }
+    }
+
+    /// The record in `rec` (line `line`) as a sample; false for a blank line.
+    fn general_row(&mut self, line: u64, row: &mut Row) -> Result<bool, SessionError> {
+        if self.rec.len() == 1 && self.rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()) {
+            return Ok(false);
+        }
+        if self.rec.len() < self.width {
+            let n = self.rec.len();
+            return Err(csv_err(
+                Problem::Truncated,
+                &self.path,
+                line,
+                format!("{} ({})", n + 1, self.names[n]),
+                format!("the row has {n} fields, the header has {}: a truncated or incomplete row", self.width),
+            ));
+        }
+        let [kt, kg, ka, kwr, kar] = self.factors;
+        let t = self.field(self.idx[0], line)? * kt;
+        if t <= self.last_t {
+            let what = if t >= self.last_t { "duplicate" } else { "decreasing" };
+            return Err(csv_err(
+                Problem::Time,
+                &self.path,
+                line,
+                format!("{} (t)", self.idx[0] + 1),
+                format!(
+                    "{what} time stamp {}: t must be strictly increasing (previous sample had {})",
+                    t / kt,
+                    self.last_t / kt
+                ),
+            ));
+        }
+        self.last_t = t;
+        row.t_s = t;
+        row.gyro = self.triple(&self.idx[1..4], kg, line)?;
+        row.accel = self.triple(&self.idx[4..7], ka, line)?;
+        row.temp_c = match self.temp_idx {
+            Some(k) => self.field(k, line)?,
+            None => f64::NAN,
+        };
+        if let Some(r) = self.ref_idx {
+            row.w_ref = self.triple(&r[0..3], kwr, line)?;
+            row.a_ref = self.triple(&r[3..6], kar, line)?;
+            if let Some(e) = self.eps_idx {
+                row.e_ref = self.triple(&e, kwr, line)?;
+            }
+        }
+        Ok(true)
     }
 
     /// Stops hashing the bytes still to come (a re-read whose hash is already known).
     pub fn stop_hashing(&mut self) {
-        self.rdr.get_mut().skip = true;
+        self.lines.input.skip = true;
     }
 
     /// The SHA-256 (hex) of every byte read so far; of the whole file once it is read.
     pub fn sha256(&self) -> String {
-        hex(&self.rdr.get_ref().hash.clone().finalize())
+        hex(&self.lines.input.hash.clone().finalize())
     }
 }
 
@@ -551,8 +750,8 @@ fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<(usize, String)> {
     warnings
 }
 
-fn map_csv_error(path: &Path, e: &csv::Error) -> SessionError {
-    let line = e.position().map_or(0, |p| p.line());
+/// A csv crate error on line `line` (parsed on its own).
+fn csv_error(path: &Path, line: u64, e: &csv::Error) -> SessionError {
     csv_err(Problem::Malformed, path, line, "-", format!("malformed CSV: {e}"))
 }
 
@@ -603,6 +802,37 @@ mod tests {
         assert!(e.to_string().contains("empty"), "{e}");
         let e = parse("0,1,2,3,0,0,1\n").unwrap_err();
         assert!(e.to_string().contains("header line is missing"), "{e}");
+    }
+
+    #[test]
+    fn line_endings_bom_and_quotes_read_like_plain_lines() {
+        let plain = parse("t,gx,gy,gz,ax,ay,az\n0,1.25,2,3,0,0,1\n0.5,4,5,6,0,0,1\n").unwrap();
+        for text in [
+            "\u{feff}t,gx,gy,gz,ax,ay,az\r\n0,1.25,2,3,0,0,1\r\n0.5,4,5,6,0,0,1\r\n",
+            "t,gx,gy,gz,ax,ay,az\r0,1.25,2,3,0,0,1\r0.5,4,5,6,0,0,1",
+            "\"t\",gx,gy,gz,ax,ay,az\n\"0\",\"1.25\",2,3,0,0,1\n0.5,4,5,6,0,0,\"1\"\n",
+        ] {
+            let r = parse(text).unwrap();
+            assert_eq!((&r.t_s, &r.gyro, &r.accel), (&plain.t_s, &plain.gyro, &plain.accel), "{text:?}");
+        }
+        // A skipped column may hold quoted text with commas; the line number stays right.
+        let r = parse("t,note,gx,gy,gz,ax,ay,az\n0,\"a, b\",1,2,3,0,0,1\n0.5,x,1,2,3,0,0,1\n0.25,y,1,2,3,0,0,1\n");
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("run.csv:4:1 (t)") && e.contains("decreasing"), "{e}");
+    }
+
+    #[test]
+    fn lines_longer_than_the_buffer_and_many_rows_are_read() {
+        let pad = "9".repeat(3 * LINE_BUFFER);
+        let mut s = format!("t,gx,gy,gz,ax,ay,az,pad\n0,1,2,3,0,0,1,{pad}\n");
+        for k in 1..20_000 {
+            s.push_str(&format!("{},{},-2.5e-3,3,0,0,1,x\n", k as f64 * 0.01, k as f64 / 7.0));
+        }
+        let r = parse(&s).unwrap();
+        assert_eq!(r.len(), 20_000);
+        assert_eq!(r.gyro[19_999][0], (19_999.0f64 / 7.0).to_string().parse::<f64>().unwrap().to_radians());
+        assert_eq!(r.gyro[5][1], (-2.5e-3f64).to_radians());
+        assert_eq!(r.sha256, sha256_hex(s.as_bytes()));
     }
 
     #[test]

@@ -8,6 +8,7 @@
 mod csvread;
 mod error;
 pub mod import;
+mod number;
 pub mod sanity;
 pub mod units;
 
