@@ -860,7 +860,7 @@ impl AutoCov {
 /// Σ a_k b_k for equal lengths, with sixteen partial sums (so that the adds do not wait on
 /// each other), added pairwise, then the tail.
 #[inline]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut s = [0.0; 16];
     let (ac, bc) = (a.chunks_exact(16), b.chunks_exact(16));
     let tail: f64 = ac.remainder().iter().zip(bc.remainder()).map(|(x, y)| x * y).sum();

@@ -1,24 +1,22 @@
 //! Streaming least squares: the R factor of a tall matrix accumulated block by block.
 //!
-//! Rows are buffered in chunks; each full chunk is stacked under the current R and
-//! re-factored with faer's Householder QR, so memory is O(p · chunk) whatever the number of
-//! rows, and no normal equations are formed (the condition number is not squared).
+//! Rows are buffered in chunks; each full chunk is folded into the current R by Householder
+//! reflectors that respect R's triangle (see [`QrAccumulator`]'s flush), so memory is
+//! O(p · chunk) whatever the number of rows, and no normal equations are formed (the
+//! condition number is not squared).
 //! Because `RᵀR = XᵀX` and R = QᵀX with Q orthonormal, any least-squares problem on a
 //! subset (or linear combination) of X's columns can be solved from R alone.
 
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::qr::no_pivoting::factor::{qr_in_place, qr_in_place_scratch, recommended_block_size};
-use faer::{Mat, Par};
+use faer::Mat;
 
 /// Rows accumulated into an upper-triangular R (p × p).
 pub struct QrAccumulator {
     p: usize,
     chunk: usize,
+    /// R (first p rows, upper triangular) over the rows not yet folded in.
     buf: Mat<f64>,
-    /// Householder block coefficients of a re-factoring (faer's `Q_coeff`).
-    q_coeff: Mat<f64>,
-    /// Work space of a re-factoring.
-    scratch: MemBuffer,
+    /// The current Householder vector (below its leading 1).
+    v: Vec<f64>,
     filled: usize,
     rows: u64,
     col_sq: Vec<f64>,
@@ -48,23 +46,11 @@ impl Clone for QrAccumulator {
 impl QrAccumulator {
     /// Accumulator for rows of width `p`, re-factoring every `chunk` rows.
     pub fn new(p: usize, chunk: usize) -> Self {
-        // The blocks are narrow (tens of columns): faer's thread pool would only add wake-up
-        // latency, and crosscal parallelises across units and runs instead.
+        // The problems solved from R are small (tens of columns): faer's thread pool would only
+        // add wake-up latency, and crosscal parallelises across units and runs instead.
         faer::set_global_parallelism(faer::Par::Seq);
         let chunk = chunk.max(p).max(1);
-        // The block size grows with the matrix: the largest is that of a full chunk.
-        let block = recommended_block_size::<f64>(p + chunk, p).max(1);
-        let scratch = MemBuffer::new(qr_in_place_scratch::<f64>(p + chunk, p, block, Par::Seq, Default::default()));
-        Self {
-            p,
-            chunk,
-            buf: Mat::zeros(p + chunk, p),
-            q_coeff: Mat::zeros(block, p),
-            scratch,
-            filled: 0,
-            rows: 0,
-            col_sq: vec![0.0; p],
-        }
+        Self { p, chunk, buf: Mat::zeros(p + chunk, p), v: vec![0.0; chunk], filled: 0, rows: 0, col_sq: vec![0.0; p] }
     }
 
     /// Row width.
@@ -118,24 +104,41 @@ impl QrAccumulator {
         }
     }
 
+    /// Folds the buffered rows X into R: `[R; X] = Q [R'; 0]`, one Householder reflector
+    /// per column acting on R's diagonal element and X's column only — R is already upper
+    /// triangular, so nothing else changes (the structured update of LAPACK's `dtpqrt2`;
+    /// Golub & Van Loan, Matrix Computations, §5.2 and §6.5.3). 2·m·p² flops for m rows.
     fn flush(&mut self) {
-        if self.filled == 0 {
+        let (p, m) = (self.p, self.filled);
+        if m == 0 {
             return;
         }
-        let m = self.p + self.filled;
-        // Householder QR in place (what `Mat::qr` does, without its copies): R is left in
-        // the upper triangle of the first p rows, the reflectors below it.
-        let block = recommended_block_size::<f64>(m, self.p).clamp(1, self.q_coeff.nrows());
-        qr_in_place(
-            self.buf.as_mut().subrows_mut(0, m),
-            self.q_coeff.as_mut().subrows_mut(0, block),
-            Par::Seq,
-            MemStack::new(&mut self.scratch),
-            Default::default(),
-        );
-        for i in 0..self.p {
-            for j in 0..i {
-                self.buf[(i, j)] = 0.0;
+        for j in 0..p {
+            let col = self.buf.col_as_slice_mut(j);
+            let alpha = col[j];
+            let x = &mut col[p..p + m];
+            let x_sq = super::dot(x, x);
+            if x_sq == 0.0 {
+                continue;
+            }
+            // β = −sign(α)‖(α, x)‖ (no cancellation in α − β); v = (1, x/(α − β)); τ = (β − α)/β.
+            let norm = alpha.hypot(x_sq.sqrt());
+            let beta = if alpha >= 0.0 { -norm } else { norm };
+            let tau = (beta - alpha) / beta;
+            let scale = 1.0 / (alpha - beta);
+            for v in x.iter_mut() {
+                *v *= scale;
+            }
+            col[j] = beta;
+            self.v[..m].copy_from_slice(&col[p..p + m]);
+            let v = &self.v[..m];
+            for k in j + 1..p {
+                let ck = self.buf.col_as_slice_mut(k);
+                let tw = tau * (ck[j] + super::dot(v, &ck[p..p + m]));
+                ck[j] -= tw;
+                for (c, vi) in ck[p..p + m].iter_mut().zip(v) {
+                    *c -= tw * vi;
+                }
             }
         }
         self.filled = 0;

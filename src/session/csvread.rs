@@ -830,8 +830,11 @@ mod tests {
         }
         let r = parse(&s).unwrap();
         assert_eq!(r.len(), 20_000);
-        assert_eq!(r.gyro[19_999][0], (19_999.0f64 / 7.0).to_string().parse::<f64>().unwrap().to_radians());
-        assert_eq!(r.gyro[5][1], (-2.5e-3f64).to_radians());
+        assert_eq!(
+            r.gyro[19_999][0].to_bits(),
+            (19_999.0f64 / 7.0).to_string().parse::<f64>().unwrap().to_radians().to_bits()
+        );
+        assert_eq!(r.gyro[5][1].to_bits(), (-2.5e-3f64).to_radians().to_bits());
         assert_eq!(r.sha256, sha256_hex(s.as_bytes()));
     }
 
