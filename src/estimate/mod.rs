@@ -513,6 +513,7 @@ fn residual_pass(
     let mut acov: Vec<AutoCov> = (0..3 * designs.len()).map(|_| AutoCov::new(lags + 1)).collect();
     let mut max = vec![0.0_f64; 3 * designs.len()];
     let mut pred = vec![0.0; 3 * BLOCK];
+    let mut resid = vec![0.0; BLOCK];
     // Per sensor: the design's columns once per block, then the fitted coefficients
     // (channel, column, value) in term order.
     let mut blocks: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; (d.cols.len() + 3) * BLOCK]).collect();
@@ -544,12 +545,15 @@ fn residual_pass(
                 }
             }
             for ch in 0..3 {
-                let (acov, m) = (&mut acov[3 * di + ch], &mut max[3 * di + ch]);
-                for (p, u) in pred[ch * BLOCK..ch * BLOCK + n].iter().zip(u) {
-                    let e = u[ch] - p;
-                    acov.push(e);
-                    *m = m.max(e.abs());
+                let r = &mut resid[..n];
+                for ((r, p), u) in r.iter_mut().zip(&pred[ch * BLOCK..ch * BLOCK + n]).zip(u) {
+                    *r = u[ch] - p;
                 }
+                let m = &mut max[3 * di + ch];
+                for r in r.iter() {
+                    *m = m.max(r.abs());
+                }
+                acov[3 * di + ch].extend(r);
             }
         }
     })?;
@@ -831,13 +835,17 @@ impl AutoCov {
         Self { buf: vec![0.0; max_lag + 1 + ACOV_BLOCK], fill: 0, hist: 0, sums: vec![0.0; max_lag + 1], n: 0 }
     }
 
-    #[inline]
-    fn push(&mut self, r: f64) {
-        self.buf[self.fill] = r;
-        self.fill += 1;
-        self.n += 1;
-        if self.fill == self.buf.len() {
-            self.finish();
+    /// Appends values in order, summing each block as it fills.
+    fn extend(&mut self, mut vals: &[f64]) {
+        while !vals.is_empty() {
+            let take = (self.buf.len() - self.fill).min(vals.len());
+            self.buf[self.fill..self.fill + take].copy_from_slice(&vals[..take]);
+            self.fill += take;
+            self.n += take;
+            vals = &vals[take..];
+            if self.fill == self.buf.len() {
+                self.finish();
+            }
         }
     }
 
@@ -1121,8 +1129,9 @@ mod tests {
             let r: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin() + 0.3 * (k as f64 * 1.91).cos()).collect();
             let lags = 19;
             let mut a = AutoCov::new(lags);
-            for &x in &r {
-                a.push(x);
+            // In uneven pieces, across block boundaries.
+            for piece in r.chunks(97) {
+                a.extend(piece);
             }
             a.finish();
             assert_eq!(a.n, n);

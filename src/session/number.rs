@@ -285,33 +285,6 @@ mod tests {
         }
     }
 
-    #[test]
-    #[ignore = "timing, run by hand with --ignored --nocapture"]
-    fn scan_speed() {
-        let mut text = Vec::new();
-        let mut x = 0.123_456_789_f64;
-        for _ in 0..1_000_000 {
-            x = (x * 3.7 + 0.1) % 2.0 - 0.5;
-            text.extend_from_slice(format!("{x},").as_bytes());
-        }
-        for _ in 0..3 {
-            let t0 = std::time::Instant::now();
-            let (mut i, mut sum, mut n) = (0, 0.0, 0);
-            while i < text.len() {
-                let (v, len) = scan(&text[i..]).unwrap_or((0.0, text[i..].iter().position(|&b| b == b',').unwrap()));
-                sum += v;
-                i += len + 1;
-                n += 1;
-            }
-            let dt = t0.elapsed().as_secs_f64();
-            println!(
-                "{:.1} ns per field ({n} fields, {:.0} MB/s, sum {sum})",
-                dt / n as f64 * 1e9,
-                text.len() as f64 / dt / 1e6
-            );
-        }
-    }
-
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(20_000))]
 
