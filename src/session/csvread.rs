@@ -253,8 +253,8 @@ const SKIP: u8 = u8::MAX;
 const SLOTS: usize = 17;
 
 /// The fields of one data line, parsed straight from its bytes into `vals` by slot (see
-/// [`RowReader`]); false when the line needs the general path (anything but plain
-/// decimals separated by commas, with optional spaces or tabs around them).
+/// [`RowReader`]); false when the line needs the general path (anything but finite
+/// numbers separated by commas, with optional spaces or tabs around them).
 #[inline]
 fn fast_row(line: &[u8], slots: &[u8], vals: &mut [f64; SLOTS]) -> bool {
     let n = line.len();
@@ -274,7 +274,7 @@ fn fast_row(line: &[u8], slots: &[u8], vals: &mut [f64; SLOTS]) -> bool {
             }
         } else {
             blank(&mut i);
-            let Some((v, len)) = super::number::scan(&line[i..]) else {
+            let Some((v, len)) = fast_float2::parse_partial::<f64, _>(&line[i..]).ok().filter(|(v, _)| v.is_finite()) else {
                 return false;
             };
             vals[slot as usize] = v;
@@ -304,10 +304,10 @@ fn csv_line(line: &[u8], rec: &mut csv::ByteRecord) -> Result<bool, csv::Error> 
 /// is validated (numbers, finite values, strictly increasing time) with errors naming
 /// file, line and column.
 ///
-/// Lines of plain decimals are parsed straight from the buffer ([`super::number`]); any
-/// other line (quoted fields, a value that is not a number, a short row, time going back)
-/// goes through the csv crate and the checks that name the problem, with the same
-/// values: both paths round every number correctly.
+/// Lines of plain numbers are parsed straight from the buffer, each field by the same
+/// correctly rounded parser as the general path (`fast_float2`); any other line (quoted
+/// fields, a value that is not a finite number, a short row, time going back) goes through
+/// the csv crate and the checks that name the problem, with the same values.
 pub struct RowReader<R: std::io::Read> {
     lines: Lines<R>,
     rec: csv::ByteRecord,

@@ -8,7 +8,6 @@
 mod csvread;
 mod error;
 pub mod import;
-mod number;
 pub mod sanity;
 pub mod units;
 
