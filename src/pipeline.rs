@@ -9,7 +9,8 @@ use crate::session::{AccelUnit, GyroUnit, Run, Session};
 
 /// The true motion of every run of a session, in sensor axes.
 pub fn tracks(session: &Session, deriv: &DerivativeConfig) -> Vec<Track> {
-    session.runs.iter().map(|r| track(r, session.manifest.g_m_s2, deriv)).collect()
+    use rayon::prelude::*;
+    session.runs.par_iter().map(|r| track(r, session.manifest.g_m_s2, deriv)).collect()
 }
 
 /// Pairs each run's outputs with its track, for the estimator.

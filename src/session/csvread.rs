@@ -274,7 +274,8 @@ fn fast_row(line: &[u8], slots: &[u8], vals: &mut [f64; SLOTS]) -> bool {
             }
         } else {
             blank(&mut i);
-            let Some((v, len)) = fast_float2::parse_partial::<f64, _>(&line[i..]).ok().filter(|(v, _)| v.is_finite()) else {
+            let Some((v, len)) = fast_float2::parse_partial::<f64, _>(&line[i..]).ok().filter(|(v, _)| v.is_finite())
+            else {
                 return false;
             };
             vals[slot as usize] = v;

@@ -240,15 +240,28 @@ impl Session {
 
     /// Reads a manifest and all its recordings; with `strict`, gaps in `t` are errors.
     pub fn load_with(manifest_path: &Path, strict: bool) -> Result<Self, SessionError> {
+        use rayon::prelude::*;
         let manifest = read_manifest(manifest_path)?;
+        let options = |spec: &RunSpec| ReadOptions { reference: matches!(spec.motion, MotionSpec::Reference), strict };
+        // Runs with a file of their own are read in parallel; results (and errors) are taken
+        // in manifest order below.
+        let mut own: Vec<Option<Result<Recording, SessionError>>> = manifest
+            .runs
+            .par_iter()
+            .map(|spec| {
+                let path = run_path(manifest_path, spec).ok()?;
+                spec.rows.is_none().then(|| read_recording(&path, &manifest.units, manifest.g_m_s2, options(spec)))
+            })
+            .collect();
         let mut runs = Vec::with_capacity(manifest.runs.len());
         let mut cache: Vec<(PathBuf, Recording)> = Vec::new();
-        for spec in &manifest.runs {
+        for (spec, own) in manifest.runs.iter().zip(own.iter_mut()) {
             let path = run_path(manifest_path, spec)?;
-            let opts = ReadOptions { reference: matches!(spec.motion, MotionSpec::Reference), strict };
-            let rec = match spec.rows {
-                None => read_recording(&path, &manifest.units, manifest.g_m_s2, opts)?,
-                Some((start, end)) => {
+            let opts = options(spec);
+            let rec = match (spec.rows, own.take()) {
+                (None, Some(read)) => read?,
+                (None, None) => read_recording(&path, &manifest.units, manifest.g_m_s2, opts)?,
+                (Some((start, end)), _) => {
                     // Runs sharing a file read it once.
                     let i = match cache.iter().position(|(p, _)| *p == path) {
                         Some(i) => i,
