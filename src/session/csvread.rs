@@ -238,10 +238,6 @@ impl<R: std::io::Read> Lines<R> {
                     return Ok(Some((line, self.next_no - 1)));
                 }
             }
-            if self.eof {
-                // Only the byte-order mark check can get here, with it done now.
-                continue;
-            }
             self.fill()?;
         }
     }
