@@ -67,20 +67,11 @@ impl QrAccumulator {
     #[inline]
     pub fn push(&mut self, row: &[f64]) {
         debug_assert_eq!(row.len(), self.p);
-        let r = self.p + self.filled;
-        for (j, v) in row.iter().enumerate() {
-            self.buf[(r, j)] = *v;
-            self.col_sq[j] += v * v;
-        }
-        self.filled += 1;
-        self.rows += 1;
-        if self.filled == self.chunk {
-            self.flush();
-        }
+        // One row is p columns of one value each.
+        self.push_columns(row, 1, 1);
     }
 
     /// Adds `n` rows given by columns: column j is `cols[j·stride..][..n]` (p columns).
-    /// The same arithmetic as [`Self::push`] row by row.
     pub fn push_columns(&mut self, cols: &[f64], stride: usize, n: usize) {
         let mut i0 = 0;
         while i0 < n {

@@ -291,6 +291,11 @@ fn fast_row(line: &[u8], slots: &[u8], vals: &mut [f64; SLOTS]) -> bool {
     true
 }
 
+/// A record of a line holding only spaces (one field, blank): skipped like an empty line.
+fn blank_record(rec: &csv::ByteRecord) -> bool {
+    rec.len() == 1 && rec.get(0).is_some_and(|f| f.trim_ascii().is_empty())
+}
+
 /// Parses one line with the csv crate into `rec`: false for a line with no record.
 fn csv_line(line: &[u8], rec: &mut csv::ByteRecord) -> Result<bool, csv::Error> {
     let mut rdr = csv::ReaderBuilder::new().has_headers(false).flexible(true).from_reader(line);
@@ -361,9 +366,7 @@ impl<R: std::io::Read> RowReader<R> {
             if line.first() == Some(&b'#') {
                 continue;
             }
-            if !csv_line(line, &mut rec).map_err(|e| csv_error(&path, no, &e))?
-                || (rec.len() == 1 && rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()))
-            {
+            if !csv_line(line, &mut rec).map_err(|e| csv_error(&path, no, &e))? || blank_record(&rec) {
                 continue;
             }
             header_line = no;
@@ -562,7 +565,7 @@ impl<R: std::io::Read> RowReader<R> {
 
     /// The record in `rec` (line `line`) as a sample; false for a blank line.
     fn general_row(&mut self, line: u64, row: &mut Row) -> Result<bool, SessionError> {
-        if self.rec.len() == 1 && self.rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()) {
+        if blank_record(&self.rec) {
             return Ok(false);
         }
         if self.rec.len() < self.width {
@@ -700,7 +703,7 @@ fn line_of_sample(input: impl std::io::Read, k: usize) -> Option<u64> {
     let mut seen = 0usize;
     let mut header = true;
     while rdr.read_byte_record(&mut rec).ok()? {
-        if rec.len() == 1 && rec.get(0).is_some_and(|f| f.trim_ascii().is_empty()) {
+        if blank_record(&rec) {
             continue;
         }
         if header {
