@@ -132,6 +132,23 @@ fn gap_is_a_warning_or_with_strict_an_error() {
     assert_eq!(c, 0, "{out}");
     assert!(out.contains("warning") && out.contains("gap in t") && out.contains("sample 21"), "{out}");
     expect_fit_error(d.path(), &["--strict"], 9, &["cone+10.csv:22:1 (t)", "gap"]);
+    // `correct` says the same, offline and streaming; with --strict it writes nothing.
+    let (c, out, err) = run_in(d.path(), &["fit", "s/session.json", "--out", "store"]);
+    assert_eq!(c, 0, "{out}{err}");
+    let profile = std::fs::read_dir(d.path().join("store")).unwrap().next().unwrap().unwrap().path();
+    let profile = std::fs::read_dir(profile).unwrap().next().unwrap().unwrap().path();
+    let profile = profile.to_str().unwrap();
+    for mode in ["offline", "streaming"] {
+        let out_csv = format!("{mode}.csv");
+        let args = ["correct", "--profile", profile, "s/cone+10.csv", "-o", &out_csv, "--mode", mode];
+        let (c, _, err) = run_in(d.path(), &[&args[..], &["--strict"]].concat());
+        assert_eq!(c, 9, "{mode}: {err}");
+        assert!(err.contains("cone+10.csv:22:1 (t)") && err.contains("gap"), "{mode}: {err}");
+        assert!(!d.path().join(&out_csv).exists(), "{mode}: a refused correction wrote its output");
+        let (c, _, err) = run_in(d.path(), &args);
+        assert_eq!(c, 0, "{mode}: {err}");
+        assert!(err.contains("warning") && err.contains("gap in t") && err.contains("sample 21"), "{mode}: {err}");
+    }
 }
 
 #[test]

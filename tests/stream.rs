@@ -87,3 +87,128 @@ fn streamed_fit_refuses_what_needs_the_samples_in_memory() {
     m.add_effect("time-delay").unwrap();
     assert!(matches!(fit_streaming(&manifest, &m, &FitOptions::default()), Err(StreamError::NotStreamable(_))));
 }
+
+/// A corrected CSV read back: the header and each row's fields.
+fn read_back(text: &str) -> (String, Vec<Vec<f64>>) {
+    let mut lines = text.lines();
+    let header = lines.next().unwrap_or_default().to_string();
+    (header, lines.map(|l| l.split(',').map(|f| f.parse().unwrap()).collect()).collect())
+}
+
+#[test]
+fn csv_correction_streams_the_same_bits_as_the_in_memory_corrector() {
+    use crosscal::correct::{correct_csv_streaming, correct_streaming, Calibration, OutputScale, StreamCsvOptions};
+    use crosscal::session::{parse_recording, ReadOptions};
+    let mut c = SimConfig::paper();
+    // 2500 samples a run: two full blocks of the streamed corrector and a partial one.
+    c.runs = conic_plan(&[10.0, -20.0], &[10.0], &cyclic_mounts(2), 25.0);
+    c.gyro_noise_deg_s = 0.002;
+    c.accel_noise_g = 2e-5;
+    let tmp = tempfile::tempdir().unwrap();
+    let plain = write_session(&c.generate(), &tmp.path().join("plain")).unwrap();
+    c.temperature_c = Some((20.0, 30.0));
+    let warm = write_session(&c.generate(), &tmp.path().join("warm")).unwrap();
+    // A fitted linear calibration; and one with a dead zone wide enough to catch the rates'
+    // zero crossings (flags), on the recording with a temp column.
+    let session = Session::load(&plain).unwrap();
+    let f = crosscal::pipeline::fit_session(&session, &Model::default_model(), &FitOptions::default()).unwrap();
+    let fitted = crosscal::pipeline::calibration_of(&Model::default_model(), &f).unwrap();
+    let mut dz = Model::default_model();
+    dz.fix_nonlinear("gyro-dead-zone", vec![0.002, 0.003, 0.001]).unwrap();
+    let mut dead = Calibration::from_model(&dz, Default::default()).unwrap();
+    // Outputs within 3 σ of zero are inside the band: flagged, not inverted.
+    dead.noise = [[1e-3; 3], [1e-3; 3]];
+    for (manifest, cal, flags_expected) in [(&plain, &fitted, false), (&warm, &dead, true)] {
+        let session = Session::load(manifest).unwrap();
+        let units = session.manifest.units;
+        let g = session.manifest.g_m_s2;
+        for run in &session.runs {
+            let path = manifest.with_file_name(&run.spec.file);
+            let bytes = std::fs::read(&path).unwrap();
+            let rec = parse_recording(&path, &bytes, &units, g, ReadOptions::default()).unwrap();
+            let expected = correct_streaming(cal, &rec.t_s, &rec.gyro, &rec.accel, rec.temp_c.as_deref()).unwrap();
+            let mut out = Vec::new();
+            let opts = StreamCsvOptions { scale: OutputScale { time: 1.0, gyro: 1.0, accel: 1.0 }, strict: false };
+            let s = correct_csv_streaming(&path, bytes.as_slice(), &mut out, cal, &units, g, opts).unwrap();
+            let (header, rows) = read_back(std::str::from_utf8(&out).unwrap());
+            assert_eq!(s.samples, rec.len());
+            assert_eq!(rows.len(), rec.len());
+            assert_eq!(s.warmup, expected.warmup);
+            assert_eq!(s.has_flags, flags_expected);
+            assert_eq!(header.ends_with(",temp,flags"), flags_expected, "{header}");
+            let mut flagged = 0;
+            for (k, r) in rows.iter().enumerate() {
+                let mut want = vec![rec.t_s[k]];
+                want.extend(expected.w_rad_s[k]);
+                want.extend(expected.a_m_s2[k]);
+                if let Some(t) = &rec.temp_c {
+                    want.push(t[k]);
+                }
+                if flags_expected {
+                    let f = expected.flags.get(k).copied().unwrap_or(0);
+                    flagged += usize::from(f != 0);
+                    want.push(f64::from(f));
+                }
+                assert_eq!(r.len(), want.len());
+                for (x, y) in r.iter().zip(&want) {
+                    assert_eq!(x.to_bits(), y.to_bits(), "{} sample {k}: {x} vs {y}", run.spec.name);
+                }
+            }
+            assert_eq!(s.flagged, flagged);
+            assert_eq!(flagged > 0, flags_expected, "{} flagged", flagged);
+            assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+        }
+    }
+}
+
+#[test]
+fn csv_correction_reports_gaps_and_refuses_them_in_strict_mode() {
+    use crosscal::correct::{correct_csv_streaming, Calibration, OutputScale, StreamCsvError, StreamCsvOptions};
+    use crosscal::session::{Problem, SessionError, Units};
+    let cal = Calibration::from_model(&Model::default_model(), Default::default()).unwrap();
+    let mut text = String::from("t,gx,gy,gz,ax,ay,az\n");
+    for k in 0..200 {
+        let t = if k < 120 { k as f64 * 0.01 } else { k as f64 * 0.01 + 1.0 };
+        text.push_str(&format!("{t},0.1,0.2,0.3,0,0,1\n"));
+    }
+    let path = std::path::Path::new("gappy.csv");
+    let scale = OutputScale { time: 1.0, gyro: 1.0, accel: 1.0 };
+    let mut out = Vec::new();
+    let s = correct_csv_streaming(
+        path,
+        text.as_bytes(),
+        &mut out,
+        &cal,
+        &Units::default(),
+        9.80665,
+        StreamCsvOptions { scale, strict: false },
+    )
+    .unwrap();
+    assert_eq!(s.samples, 200);
+    assert!(s.warnings.iter().any(|w| w.contains("gap in t") && w.contains("before sample 121")), "{:?}", s.warnings);
+    let e = correct_csv_streaming(
+        path,
+        text.as_bytes(),
+        &mut Vec::new(),
+        &cal,
+        &Units::default(),
+        9.80665,
+        StreamCsvOptions { scale, strict: true },
+    )
+    .unwrap_err();
+    match e {
+        StreamCsvError::Read(SessionError::Csv { problem: Problem::Gap, line, .. }) => assert_eq!(line, 122),
+        other => panic!("{other}"),
+    }
+    let e = correct_csv_streaming(
+        path,
+        "t,gx,gy,gz,ax,ay,az\n".as_bytes(),
+        &mut Vec::new(),
+        &cal,
+        &Units::default(),
+        9.80665,
+        StreamCsvOptions { scale, strict: false },
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("gappy.csv:1:") && e.to_string().contains("no samples"), "{e}");
+}

@@ -2,10 +2,10 @@
 
 use super::Outcome;
 use anyhow::Context;
-use crosscal::correct::Calibration;
+use crosscal::correct::{correct_csv_streaming, Calibration, OutputScale, StreamCsvError, StreamCsvOptions};
 use crosscal::pipeline::{correct_run, Mode};
 use crosscal::profile::Profile;
-use crosscal::session::{parse_recording, AccelUnit, GyroUnit, MotionSpec, ReadOptions, Run, RunSpec, Units};
+use crosscal::session::{parse_recording, AccelUnit, CsvLine, GyroUnit, MotionSpec, ReadOptions, Run, RunSpec, Units};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -87,23 +87,6 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if a.output.canonicalize().ok().is_some_and(|o| a.input.canonicalize().ok().is_some_and(|i| i == o)) {
         anyhow::bail!("the output {} is the input: crosscal never modifies the data it is given", a.output.display());
     }
-    let bytes = std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
-    let rec = parse_recording(&a.input, &bytes, &units, profile.g_m_s2, ReadOptions::default())?;
-    for w in &rec.warnings {
-        eprintln!("warning: {w}");
-    }
-    let run = Run {
-        spec: RunSpec::new(a.input.display().to_string(), a.input.display().to_string(), MotionSpec::Reference, None),
-        path: a.input.clone(),
-        rec,
-    };
-    let mut corrected = correct_run(&cal, &run, a.mode.into())?;
-    if a.resample {
-        if matches!(a.mode, ModeArg::Streaming) {
-            anyhow::bail!("--resample needs the whole record: use it with --mode offline");
-        }
-        corrected = crosscal::correct::resample_to_stamps(&corrected, &run.rec.t_s);
-    }
     // Output in the input's units (raw inputs come out in deg/s and g: the calibration
     // supplies the physical unit).
     let out_units = Units {
@@ -114,6 +97,32 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let kg = 1.0 / out_units.gyro.to_rad_s();
     let ka = 1.0 / out_units.accel.to_m_s2(profile.g_m_s2);
     let kt = 1.0 / units.time.to_s();
+    if matches!(a.mode, ModeArg::Streaming) {
+        if a.resample {
+            anyhow::bail!("--resample needs the whole record: use it with --mode offline");
+        }
+        return run_streaming(&a, &profile, &cal, &units, out_units, OutputScale { time: kt, gyro: kg, accel: ka });
+    }
+    let bytes = std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
+    let rec = parse_recording(
+        &a.input,
+        &bytes,
+        &units,
+        profile.g_m_s2,
+        ReadOptions { strict: a.strict, ..ReadOptions::default() },
+    )?;
+    for w in &rec.warnings {
+        eprintln!("warning: {w}");
+    }
+    let run = Run {
+        spec: RunSpec::new(a.input.display().to_string(), a.input.display().to_string(), MotionSpec::Reference, None),
+        path: a.input.clone(),
+        rec,
+    };
+    let mut corrected = correct_run(&cal, &run, a.mode.into())?;
+    if a.resample {
+        corrected = crosscal::correct::resample_to_stamps(&corrected, &run.rec.t_s);
+    }
     let has_temp = run.rec.temp_c.is_some();
     let has_flags = !corrected.flags.is_empty();
     let offset = corrected.time_offset_s;
@@ -124,27 +133,23 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             if has_temp { ",temp" } else { "" },
             if has_flags { ",flags" } else { "" }
         )?;
+        let mut line = CsvLine::new();
         for k in 0..run.rec.len() {
-            let g = corrected.w_rad_s[k];
-            let ac = corrected.a_m_s2[k];
-            write!(
-                w,
-                "{},{},{},{},{},{},{}",
-                (run.rec.t_s[k] - offset) * kt,
-                g[0] * kg,
-                g[1] * kg,
-                g[2] * kg,
-                ac[0] * ka,
-                ac[1] * ka,
-                ac[2] * ka
-            )?;
+            let (g, ac) = (corrected.w_rad_s[k], corrected.a_m_s2[k]);
+            line.float((run.rec.t_s[k] - offset) * kt);
+            for v in g {
+                line.float(v * kg);
+            }
+            for v in ac {
+                line.float(v * ka);
+            }
             if let Some(t) = &run.rec.temp_c {
-                write!(w, ",{}", t[k])?;
+                line.float(t[k]);
             }
             if has_flags {
-                write!(w, ",{}", corrected.flags[k])?;
+                line.uint(corrected.flags[k].into());
             }
-            writeln!(w)?;
+            line.write_to(w)?;
         }
         Ok(())
     })
@@ -170,6 +175,64 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         } else {
             String::new()
         },
+        profile.serial,
+        a.output.display(),
+        out_units.gyro,
+        out_units.accel
+    );
+    Ok(Outcome::Ok)
+}
+
+/// `--mode streaming`: read, correct and write row by row (fixed memory).
+fn run_streaming(
+    a: &Args,
+    profile: &Profile,
+    cal: &Calibration,
+    units: &Units,
+    out_units: Units,
+    scale: OutputScale,
+) -> anyhow::Result<Outcome> {
+    let input = std::fs::File::open(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
+    let opts = StreamCsvOptions { scale, strict: a.strict };
+    let mut failed = None;
+    let mut done = None;
+    let written = crosscal::atomic::write_atomic(&a.output, a.force, |w| {
+        match correct_csv_streaming(&a.input, input, w, cal, units, profile.g_m_s2, opts) {
+            Ok(s) => {
+                done = Some(s);
+                Ok(())
+            }
+            Err(StreamCsvError::Write(e)) => Err(e),
+            Err(e) => {
+                failed = Some(e);
+                Err(std::io::Error::other("the input could not be corrected"))
+            }
+        }
+    });
+    // Errors of the input keep their type (exit codes); nothing was written.
+    match failed {
+        Some(StreamCsvError::Read(e)) => return Err(e.into()),
+        Some(StreamCsvError::Correct(e)) => return Err(e.into()),
+        Some(e) => return Err(e.into()),
+        None => written.with_context(|| format!("writing {}", a.output.display()))?,
+    }
+    let s = done.ok_or_else(|| anyhow::anyhow!("writing {}: nothing was corrected", a.output.display()))?;
+    for w in &s.warnings {
+        eprintln!("warning: {w}");
+    }
+    if s.flagged > 0 {
+        eprintln!("note: {} samples could not be inverted (inside a dead band): their 'flags' column is non-zero (bits 0-2 gyro x,y,z; 3-5 accel x,y,z) and their values are 0, not estimates", s.flagged);
+    }
+    if s.time_offset_s != 0.0 {
+        eprintln!(
+            "note: the profile has a time delay: the t column is shifted by -{} s to the time each sample describes",
+            s.time_offset_s
+        );
+    }
+    eprintln!(
+        "corrected {} samples (streaming mode, read and written as a stream{}) with profile of unit {} -> {} (gyro {}, accel {})",
+        s.samples,
+        if s.warmup > 0 { format!(", first {} samples are derivative warm-up", s.warmup) } else { String::new() },
         profile.serial,
         a.output.display(),
         out_units.gyro,

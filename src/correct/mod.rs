@@ -31,6 +31,9 @@ use crate::profile::{CorrectionSettings, Profile};
 use nalgebra::{Matrix3, Vector3};
 use std::sync::Arc;
 
+mod csvstream;
+pub use csvstream::{correct_csv_streaming, OutputScale, StreamCsvError, StreamCsvOptions, StreamedCsv};
+
 /// Correction errors.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]

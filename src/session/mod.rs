@@ -6,6 +6,7 @@
 //! the sensor frame with the run's mount by [`crate::motion`].
 
 mod csvread;
+mod csvwrite;
 mod error;
 pub mod import;
 pub mod sanity;
@@ -14,6 +15,7 @@ pub mod units;
 pub use csvread::{
     parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
 };
+pub use csvwrite::CsvLine;
 pub use error::{Problem, SessionError};
 pub use units::{AccelUnit, GyroUnit, TimeUnit, Units};
 

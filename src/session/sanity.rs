@@ -122,8 +122,14 @@ fn spikes(x: &[f64], channel: &'static str) -> Option<Finding> {
     Some(Finding::Spikes { channel, count: at.len(), at: at.into_iter().take(10).collect() })
 }
 
-/// Human-readable lines for findings, naming sample numbers and times.
+/// Human-readable lines for findings, naming sample numbers and times (`t_s` the record's
+/// stamps).
 pub fn describe(findings: &[Finding], t_s: &[f64], file: &str) -> Vec<String> {
+    describe_with(findings, &|k| t_s.get(k).copied().unwrap_or(f64::NAN), file)
+}
+
+/// [`describe`] with the time of sample k (0-based) from `time_of`.
+fn describe_with(findings: &[Finding], time_of: &dyn Fn(usize) -> f64, file: &str) -> Vec<String> {
     findings
         .iter()
         .map(|f| match f {
@@ -135,17 +141,338 @@ pub fn describe(findings: &[Finding], t_s: &[f64], file: &str) -> Vec<String> {
             } => format!(
                 "{file}: channel {channel} looks saturated: {samples} samples flat at its extreme {value:e} (SI), first at sample {} (t = {} s); the fit will be biased there",
                 first + 1,
-                t_s.get(*first).copied().unwrap_or(f64::NAN)
+                time_of(*first)
             ),
             Finding::Spikes { channel, at, count } => format!(
                 "{file}: channel {channel} has {count} spike(s) (more than {SPIKE_Z} robust σ from their neighbours), at samples {}; consider --robust",
-                at.iter()
-                    .map(|k| format!("{} (t = {} s)", k + 1, t_s.get(*k).copied().unwrap_or(f64::NAN)))
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                at.iter().map(|k| format!("{} (t = {} s)", k + 1, time_of(*k))).collect::<Vec<_>>().join(", ")
             ),
         })
         .collect()
+}
+
+/// Samples whose steps and second differences set the reference of a [`StreamScan`].
+pub const STREAM_REFERENCE: usize = 4096;
+
+/// Spikes reported by position (as [`scan`]: the first ten).
+const SPIKES_LISTED: usize = 10;
+
+/// A gap in t found by a [`StreamScan`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct StreamGap {
+    /// 0-based index of the sample after the gap.
+    pub sample: usize,
+    /// Its line in the file.
+    pub line: u64,
+    /// The message.
+    pub message: String,
+}
+
+/// Flat runs at one running extreme of a channel: exact for the record's final extreme,
+/// since its value cannot occur before it is first reached.
+#[derive(Debug, Clone, Copy)]
+struct Flat {
+    value: f64,
+    run: usize,
+    samples: usize,
+    first: Option<usize>,
+}
+
+impl Flat {
+    fn new(value: f64) -> Self {
+        Self { value, run: 0, samples: 0, first: None }
+    }
+
+    /// Sample k with value v; `beyond(v, extreme)` says v is a new extreme.
+    #[allow(clippy::float_cmp)]
+    fn push(&mut self, k: usize, v: f64, beyond: bool) {
+        if beyond {
+            *self = Self::new(v);
+        }
+        if v == self.value {
+            self.run += 1;
+            if self.run == SATURATION_RUN {
+                self.samples += SATURATION_RUN;
+                self.first.get_or_insert(k + 1 - SATURATION_RUN);
+            } else if self.run > SATURATION_RUN {
+                self.samples += 1;
+            }
+        } else {
+            self.run = 0;
+        }
+    }
+}
+
+/// One channel's spike detector: second differences judged against the median and MAD of
+/// the first [`STREAM_REFERENCE`] of them, reported at local maxima (one sample later).
+#[derive(Debug, Clone)]
+struct SpikeWatch {
+    /// The first second differences, until the reference is set.
+    held: Vec<f64>,
+    centre: f64,
+    scale: Option<f64>,
+    /// |d2 − centre| of the last two second differences seen by the detector.
+    prev: [f64; 2],
+    /// Index (of the detector's input) of the newest.
+    seen: usize,
+    count: usize,
+    at: Vec<usize>,
+}
+
+impl SpikeWatch {
+    fn new() -> Self {
+        Self {
+            held: Vec::with_capacity(STREAM_REFERENCE),
+            centre: 0.0,
+            scale: None,
+            prev: [0.0; 2],
+            seen: 0,
+            count: 0,
+            at: Vec::new(),
+        }
+    }
+
+    /// The second difference centred on sample `j + 1`; `range` is the channel's range so far.
+    fn push(&mut self, d2: f64, range: f64) {
+        match self.scale {
+            Some(_) => self.judge(d2, range),
+            None => {
+                self.held.push(d2);
+                if self.held.len() == STREAM_REFERENCE {
+                    self.set_reference(range);
+                }
+            }
+        }
+    }
+
+    fn set_reference(&mut self, range: f64) {
+        let mut tmp = self.held.clone();
+        self.centre = median(&mut tmp);
+        for v in tmp.iter_mut() {
+            *v = (*v - self.centre).abs();
+        }
+        self.scale = Some(1.4826 * median(&mut tmp));
+        for d2 in std::mem::take(&mut self.held) {
+            self.judge(d2, range);
+        }
+    }
+
+    /// Feeds the detector; decides about the previous value now that its right neighbour is
+    /// known (`None`: the record ended).
+    fn judge_value(&mut self, v: Option<f64>, range: f64) {
+        let limit = (SPIKE_Z * self.scale.unwrap_or(0.0)).max(1e-6 * range.max(f64::MIN_POSITIVE));
+        if self.seen > 0 {
+            let (left, mid) = (if self.seen > 1 { self.prev[0] } else { 0.0 }, self.prev[1]);
+            let right = v.unwrap_or(0.0);
+            if mid > limit && mid >= left && mid >= right {
+                self.count += 1;
+                if self.at.len() < SPIKES_LISTED {
+                    self.at.push(self.seen);
+                }
+            }
+        }
+        if let Some(v) = v {
+            self.prev = [self.prev[1], v];
+            self.seen += 1;
+        }
+    }
+
+    fn judge(&mut self, d2: f64, range: f64) {
+        self.judge_value(Some((d2 - self.centre).abs()), range);
+    }
+
+    fn finish(&mut self, range: f64) {
+        if self.scale.is_none() && !self.held.is_empty() {
+            self.set_reference(range);
+        }
+        self.judge_value(None, range);
+    }
+}
+
+/// The checks of a recording read as a stream, in fixed memory (what a unit could do as the
+/// samples arrive): gaps in t of more than 5 times the median step of the first
+/// [`STREAM_REFERENCE`] steps; saturation exactly as [`scan`]; spikes as [`scan`] but
+/// against the median and MAD of the first [`STREAM_REFERENCE`] second differences and the
+/// range seen so far.
+#[derive(Debug, Clone)]
+pub struct StreamScan {
+    n: usize,
+    /// Stamps of the first samples (those the reference phase may name).
+    first_times: Vec<f64>,
+    /// The last samples' stamps (ring of 8, for the times of findings).
+    times: [f64; 8],
+    /// Times of the samples findings name (sample index, t).
+    named: Vec<(usize, f64)>,
+    /// Steps held until the reference step is set: (sample after the step, line, step, t).
+    steps: Vec<(usize, u64, f64, f64)>,
+    median_step: Option<f64>,
+    gaps: Vec<StreamGap>,
+    gaps_total: usize,
+    last: [[f64; 2]; 6],
+    lo: [Flat; 6],
+    hi: [Flat; 6],
+    spikes: Vec<SpikeWatch>,
+}
+
+/// Gaps listed by position.
+const GAPS_LISTED: usize = 20;
+
+impl Default for StreamScan {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl StreamScan {
+    /// A scan before the first sample.
+    pub fn new() -> Self {
+        Self {
+            n: 0,
+            first_times: Vec::with_capacity(STREAM_REFERENCE + 8),
+            times: [f64::NAN; 8],
+            named: Vec::new(),
+            steps: Vec::with_capacity(STREAM_REFERENCE),
+            median_step: None,
+            gaps: Vec::new(),
+            gaps_total: 0,
+            last: [[0.0; 2]; 6],
+            lo: [Flat::new(f64::INFINITY); 6],
+            hi: [Flat::new(f64::NEG_INFINITY); 6],
+            spikes: (0..6).map(|_| SpikeWatch::new()).collect(),
+        }
+    }
+
+    /// The next sample (SI), read from line `line` of the file; returns a gap found now, if
+    /// any (listed ones only, in order: the held first steps are judged when the reference is
+    /// set).
+    pub fn push(&mut self, line: u64, t_s: f64, gyro: [f64; 3], accel: [f64; 3]) -> Option<&StreamGap> {
+        let k = self.n;
+        let before = self.gaps.len();
+        if k > 0 {
+            let step = t_s - self.times[(k - 1) % 8];
+            match self.median_step {
+                Some(m) => self.judge_step(k, line, step, t_s, m),
+                None => {
+                    self.steps.push((k, line, step, t_s));
+                    if self.steps.len() == STREAM_REFERENCE {
+                        self.set_step();
+                    }
+                }
+            }
+        }
+        self.times[k % 8] = t_s;
+        if self.first_times.len() < self.first_times.capacity() {
+            self.first_times.push(t_s);
+        }
+        for c in 0..6 {
+            let v = if c < 3 { gyro[c] } else { accel[c - 3] };
+            let (above, below) = (v > self.hi[c].value, v < self.lo[c].value);
+            for (flat, beyond) in [(&mut self.hi[c], above), (&mut self.lo[c], below)] {
+                flat.push(k, v, beyond);
+                if flat.run == SATURATION_RUN && flat.first == Some(k + 1 - SATURATION_RUN) {
+                    let first = k + 1 - SATURATION_RUN;
+                    self.named.push((first, self.times[first % 8]));
+                }
+            }
+            if k >= 2 {
+                let [x0, x1] = self.last[c];
+                let range = self.hi[c].value - self.lo[c].value;
+                let listed = self.spikes[c].at.len();
+                self.spikes[c].push(x0 - 2.0 * x1 + v, range);
+                self.name_spikes(c, listed);
+            }
+            self.last[c] = [self.last[c][1], v];
+        }
+        self.n += 1;
+        self.gaps[before..].first()
+    }
+
+    /// Stamp of sample k if it is one of the first or one of the last eight.
+    fn time_at(&self, k: usize) -> f64 {
+        match self.first_times.get(k) {
+            Some(t) => *t,
+            None if k + 8 > self.n => self.times[k % 8],
+            None => f64::NAN,
+        }
+    }
+
+    /// Records the times of channel c's spikes listed after the first `listed`.
+    fn name_spikes(&mut self, c: usize, listed: usize) {
+        for i in listed..self.spikes[c].at.len() {
+            let j = self.spikes[c].at[i];
+            let t = self.time_at(j);
+            self.named.push((j, t));
+        }
+    }
+
+    fn set_step(&mut self) {
+        let mut v: Vec<f64> = self.steps.iter().map(|s| s.2).collect();
+        let m = median(&mut v);
+        self.median_step = Some(m);
+        for (k, line, step, t) in std::mem::take(&mut self.steps) {
+            self.judge_step(k, line, step, t, m);
+        }
+    }
+
+    fn judge_step(&mut self, k: usize, line: u64, step: f64, t_s: f64, median: f64) {
+        if step > 5.0 * median {
+            self.gaps_total += 1;
+            if self.gaps.len() < GAPS_LISTED {
+                self.gaps.push(StreamGap {
+                    sample: k,
+                    line,
+                    message: format!(
+                        "gap in t of {step} s before sample {} (t = {t_s} s): {:.1} times the median step of the first {} steps",
+                        k + 1,
+                        step / median,
+                        STREAM_REFERENCE
+                    ),
+                });
+            }
+        }
+    }
+
+    /// Ends the record: the gaps (in order) and the warnings, each message prefixed with
+    /// `file`.
+    pub fn finish(mut self, file: &str) -> (Vec<StreamGap>, Vec<String>) {
+        if self.median_step.is_none() && self.steps.len() >= 2 {
+            self.set_step();
+        }
+        let mut findings = Vec::new();
+        for c in 0..6 {
+            let range = self.hi[c].value - self.lo[c].value;
+            if self.n >= 7 {
+                let listed = self.spikes[c].at.len();
+                self.spikes[c].finish(range);
+                self.name_spikes(c, listed);
+            }
+            let name = CHANNELS[c];
+            if self.n >= SATURATION_RUN && range > 0.0 {
+                if let Some(f) = [self.hi[c], self.lo[c]].iter().find_map(|f| {
+                    f.first.map(|first| Finding::Saturation {
+                        channel: name,
+                        value: f.value,
+                        samples: f.samples,
+                        first,
+                    })
+                }) {
+                    findings.push(f);
+                }
+            }
+            let w = &self.spikes[c];
+            if self.n >= 7 && w.count > 0 {
+                findings.push(Finding::Spikes { channel: name, at: w.at.clone(), count: w.count });
+            }
+        }
+        let named = self.named;
+        let time_of = |k: usize| named.iter().rev().find(|(j, _)| *j == k).map_or(f64::NAN, |(_, t)| *t);
+        let mut warnings: Vec<String> = self.gaps.iter().map(|g| format!("{file}: {}", g.message)).collect();
+        if self.gaps_total > self.gaps.len() {
+            warnings.push(format!("{file}: further gaps not listed ({} in all)", self.gaps_total));
+        }
+        warnings.extend(describe_with(&findings, &time_of, file));
+        (self.gaps, warnings)
+    }
 }
 
 #[cfg(test)]
@@ -188,5 +515,69 @@ mod tests {
             f.iter().any(|f| matches!(f, Finding::Spikes { channel: "gy", at, .. } if at.contains(&1234))),
             "{f:?}"
         );
+    }
+
+    fn stream(g: &[[f64; 3]], a: &[[f64; 3]], t: &[f64]) -> (Vec<StreamGap>, Vec<String>) {
+        let mut s = StreamScan::new();
+        for k in 0..t.len() {
+            s.push(k as u64 + 2, t[k], g[k], a[k]);
+        }
+        s.finish("f.csv")
+    }
+
+    #[test]
+    fn the_stream_scan_says_what_the_whole_record_scan_says_on_short_records() {
+        let mut g = sine(3000, true);
+        for v in g.iter_mut() {
+            v[0] = v[0].min(0.9);
+            v[2] = v[2].max(0.3);
+        }
+        g[1234][1] += 5.0;
+        g[3][1] -= 4.0;
+        g[2998][1] += 3.0;
+        let a = sine(3000, true);
+        let t: Vec<f64> = (0..3000).map(|k| k as f64 * 0.01).collect();
+        let whole = describe(&scan(&g, &a), &t, "f.csv");
+        assert!(whole.len() >= 2, "{whole:?}");
+        let (gaps, warnings) = stream(&g, &a, &t);
+        assert!(gaps.is_empty());
+        assert_eq!(warnings, whole);
+    }
+
+    #[test]
+    fn the_stream_scan_finds_late_spikes_clipping_and_gaps() {
+        let n = 50_000;
+        let mut g = sine(n, true);
+        let a = sine(n, true);
+        let mut t: Vec<f64> = (0..n).map(|k| k as f64 * 0.01).collect();
+        // A spike among the reference samples and one long after.
+        g[100][1] += 5.0;
+        g[30_000][1] += 2.0;
+        // Clipping at a new maximum that appears only late.
+        for v in g[40_000..40_050].iter_mut() {
+            v[0] = 1.5;
+        }
+        // A gap of 0.5 s before sample 45 000 and one in the reference steps.
+        for x in t[45_000..].iter_mut() {
+            *x += 0.5;
+        }
+        for x in t[10..].iter_mut() {
+            *x += 0.2;
+        }
+        let (gaps, warnings) = stream(&g, &a, &t);
+        assert_eq!(gaps.iter().map(|g| (g.sample, g.line)).collect::<Vec<_>>(), [(10, 12), (45_000, 45_002)]);
+        let all = warnings.join("\n");
+        assert!(all.contains("gap in t of 0.5"), "{all}");
+        assert!(
+            all.contains("channel gx looks saturated: 50 samples") && all.contains("sample 40001 (t = 400.2 s)"),
+            "{all}"
+        );
+        // The plateau's edges are steps, reported as the whole-record scan reports them.
+        assert!(all.contains("channel gx has 2 spike(s)"), "{all}");
+        assert!(
+            all.contains("channel gy has 2 spike(s)") && all.contains("101 (t = 1.2 s), 30001 (t = 300.2 s)"),
+            "{all}"
+        );
+        assert_eq!(warnings.len(), 5, "{all}");
     }
 }

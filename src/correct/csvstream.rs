@@ -1,0 +1,184 @@
+//! Streaming correction of a recording file: rows are read, corrected with [`Streaming`] and
+//! written as they come, a block at a time, so memory stays fixed whatever the length.
+
+use super::{Calibration, CorrectError, Streaming};
+use crate::session::sanity::{StreamGap, StreamScan};
+use crate::session::{CsvLine, Problem, ReadOptions, Row, RowReader, SessionError, Units};
+use std::io::{Read, Write};
+use std::path::Path;
+
+/// Rows corrected per block (the block corrector's batch).
+const BLOCK: usize = 1024;
+
+/// Output scales: each value written is the SI value times its factor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OutputScale {
+    /// Written time per second.
+    pub time: f64,
+    /// Written rate per rad/s.
+    pub gyro: f64,
+    /// Written specific force per m/s².
+    pub accel: f64,
+}
+
+/// Settings of [`correct_csv_streaming`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StreamCsvOptions {
+    /// Output scales.
+    pub scale: OutputScale,
+    /// A gap in t is an error, not a warning.
+    pub strict: bool,
+}
+
+/// What a streamed correction did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StreamedCsv {
+    /// Samples corrected.
+    pub samples: usize,
+    /// Leading samples corrected before the derivative window was full.
+    pub warmup: usize,
+    /// Samples with a non-zero `flags` column.
+    pub flagged: usize,
+    /// Whether the output has a `flags` column (the calibration has nonlinear inverses).
+    pub has_flags: bool,
+    /// The stamps were shifted by −this (the profile's time delay), s.
+    pub time_offset_s: f64,
+    /// Gaps, saturation and spikes found on the way (see [`StreamScan`]).
+    pub warnings: Vec<String>,
+}
+
+/// Errors of [`correct_csv_streaming`].
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum StreamCsvError {
+    /// The recording could not be read (names file, line and column).
+    #[error(transparent)]
+    Read(#[from] SessionError),
+    /// The calibration cannot correct this recording.
+    #[error(transparent)]
+    Correct(#[from] CorrectError),
+    /// The output could not be written.
+    #[error("writing the output: {0}")]
+    Write(#[from] std::io::Error),
+}
+
+/// The error of a gap in strict mode.
+fn gap_error(path: &Path, t_column: usize, gap: &StreamGap) -> SessionError {
+    SessionError::Csv {
+        problem: Problem::Gap,
+        path: path.to_path_buf(),
+        line: gap.line,
+        column: format!("{t_column} (t)"),
+        msg: format!(
+            "{}; expected a gap of at most 5 sample periods (strict mode; without --strict gaps are warnings)",
+            gap.message
+        ),
+    }
+}
+
+/// Corrects the recording `input` (named `path` in messages) into `out` as CSV, in the
+/// same columns as read (`t,gx,gy,gz,ax,ay,az[,temp]`, plus `flags` when the calibration
+/// has nonlinear inverses), scaled by `opts.scale`. The values
+/// are those of [`super::correct_streaming`] on the whole record, bit for bit.
+pub fn correct_csv_streaming(
+    path: &Path,
+    input: impl Read,
+    out: &mut impl Write,
+    cal: &Calibration,
+    units: &Units,
+    g_m_s2: f64,
+    opts: StreamCsvOptions,
+) -> Result<StreamedCsv, StreamCsvError> {
+    let StreamCsvOptions { scale, strict } = opts;
+    let mut rdr = RowReader::new(path, input, units, g_m_s2, ReadOptions { strict, ..Default::default() })?;
+    rdr.stop_hashing();
+    let has_temp = rdr.has_temp();
+    if let (false, Some(id)) = (has_temp, cal.needs_temperature()) {
+        return Err(CorrectError::MissingTemperature(id.to_string()).into());
+    }
+    let has_flags = !cal.nonlinear.is_empty();
+    let per_sample = has_temp || has_flags;
+    let time_offset_s = cal.lag_s();
+    let mut corrector = Streaming::new(cal.clone());
+    writeln!(
+        out,
+        "t,gx,gy,gz,ax,ay,az{}{}",
+        if has_temp { ",temp" } else { "" },
+        if has_flags { ",flags" } else { "" }
+    )?;
+    let mut scan = StreamScan::new();
+    let (mut t, mut gyro, mut accel, mut temp) =
+        (Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK));
+    let (mut w_out, mut a_out, mut flags) = (vec![[0.0; 3]; BLOCK], vec![[0.0; 3]; BLOCK], vec![0u8; BLOCK]);
+    let mut line = CsvLine::new();
+    let mut row = Row::default();
+    let (mut samples, mut flagged) = (0usize, 0usize);
+    loop {
+        t.clear();
+        gyro.clear();
+        accel.clear();
+        temp.clear();
+        while t.len() < BLOCK && rdr.read_row(&mut row)? {
+            if let Some(gap) = scan.push(rdr.line(), row.t_s, row.gyro, row.accel).filter(|_| strict) {
+                return Err(gap_error(path, rdr.t_column(), gap).into());
+            }
+            t.push(row.t_s);
+            gyro.push(row.gyro);
+            accel.push(row.accel);
+            temp.push(row.temp_c);
+        }
+        let n = t.len();
+        if per_sample {
+            for k in 0..n {
+                (w_out[k], a_out[k]) = corrector.push(t[k], gyro[k], accel[k], temp[k]);
+                flags[k] = corrector.last_flags();
+            }
+        } else {
+            corrector.push_block(&t, &gyro, &accel, &mut w_out, &mut a_out);
+        }
+        for k in 0..n {
+            line.float((t[k] - time_offset_s) * scale.time);
+            for v in w_out[k] {
+                line.float(v * scale.gyro);
+            }
+            for v in a_out[k] {
+                line.float(v * scale.accel);
+            }
+            if has_temp {
+                line.float(temp[k]);
+            }
+            if has_flags {
+                line.uint(flags[k].into());
+                flagged += usize::from(flags[k] != 0);
+            }
+            line.write_to(out)?;
+        }
+        samples += n;
+        if n < BLOCK {
+            break;
+        }
+    }
+    if samples == 0 {
+        return Err(SessionError::Csv {
+            problem: Problem::Empty,
+            path: path.to_path_buf(),
+            line: rdr.header_line(),
+            column: "-".into(),
+            msg: "the file has a header but no samples".into(),
+        }
+        .into());
+    }
+    let (gaps, warnings) = scan.finish(&path.display().to_string());
+    // A record shorter than the scan's reference has its steps judged only now.
+    if let Some(gap) = gaps.first().filter(|_| strict) {
+        return Err(gap_error(path, rdr.t_column(), gap).into());
+    }
+    Ok(StreamedCsv {
+        samples,
+        warmup: corrector.warmup_samples().min(samples),
+        flagged,
+        has_flags,
+        time_offset_s,
+        warnings,
+    })
+}
