@@ -56,6 +56,35 @@ impl CsvLine {
     }
 }
 
+/// A recording as CSV text (`t,gx,gy,gz,ax,ay,az[,temp]`), the gyro and accelerometer
+/// values multiplied by `scale` = [gyro, accel] (1 for SI).
+pub fn recording_csv(
+    t_s: &[f64],
+    gyro: &[[f64; 3]],
+    accel: &[[f64; 3]],
+    temp_c: Option<&[f64]>,
+    scale: [f64; 2],
+) -> Vec<u8> {
+    let mut text = Vec::with_capacity(t_s.len() * 128 + 32);
+    text.extend_from_slice(if temp_c.is_some() { b"t,gx,gy,gz,ax,ay,az,temp\n" } else { b"t,gx,gy,gz,ax,ay,az\n" });
+    let mut line = CsvLine::new();
+    for (k, t) in t_s.iter().enumerate() {
+        line.float(*t);
+        for v in gyro.get(k).copied().unwrap_or([f64::NAN; 3]) {
+            line.float(v * scale[0]);
+        }
+        for v in accel.get(k).copied().unwrap_or([f64::NAN; 3]) {
+            line.float(v * scale[1]);
+        }
+        if let Some(temp) = temp_c {
+            line.float(temp.get(k).copied().unwrap_or(f64::NAN));
+        }
+        // Writing to memory cannot fail.
+        let _ = line.write_to(&mut text);
+    }
+    text
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -12,7 +12,6 @@
 //! (and y, z) are turns about +axis through `turn_angle_deg`.
 
 use super::{AccelUnit, GyroUnit, Manifest, MotionSpec, Problem, RunSpec, SessionError, TimeUnit, Units};
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Settings shared by the importers.
@@ -143,13 +142,8 @@ fn write_session(
     };
     std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
     let csv_path = out_dir.join("recording.csv");
-    let mut text = String::with_capacity(table.t.len() * 80);
-    text.push_str("t,gx,gy,gz,ax,ay,az\n");
-    for k in 0..table.t.len() {
-        let (g, a) = (table.gyro[k], table.accel[k]);
-        let _ = writeln!(text, "{},{},{},{},{},{},{}", table.t[k], g[0], g[1], g[2], a[0], a[1], a[2]);
-    }
-    crate::atomic::write_new(&csv_path, text.as_bytes()).map_err(io(&csv_path))?;
+    let text = super::recording_csv(&table.t, &table.gyro, &table.accel, None, [1.0, 1.0]);
+    crate::atomic::write_new(&csv_path, &text).map_err(io(&csv_path))?;
     let manifest = Manifest { serial: opts.serial.clone(), units, g_m_s2: opts.g_m_s2, runs, version: 2 };
     let manifest_path = out_dir.join("session.json");
     crate::atomic::write_new(&manifest_path, manifest.to_json().as_bytes()).map_err(io(&manifest_path))?;

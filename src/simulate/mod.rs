@@ -322,29 +322,9 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
     let ka = 1.0 / session.manifest.units.accel.to_m_s2(session.manifest.g_m_s2);
     for run in &session.runs {
         let path = dir.join(&run.spec.file);
-        let mut text = String::with_capacity(run.rec.len() * 120);
-        text.push_str(if run.rec.temp_c.is_some() { "t,gx,gy,gz,ax,ay,az,temp\n" } else { "t,gx,gy,gz,ax,ay,az\n" });
-        for k in 0..run.rec.len() {
-            let g = run.rec.gyro[k];
-            let a = run.rec.accel[k];
-            use std::fmt::Write as _;
-            let _ = write!(
-                text,
-                "{},{},{},{},{},{},{}",
-                run.rec.t_s[k],
-                g[0] * kg,
-                g[1] * kg,
-                g[2] * kg,
-                a[0] * ka,
-                a[1] * ka,
-                a[2] * ka
-            );
-            let _ = match &run.rec.temp_c {
-                Some(t) => writeln!(text, ",{}", t[k]),
-                None => writeln!(text),
-            };
-        }
-        write_new(&path, text.as_bytes()).map_err(io(&path))?;
+        let r = &run.rec;
+        let text = crate::session::recording_csv(&r.t_s, &r.gyro, &r.accel, r.temp_c.as_deref(), [kg, ka]);
+        write_new(&path, &text).map_err(io(&path))?;
     }
     let text = session.manifest.to_json();
     write_new(&manifest_path, text.as_bytes()).map_err(io(&manifest_path))?;

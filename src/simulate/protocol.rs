@@ -138,15 +138,10 @@ impl ProtocolSession {
 
     /// Writes `session.json` and `recording.csv` into `dir` (refusing to overwrite).
     pub fn write(&self, dir: &Path) -> std::io::Result<PathBuf> {
-        use std::fmt::Write as _;
         std::fs::create_dir_all(dir)?;
-        let mut text = String::from("t,gx,gy,gz,ax,ay,az\n");
         let r = &self.recording;
-        for k in 0..r.len() {
-            let (g, a) = (r.gyro[k], r.accel[k]);
-            let _ = writeln!(text, "{},{},{},{},{},{},{}", r.t_s[k], g[0], g[1], g[2], a[0], a[1], a[2]);
-        }
-        crate::atomic::write_new(&dir.join("recording.csv"), text.as_bytes())?;
+        let text = crate::session::recording_csv(&r.t_s, &r.gyro, &r.accel, None, [1.0, 1.0]);
+        crate::atomic::write_new(&dir.join("recording.csv"), &text)?;
         let path = dir.join("session.json");
         crate::atomic::write_new(&path, self.manifest.to_json().as_bytes())?;
         Ok(path)
