@@ -10,6 +10,15 @@ use std::time::Instant;
 #[global_allocator]
 static ALLOC: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
+/// The rows of the README's table: (what, measured).
+type Table = Vec<(String, String)>;
+
+/// Prints a measurement as it is made and keeps it for the table.
+fn report(table: &mut Table, what: String, measured: String) {
+    println!("{what} | {measured}");
+    table.push((what, measured));
+}
+
 fn best_of<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     let mut best = f64::INFINITY;
     let mut out = None;
@@ -23,7 +32,7 @@ fn best_of<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
 }
 
 /// Allan deviation of a 1e7-sample, six-channel static recording on one core.
-fn noise() {
+fn noise(table: &mut Table) {
     let n = 10_000_000usize;
     let p = NoiseProcess { white_density: 1e-3, bias_instability: 1e-4, random_walk: 1e-6, ar1: None };
     let mut rng = ChaCha8Rng::seed_from_u64(1);
@@ -39,14 +48,15 @@ fn noise() {
         }
         total
     });
-    println!(
-        "noise   | Allan deviation, 1e7 samples × 6 channels, one core | {secs:.3} s ({:.3} s per channel)",
-        secs / 6.0
+    report(
+        table,
+        "Allan deviation, 1e7 samples × 6 channels, one core".into(),
+        format!("{secs:.2} s ({:.2} s per channel)", secs / 6.0),
     );
 }
 
 /// Batch calibration of 16 units with one worker and with two: the parallel speed-up.
-fn batch() {
+fn batch(table: &mut Table) {
     use crosscal::batch::{run, unit_dirs, BatchOptions};
     use crosscal::simulate::{conic_plan, cyclic_mounts, write_session, SimConfig};
     let tmp = tempfile::tempdir().expect("temp dir");
@@ -81,11 +91,10 @@ fn batch() {
         assert_eq!(r.passed(), 16);
         times.push(t0.elapsed().as_secs_f64());
     }
-    println!(
-        "batch   | 16 units (18 runs × 12 s at 50 Hz, fit + check + diagnose) | 1 core {:.2} s, 2 cores {:.2} s: {:.2}× faster",
-        times[0],
-        times[1],
-        times[0] / times[1]
+    report(
+        table,
+        "`batch`, 16 units (18 runs × 12 s at 50 Hz: fit, check, diagnose), 2 workers vs 1".into(),
+        format!("{:.2} s vs {:.2} s: {:.2}×", times[1], times[0], times[0] / times[1]),
     );
 }
 
@@ -111,7 +120,7 @@ fn measure(cmd: &mut std::process::Command) -> (f64, f64) {
 }
 
 /// End-to-end `crosscal fit` against the pandas + numpy peer on the same 10-run sessions.
-fn fit_vs_peer(sizes: &[usize]) {
+fn fit_vs_peer(table: &mut Table, sizes: &[usize]) {
     use crosscal::simulate::{conic_plan, cyclic_mounts, write_session, SimConfig};
     let peer = concat!(env!("CARGO_MANIFEST_DIR"), "/benches/peer/fit_numpy.py");
     let tmp = tempfile::tempdir().expect("temp dir");
@@ -133,12 +142,14 @@ fn fit_vs_peer(sizes: &[usize]) {
         let (tc, mc) = crosscal(&[]);
         let (ts, ms) = crosscal(&["--stream"]);
         let (tp, mp) = measure(std::process::Command::new("python3").arg(peer).arg(&manifest));
-        println!(
-            "fit     | {n:>9} samples, 10 runs: crosscal {tc:.2} s {mc:.0} MB, --stream {ts:.2} s {ms:.0} MB | pandas+numpy {tp:.2} s {mp:.0} MB | {:.1}× / {:.1}× faster, {:.2}× / {:.2}× the memory",
-            tp / tc,
-            tp / ts,
-            mc / mp,
-            ms / mp
+        report(
+            table,
+            format!("`fit` vs `benches/peer/fit_numpy.py` (pandas + numpy), 10 runs, {n:.0e} samples"),
+            format!(
+                "{tc:.2} s / {mc:.0} MB; `--stream` {ts:.2} s / {ms:.0} MB; peer {tp:.2} s / {mp:.0} MB: {:.1}× / {:.1}× faster",
+                tp / tc,
+                tp / ts
+            ),
         );
         let _ = std::fs::remove_dir_all(&dir);
     }
@@ -156,7 +167,7 @@ fn own_peak_mb() -> f64 {
 }
 
 /// One channel of 1e8 samples: time and peak memory (the 800 MB input buffer dominates).
-fn noise_1e8() {
+fn noise_1e8(table: &mut Table) {
     let n = 100_000_000usize;
     let p = NoiseProcess { white_density: 1e-3, ..Default::default() };
     let mut rng = ChaCha8Rng::seed_from_u64(2);
@@ -165,19 +176,23 @@ fn noise_1e8() {
     let before = own_peak_mb();
     let t0 = Instant::now();
     let r = analyse_channel("gx", "rad/s", &mut data, 0.01, NoiseOptions::default()).expect("analysis");
-    println!(
-        "noise   | Allan deviation, 1e8 samples, one channel | {:.2} s; peak RSS {:.0} MB with an {:.0} MB input buffer ({:.0} MB before analysis); N = {:.4e}",
-        t0.elapsed().as_secs_f64(),
-        own_peak_mb(),
-        n as f64 * 8.0 / 1048576.0,
-        before,
-        r.white_density.unwrap_or(f64::NAN)
+    report(
+        table,
+        "Allan deviation, 1e8 samples, one channel".into(),
+        format!(
+            "{:.2} s; peak RSS {:.0} MB with an {:.0} MB input buffer ({:.0} MB before analysis); N = {:.4e}",
+            t0.elapsed().as_secs_f64(),
+            own_peak_mb(),
+            n as f64 * 8.0 / 1048576.0,
+            before,
+            r.white_density.unwrap_or(f64::NAN)
+        ),
     );
 }
 
 /// CSV parsing (one core, in memory) and streaming correction (gyro + accelerometer with
 /// ε estimation, in memory) of the paper's session.
-fn parse_and_correct() {
+fn parse_and_correct(table: &mut Table) {
     use crosscal::session::{parse_recording, ReadOptions, Units};
     let mut c = crosscal::simulate::SimConfig::paper();
     c.gyro_noise_deg_s = 0.002;
@@ -204,11 +219,13 @@ fn parse_and_correct() {
         }
         n
     });
-    println!(
-        "csv     | parse {} MB ({n} rows), one core | {:.0} MB/s, {:.1} M rows/s",
-        (reps * one.len()) / 1_000_000,
-        (reps * one.len()) as f64 / secs / 1e6,
-        n as f64 / secs / 1e6
+    report(
+        table,
+        format!(
+            "CSV parsing (`parse_recording`: SHA-256, gap and sanity scans included), {} MB, one core, in memory",
+            (reps * one.len()) / 1_000_000
+        ),
+        format!("{:.0} MB/s ({:.1} M rows/s)", (reps * one.len()) as f64 / secs / 1e6, n as f64 / secs / 1e6),
     );
     let f = crosscal::pipeline::fit_session(&session, &crosscal::model::Model::default_model(), &Default::default())
         .expect("fit");
@@ -226,10 +243,7 @@ fn parse_and_correct() {
         std::hint::black_box((&w_out, &a_out));
         n
     });
-    println!(
-        "correct | streaming, gyro + accel with ε estimation, {n} samples in runs of {longest} (reset and warm-up per run), one core | {:.2} M samples/s",
-        n as f64 / secs / 1e6
-    );
+    let runs_rate = n as f64 / secs / 1e6;
     // One long record on one uniform clock (a unit streaming for hours), corrected in blocks
     // of 4096 samples that stay in cache: the first run's samples over and over, with the
     // stamps running on.
@@ -250,28 +264,166 @@ fn parse_and_correct() {
         }
         n
     });
-    println!(
-        "correct | streaming, gyro + accel with ε estimation, one record of {n} samples, one core | {:.2} M samples/s",
-        n as f64 / secs / 1e6
+    report(
+        table,
+        format!("streaming correction, gyro + accel with ε estimation, one core, caller's buffers: runs of {longest} samples (reset and warm-up each) / one long record in blocks of {block}"),
+        format!("{runs_rate:.1} / {:.1} M samples/s", n as f64 / secs / 1e6),
     );
+}
+
+/// `crosscal correct` on a CSV of 1e6 samples (one run), streaming and offline, against its
+/// parts on one core in memory: parsing, the streaming corrector's maths, formatting.
+fn correct_csv(table: &mut Table) {
+    use crosscal::session::{parse_recording, CsvLine, ReadOptions};
+    use crosscal::simulate::{conic_plan, cyclic_mounts, write_session, SimConfig};
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let mut c = SimConfig::paper();
+    c.runs = conic_plan(&[10.0], &[10.0], &cyclic_mounts(1), 10_000.0);
+    c.gyro_noise_deg_s = 0.002;
+    c.accel_noise_g = 2e-5;
+    let session = c.generate();
+    let manifest = write_session(&session, &tmp.path().join("s")).expect("write session");
+    let model = crosscal::model::Model::default_model();
+    let fit = crosscal::pipeline::fit_session(&session, &model, &Default::default()).expect("fit");
+    let cal = crosscal::pipeline::calibration_of(&model, &fit).expect("calibration");
+    let profile = crosscal::profile::Profile::from_fit(&session, &model, fit, Vec::new());
+    let profile_path = tmp.path().join("profile.json");
+    std::fs::write(&profile_path, profile.to_json()).expect("profile");
+    let csv = manifest.with_file_name(&session.runs[0].spec.file);
+    let bytes = std::fs::read(&csv).expect("csv");
+    let cli = |mode: &str| {
+        measure(
+            std::process::Command::new(env!("CARGO_BIN_EXE_crosscal"))
+                .args(["correct", "--force", "--mode", mode, "--profile"])
+                .arg(&profile_path)
+                .arg(&csv)
+                .arg("-o")
+                .arg(tmp.path().join("out.csv"))
+                .stderr(std::process::Stdio::null()),
+        )
+    };
+    let (ts, ms) = cli("streaming");
+    let (to, mo) = cli("offline");
+    let units = session.manifest.units;
+    let (parse, rec) =
+        best_of(3, || parse_recording(&csv, &bytes, &units, 9.80665, ReadOptions::default()).expect("parse"));
+    let (maths, out) = best_of(3, || {
+        crosscal::correct::correct_streaming(&cal, &rec.t_s, &rec.gyro, &rec.accel, None).expect("correct")
+    });
+    let (format, _) = best_of(3, || {
+        let mut sink = std::io::sink();
+        let mut line = CsvLine::new();
+        for k in 0..rec.len() {
+            line.float(rec.t_s[k]);
+            for v in out.w_rad_s[k].iter().chain(&out.a_m_s2[k]) {
+                line.float(*v);
+            }
+            line.write_to(&mut sink).expect("sink");
+        }
+    });
+    report(
+        table,
+        format!(
+            "`correct` on a CSV of {} samples ({:.0} MB): `--mode streaming` / offline (whole record); one core in memory: parsing, streaming maths, formatting",
+            rec.len(),
+            bytes.len() as f64 / 1e6
+        ),
+        format!(
+            "{ts:.2} s / {ms:.0} MB; {to:.2} s / {mo:.0} MB; {parse:.3} s, {maths:.3} s, {format:.3} s (maths {:.0} % of the three)",
+            100.0 * maths / (parse + maths + format)
+        ),
+    );
+}
+
+/// The machine and tools the table was measured with.
+fn machine() -> String {
+    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let model = cpuinfo
+        .lines()
+        .find_map(|l| l.strip_prefix("model name").and_then(|v| v.split_once(':')).map(|(_, v)| v.trim().to_string()))
+        .unwrap_or_else(|| "unknown processor".into());
+    let flags: Vec<&str> = cpuinfo
+        .lines()
+        .find_map(|l| l.strip_prefix("flags"))
+        .map(|f| f.split_whitespace().collect())
+        .unwrap_or_default();
+    let has = |f: &str| flags.contains(&f);
+    let features: Vec<&str> = [("avx2", "AVX2"), ("fma", "FMA"), ("avx512f", "AVX-512F"), ("sha_ni", "SHA extensions")]
+        .iter()
+        .filter(|(f, _)| has(f))
+        .map(|(_, n)| *n)
+        .collect();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let output = |cmd: &str, args: &[&str]| {
+        std::process::Command::new(cmd)
+            .args(args)
+            .output()
+            .ok()
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+            .filter(|s| !s.is_empty())
+            .unwrap_or_else(|| format!("{cmd}: not found"))
+    };
+    let rustc = output("rustc", &["--version"]);
+    let peer = output(
+        "python3",
+        &["-c", "import sys, numpy, pandas; print(f'Python {sys.version.split()[0]}, pandas {pandas.__version__}, numpy {numpy.__version__}')"],
+    );
+    let date = jiff::Zoned::now().strftime("%Y-%m-%d").to_string();
+    format!(
+        "{model}, {cores} logical cores ({}); {rustc}; peer: {peer}. Measured {date}, release build.",
+        features.join(", ")
+    )
+}
+
+/// Replaces the README's table (between the bench markers) with this run's.
+fn write_readme(table: &Table) -> std::io::Result<()> {
+    const BEGIN: &str = "<!-- bench:begin";
+    const END: &str = "<!-- bench:end -->";
+    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"));
+    let text = std::fs::read_to_string(path)?;
+    let (Some(a), Some(b)) = (text.find(BEGIN), text.find(END)) else {
+        return Err(std::io::Error::other("README.md has no bench markers"));
+    };
+    let mut block = String::from(
+        "<!-- bench:begin: generated by `CROSSCAL_BENCH_README=1 cargo bench --bench throughput`; edits here are overwritten -->\n",
+    );
+    block.push_str(&format!("{}\n\n| what | measured (one run) |\n|---|---|\n", machine()));
+    for (what, measured) in table {
+        block.push_str(&format!("| {what} | {measured} |\n"));
+    }
+    let new = format!("{}{block}{}", &text[..a], &text[b..]);
+    crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, new.as_bytes()))
 }
 
 fn main() {
     let only = std::env::args().skip(1).find(|a| !a.starts_with('-'));
+    let readme = std::env::var("CROSSCAL_BENCH_README").is_ok();
+    let mut table = Table::new();
     if only.as_deref().is_none_or(|o| "noise".contains(o)) {
-        noise();
+        noise(&mut table);
         if std::env::var("CROSSCAL_BENCH_1E8").is_ok() {
-            noise_1e8();
+            noise_1e8(&mut table);
         }
     }
     if only.as_deref().is_none_or(|o| "batch".contains(o)) {
-        batch();
+        batch(&mut table);
     }
     if only.as_deref().is_none_or(|o| "csv correct".contains(o)) {
-        parse_and_correct();
+        parse_and_correct(&mut table);
+        correct_csv(&mut table);
     }
     if only.as_deref().is_none_or(|o| "fit".contains(o)) {
-        let big = std::env::var("CROSSCAL_BENCH_1E7").is_ok();
-        fit_vs_peer(if big { &[100_000, 1_000_000, 10_000_000] } else { &[100_000, 1_000_000] });
+        let big = readme || std::env::var("CROSSCAL_BENCH_1E7").is_ok();
+        fit_vs_peer(&mut table, if big { &[100_000, 1_000_000, 10_000_000] } else { &[100_000, 1_000_000] });
+    }
+    if readme {
+        if only.is_some() {
+            eprintln!("README not rewritten: its table needs the whole bench (no filter)");
+        } else {
+            match write_readme(&table) {
+                Ok(()) => println!("README.md: table rewritten"),
+                Err(e) => eprintln!("README.md not rewritten: {e}"),
+            }
+        }
     }
 }
