@@ -38,6 +38,15 @@ fn simulate_fit_correct_check() {
     assert_eq!(code, 0, "{out}{err}");
     assert!(out.contains("gyro.c_xy") && out.contains(" ± "), "{out}");
     assert!(out.contains("profile written to"), "{out}");
+    // A stand session with a linear model is fitted from streams; a nonlinear effect needs
+    // the samples in memory.
+    assert!(out.lines().next().is_some_and(|l| l.contains("(streamed)")), "{out}");
+    let (code, out, err) = run_in(dir, &["fit", "demo/session.json", "--dry-run", "--effect", "time-delay"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(out.lines().next().is_some_and(|l| !l.contains("(streamed)")), "{out}");
+    let (code, _, err) = run_in(dir, &["fit", "demo/session.json", "--dry-run", "--stream", "--effect", "time-delay"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("in memory"), "{err}");
     let p = profiles(dir);
     assert_eq!(p.len(), 1);
     let prof = p[0].to_string_lossy().to_string();

@@ -212,3 +212,50 @@ fn csv_correction_reports_gaps_and_refuses_them_in_strict_mode() {
     .unwrap_err();
     assert!(e.to_string().contains("gappy.csv:1:") && e.to_string().contains("no samples"), "{e}");
 }
+
+#[test]
+fn streamed_fit_warns_as_the_in_memory_reader_and_refuses_gaps_when_strict() {
+    let mut c = SimConfig::paper();
+    c.runs = conic_plan(&[10.0, -20.0], &[10.0], &cyclic_mounts(1), 12.0);
+    c.gyro_noise_deg_s = 0.002;
+    c.accel_noise_g = 2e-5;
+    let tmp = tempfile::tempdir().unwrap();
+    let manifest = write_session(&c.generate(), tmp.path()).unwrap();
+    // In the first run: a spike in gy (line 402), az clipped at its maximum, stamps shifted
+    // by 1 s from sample 900 on (a gap before sample 900, line 901).
+    let session = Session::load(&manifest).unwrap();
+    let csv = manifest.with_file_name(&session.runs[0].spec.file);
+    let az_max = session.runs[0].rec.accel.iter().map(|a| a[2]).fold(f64::MIN, f64::max) / 9.80665;
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    for (i, l) in lines.iter_mut().enumerate().skip(1) {
+        let mut f: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+        if i == 402 {
+            f[2] += 50.0;
+        }
+        if (600..620).contains(&i) {
+            f[6] = az_max;
+        }
+        if i >= 901 {
+            f[0] += 1.0;
+        }
+        *l = f.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(",");
+    }
+    std::fs::write(&csv, lines.join("\n") + "\n").unwrap();
+    let session = Session::load(&manifest).unwrap();
+    let whole = session.warnings();
+    // The gap, the spike, the flat top and its two edges (as steps, spikes).
+    assert_eq!(whole.len(), 4, "{whole:?}");
+    let streamed = fit_streaming(&manifest, &Model::default_model(), &FitOptions::default()).unwrap();
+    assert_eq!(streamed.warnings, whole);
+    let strict = crosscal::estimate::stream::fit_streaming_with(
+        &manifest,
+        &Model::default_model(),
+        &FitOptions::default(),
+        true,
+    )
+    .unwrap_err();
+    let in_memory = Session::load_with(&manifest, true).unwrap_err();
+    assert_eq!(strict.to_string(), in_memory.to_string());
+    assert!(strict.to_string().contains("cone+10.csv:902:1 (t): gap in t of 1.0"), "{strict}");
+}

@@ -55,9 +55,10 @@ pub struct Args {
     /// imucal computes them, instead of least squares over all six faces.
     #[arg(long)]
     classic_six_position: bool,
-    /// Read the recordings as streams while fitting (memory independent of their length:
-    /// for long recordings). Conic and static runs, linear models; gaps in t are not
-    /// reported in this mode.
+    /// Require the streamed fit (recordings read as streams, memory independent of their
+    /// length), which is used anyway whenever the session and model allow it (conic and
+    /// static runs, linear models, no --holdout/--stand/--robust): fail instead of reading
+    /// the session into memory.
     #[arg(long, conflicts_with_all = ["holdout", "stand", "robust"])]
     stream: bool,
     /// Store this noise characterisation (JSON from `crosscal noise --save`) in the profile.
@@ -78,8 +79,25 @@ pub fn build_model(preset: &str, effects: &[String], disable: &[String]) -> anyh
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
-    if a.stream {
-        return run_streaming(&a);
+    // Stand sessions with a linear model are fitted from streams (memory independent of the
+    // recordings' length, the same numbers to the last bit); what needs the samples in
+    // memory reads the session whole.
+    if a.stream || (a.holdout.is_empty() && !a.stand && !a.robust) {
+        use crosscal::estimate::stream::{fit_streaming_with, StreamError};
+        let model = build_model(&a.model, &a.effects, &a.disable)?;
+        match fit_streaming_with(&a.session, &model, &FitOptions::default(), a.strict) {
+            Ok(sf) => return run_streamed(&a, &model, sf),
+            Err(StreamError::NotStreamable(why)) if a.stream => anyhow::bail!("{}: {why}", a.session.display()),
+            Err(StreamError::NotStreamable(_)) => {}
+            // Typed causes keep their exit codes.
+            Err(StreamError::Read(e)) => {
+                return Err(anyhow::Error::from(e).context(format!("reading session {}", a.session.display())))
+            }
+            Err(StreamError::Estimate(e)) => {
+                return Err(anyhow::Error::from(e).context(format!("fitting {}", a.session.display())))
+            }
+            Err(e) => return Err(e.into()),
+        }
     }
     let full =
         Session::load_with(&a.session, a.strict).with_context(|| format!("reading session {}", a.session.display()))?;
@@ -200,16 +218,12 @@ fn attach_noise(a: &Args, profile: &mut Profile) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `fit --stream`: the recordings are read as streams, never held.
-fn run_streaming(a: &Args) -> anyhow::Result<Outcome> {
-    let model = build_model(&a.model, &a.effects, &a.disable)?;
-    let opts = FitOptions::default();
-    let sf = crosscal::estimate::stream::fit_streaming(&a.session, &model, &opts)
-        .with_context(|| format!("fitting {} (streamed)", a.session.display()))?;
+/// A streamed fit's report and profile (the recordings were never held in memory).
+fn run_streamed(a: &Args, model: &Model, sf: crosscal::estimate::stream::StreamedFit) -> anyhow::Result<Outcome> {
     if a.strict {
         sf.fit.ensure_identifiable().with_context(|| format!("fitting {} (--strict)", a.session.display()))?;
     }
-    let mut notes = Vec::new();
+    let mut notes = sf.warnings.clone();
     for run in &sf.manifest.runs {
         let eps = match run.motion {
             crosscal::session::MotionSpec::Conic { .. } => crosscal::motion::EPSILON_CONIC,
@@ -219,12 +233,15 @@ fn run_streaming(a: &Args) -> anyhow::Result<Outcome> {
     }
     notes.extend(unidentifiable_notes(&sf.fit));
     let samples: usize = sf.runs.iter().map(|r| r.samples).sum();
-    let mut profile = Profile::from_fit_of(&sf.manifest, sf.runs, &model, sf.fit, notes);
+    let mut profile = Profile::from_fit_of(&sf.manifest, sf.runs, model, sf.fit, notes);
     attach_noise(a, &mut profile)?;
     if a.json {
         print!("{}", profile.to_json());
     } else {
         println!("{}", headline(&profile, samples, " (streamed)"));
+        for w in &sf.warnings {
+            println!("warning: {w}");
+        }
         print!("{}", format::profile_fits(&profile));
     }
     save_unless_dry(a, &profile)?;

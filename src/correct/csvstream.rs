@@ -2,7 +2,7 @@
 //! written as they come, a block at a time, so memory stays fixed whatever the length.
 
 use super::{Calibration, CorrectError, Streaming};
-use crate::session::sanity::{StreamGap, StreamScan};
+use crate::session::sanity::StreamScan;
 use crate::session::{CsvLine, Problem, ReadOptions, Row, RowReader, SessionError, Units};
 use std::io::{Read, Write};
 use std::path::Path;
@@ -62,20 +62,6 @@ pub enum StreamCsvError {
     Write(#[from] std::io::Error),
 }
 
-/// The error of a gap in strict mode.
-fn gap_error(path: &Path, t_column: usize, gap: &StreamGap) -> SessionError {
-    SessionError::Csv {
-        problem: Problem::Gap,
-        path: path.to_path_buf(),
-        line: gap.line,
-        column: format!("{t_column} (t)"),
-        msg: format!(
-            "{}; expected a gap of at most 5 sample periods (strict mode; without --strict gaps are warnings)",
-            gap.message
-        ),
-    }
-}
-
 /// Corrects the recording `input` (named `path` in messages) into `out` as CSV, in the
 /// same columns as read (`t,gx,gy,gz,ax,ay,az[,temp]`, plus `flags` when the calibration
 /// has nonlinear inverses), scaled by `opts.scale`. The values
@@ -106,7 +92,7 @@ pub fn correct_csv_streaming(
         if has_temp { ",temp" } else { "" },
         if has_flags { ",flags" } else { "" }
     )?;
-    let mut scan = StreamScan::new();
+    let mut scan = StreamScan::new(units.time.to_s());
     let (mut t, mut gyro, mut accel, mut temp) =
         (Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK));
     let (mut w_out, mut a_out, mut flags) = (vec![[0.0; 3]; BLOCK], vec![[0.0; 3]; BLOCK], vec![0u8; BLOCK]);
@@ -120,7 +106,7 @@ pub fn correct_csv_streaming(
         temp.clear();
         while t.len() < BLOCK && rdr.read_row(&mut row)? {
             if let Some(gap) = scan.push(rdr.line(), row.t_s, row.gyro, row.accel).filter(|_| strict) {
-                return Err(gap_error(path, rdr.t_column(), gap).into());
+                return Err(gap.to_error(path, rdr.t_column()).into());
             }
             t.push(row.t_s);
             gyro.push(row.gyro);
@@ -171,7 +157,7 @@ pub fn correct_csv_streaming(
     let (gaps, warnings) = scan.finish(&path.display().to_string());
     // A record shorter than the scan's reference has its steps judged only now.
     if let Some(gap) = gaps.first().filter(|_| strict) {
-        return Err(gap_error(path, rdr.t_column(), gap).into());
+        return Err(gap.to_error(path, rdr.t_column()).into());
     }
     Ok(StreamedCsv {
         samples,

@@ -14,8 +14,10 @@ use super::{fit_samples, BlockFn, FitOptions, Samples, SamplesError, BLOCK};
 use crate::model::{Model, State};
 use crate::motion::{Conic, Kinematics, V3};
 use crate::profile::RunUsed;
+use crate::session::sanity::StreamScan;
 use crate::session::{
-    read_manifest, run_path, Manifest, MotionSpec, ReadOptions, Row, RowReader, RunSpec, SessionError,
+    read_manifest, rows_past_end, run_path, Manifest, MotionSpec, Problem, ReadOptions, Row, RowReader, RunSpec,
+    SessionError,
 };
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -25,11 +27,25 @@ pub struct StreamRun<'a> {
     spec: &'a RunSpec,
     path: PathBuf,
     manifest: &'a Manifest,
-    /// (SHA-256, samples) once the file has been read.
-    seen: Mutex<Option<(String, usize)>>,
+    manifest_path: PathBuf,
+    /// What the first read saw.
+    seen: Mutex<Option<Seen>>,
+    /// Gaps in t are errors.
+    strict: bool,
     /// The used rows as parsed, in binary (an anonymous temporary file, written by the
     /// first read): later reads take them from here instead of parsing the text again.
     spill: Mutex<Option<std::fs::File>>,
+}
+
+/// What the first read of a run's file saw.
+#[derive(Debug, Clone, Default)]
+struct Seen {
+    sha256: String,
+    /// Rows used.
+    samples: usize,
+    /// Gaps, saturation and spikes in the file (as [`crate::session::sanity::StreamScan`]
+    /// finds them).
+    warnings: Vec<String>,
 }
 
 /// f64 values per spilled row: t, gyro x y z, accel x y z, temperature.
@@ -38,18 +54,41 @@ const SPILL_VALUES: usize = 8;
 impl<'a> StreamRun<'a> {
     /// A conic or static run of a manifest; `None` for kinds that need the whole run in
     /// memory (reference motion with a derived ε, protocol runs).
-    pub fn new(manifest_path: &Path, manifest: &'a Manifest, spec: &'a RunSpec) -> Result<Option<Self>, SessionError> {
+    /// `strict`: a gap in t is an error, not a warning.
+    pub fn new(
+        manifest_path: &Path,
+        manifest: &'a Manifest,
+        spec: &'a RunSpec,
+        strict: bool,
+    ) -> Result<Option<Self>, SessionError> {
         if !matches!(spec.motion, MotionSpec::Conic { .. } | MotionSpec::Static { .. }) {
             return Ok(None);
         }
         let path = run_path(manifest_path, spec)?;
-        Ok(Some(Self { spec, path, manifest, seen: Mutex::new(None), spill: Mutex::new(None) }))
+        Ok(Some(Self {
+            spec,
+            path,
+            manifest,
+            manifest_path: manifest_path.to_path_buf(),
+            seen: Mutex::new(None),
+            strict,
+            spill: Mutex::new(None),
+        }))
+    }
+
+    fn seen(&self) -> Seen {
+        self.seen.lock().ok().and_then(|s| s.clone()).unwrap_or_default()
     }
 
     /// What the profile records of this run (after a fit has read it).
     pub fn used(&self) -> RunUsed {
-        let (sha256, samples) = self.seen.lock().ok().and_then(|s| s.clone()).unwrap_or_default();
+        let Seen { sha256, samples, .. } = self.seen();
         RunUsed { name: self.spec.name.clone(), file: self.spec.file.clone(), sha256, samples }
+    }
+
+    /// Non-fatal findings in the run's file (after a fit has read it).
+    pub fn warnings(&self) -> Vec<String> {
+        self.seen().warnings
     }
 }
 
@@ -145,6 +184,8 @@ impl Samples for StreamRun<'_> {
         if known.is_some() {
             rdr.stop_hashing();
         }
+        // The first read checks the whole file as the in-memory reader does.
+        let mut scan = known.is_none().then(|| StreamScan::new(self.manifest.units.time.to_s()));
         // The first read spills the used rows (if no temporary file can be written, later
         // reads parse the text again).
         let mut spill = if known.is_none() {
@@ -155,6 +196,11 @@ impl Samples for StreamRun<'_> {
         let (start, end) = self.spec.rows.unwrap_or((0, usize::MAX));
         let mut k = 0usize;
         while rdr.read_row(&mut row)? {
+            if let Some(scan) = &mut scan {
+                if let Some(gap) = scan.push(rdr.line(), row.t_s, row.gyro, row.accel).filter(|_| self.strict) {
+                    return Err(gap.to_error(&self.path, rdr.t_column()));
+                }
+            }
             if k >= start && k < end {
                 if !has_temp {
                     row.temp_c = self.spec.temperature_c.unwrap_or(f64::NAN);
@@ -184,9 +230,25 @@ impl Samples for StreamRun<'_> {
             k += 1;
         }
         emit(None);
-        if known.is_none() {
+        if k == 0 {
+            return Err(SessionError::Csv {
+                problem: Problem::Empty,
+                path: self.path.clone(),
+                line: rdr.header_line(),
+                column: "-".into(),
+                msg: "the file has a header but no samples".into(),
+            });
+        }
+        if self.spec.rows.is_some_and(|(_, end)| end > k) {
+            return Err(rows_past_end(&self.manifest_path, self.spec, k));
+        }
+        if let Some(scan) = scan {
+            let (gaps, warnings) = scan.finish(&self.path.display().to_string());
+            if let Some(gap) = gaps.first().filter(|_| self.strict) {
+                return Err(gap.to_error(&self.path, rdr.t_column()));
+            }
             if let Ok(mut seen) = self.seen.lock() {
-                *seen = Some((rdr.sha256(), used));
+                *seen = Some(Seen { sha256: rdr.sha256(), samples: used, warnings });
             }
             if let Some(file) = spill.and_then(|w| w.into_inner().ok()) {
                 if let Ok(mut s) = self.spill.lock() {
@@ -207,6 +269,8 @@ pub struct StreamedFit {
     pub fit: super::Fit,
     /// The runs as the profile records them.
     pub runs: Vec<RunUsed>,
+    /// Non-fatal findings in the recordings (gaps, saturation, spikes), in run order.
+    pub warnings: Vec<String>,
 }
 
 /// Errors of [`fit_streaming`].
@@ -226,6 +290,16 @@ pub enum StreamError {
 
 /// Fits a linear model to a session read straight from its files (see the module docs).
 pub fn fit_streaming(manifest_path: &Path, model: &Model, opts: &FitOptions) -> Result<StreamedFit, StreamError> {
+    fit_streaming_with(manifest_path, model, opts, false)
+}
+
+/// [`fit_streaming`]; with `strict`, a gap in t is an error naming its line.
+pub fn fit_streaming_with(
+    manifest_path: &Path,
+    model: &Model,
+    opts: &FitOptions,
+    strict: bool,
+) -> Result<StreamedFit, StreamError> {
     if !model.nonlinear().is_empty() || opts.robust {
         return Err(StreamError::NotStreamable(
             "nonlinear effects and the robust fit need the samples in memory: fit without --stream".into(),
@@ -234,7 +308,7 @@ pub fn fit_streaming(manifest_path: &Path, model: &Model, opts: &FitOptions) -> 
     let manifest = read_manifest(manifest_path)?;
     let mut runs = Vec::with_capacity(manifest.runs.len());
     for spec in &manifest.runs {
-        match StreamRun::new(manifest_path, &manifest, spec)? {
+        match StreamRun::new(manifest_path, &manifest, spec, strict)? {
             Some(r) => runs.push(r),
             None => {
                 return Err(StreamError::NotStreamable(format!(
@@ -258,7 +332,8 @@ pub fn fit_streaming(manifest_path: &Path, model: &Model, opts: &FitOptions) -> 
         SamplesError::Estimate(e) => StreamError::Estimate(e),
     })?;
     let used = runs.iter().map(StreamRun::used).collect();
+    let warnings = runs.iter().flat_map(StreamRun::warnings).collect();
     drop(sources);
     drop(runs);
-    Ok(StreamedFit { manifest, fit, runs: used })
+    Ok(StreamedFit { manifest, fit, runs: used, warnings })
 }

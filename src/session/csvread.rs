@@ -677,7 +677,7 @@ fn read_stream<R: std::io::Read, S: std::io::Read>(
     out.reference = refc;
     out.sha256 = rows.sha256();
     let kt = units.time.to_s();
-    let gaps = find_gaps(&out.t_s, kt, path);
+    let gaps = find_gaps(&out.t_s, kt);
     if opts.strict {
         if let Some((k, first)) = gaps.first() {
             let line = reopen().and_then(|r| line_of_sample(r, *k)).unwrap_or(header_line);
@@ -690,7 +690,7 @@ fn read_stream<R: std::io::Read, S: std::io::Read>(
             ));
         }
     }
-    out.warnings = gaps.into_iter().map(|(_, w)| w).collect();
+    out.warnings = gaps.into_iter().map(|(_, w)| format!("{}: {w}", path.display())).collect();
     let findings = super::sanity::scan(&out.gyro, &out.accel);
     out.warnings.extend(super::sanity::describe(&findings, &out.t_s, &path.display().to_string()));
     Ok(out)
@@ -719,7 +719,7 @@ fn line_of_sample(input: impl std::io::Read, k: usize) -> Option<u64> {
 }
 
 /// Gaps larger than 5 median sample periods: (index of the sample after the gap, message).
-fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<(usize, String)> {
+fn find_gaps(t: &[f64], kt: f64) -> Vec<(usize, String)> {
     if t.len() < 3 {
         return Vec::new();
     }
@@ -733,8 +733,7 @@ fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<(usize, String)> {
             warnings.push((
                 i + 1,
                 format!(
-                    "{}: gap in t of {} before sample {} (t = {}): {:.1} median sample periods",
-                    path.display(),
+                    "gap in t of {} before sample {} (t = {}): {:.1} median sample periods",
                     dt / kt,
                     i + 2,
                     w[1] / kt,
@@ -742,7 +741,7 @@ fn find_gaps(t: &[f64], kt: f64, path: &Path) -> Vec<(usize, String)> {
                 ),
             ));
             if warnings.len() >= 20 {
-                warnings.push((i + 1, format!("{}: further gaps not listed", path.display())));
+                warnings.push((i + 1, "further gaps not listed".to_string()));
                 break;
             }
         }

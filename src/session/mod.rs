@@ -275,20 +275,7 @@ impl Session {
                     };
                     let whole = &cache[i].1;
                     if end > whole.len() {
-                        let (line, column) =
-                            locate(&std::fs::read_to_string(manifest_path).unwrap_or_default(), "rows");
-                        return Err(SessionError::Manifest {
-                            problem: Problem::Invalid,
-                            path: manifest_path.to_path_buf(),
-                            line,
-                            column,
-                            msg: format!(
-                                "run '{}': rows [{start}, {end}) reach past the end of {} ({} samples)",
-                                spec.name,
-                                spec.file,
-                                whole.len()
-                            ),
-                        });
+                        return Err(rows_past_end(manifest_path, spec, whole.len()));
                     }
                     whole.slice(start, end)
                 }
@@ -312,6 +299,20 @@ impl Session {
     /// Non-fatal findings of all recordings.
     pub fn warnings(&self) -> Vec<String> {
         self.runs.iter().flat_map(|r| r.rec.warnings.iter().cloned()).collect()
+    }
+}
+
+/// The error of a run whose `rows` reach past the end of its file of `len` samples (names
+/// the manifest's `rows` line).
+pub fn rows_past_end(manifest_path: &Path, spec: &RunSpec, len: usize) -> SessionError {
+    let (start, end) = spec.rows.unwrap_or((0, len));
+    let (line, column) = locate(&std::fs::read_to_string(manifest_path).unwrap_or_default(), "rows");
+    SessionError::Manifest {
+        problem: Problem::Invalid,
+        path: manifest_path.to_path_buf(),
+        line,
+        column,
+        msg: format!("run '{}': rows [{start}, {end}) reach past the end of {} ({len} samples)", spec.name, spec.file),
     }
 }
 

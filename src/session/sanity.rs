@@ -168,6 +168,22 @@ pub struct StreamGap {
     pub message: String,
 }
 
+impl StreamGap {
+    /// The error this gap is in strict mode (`t_column`: 1-based column of t).
+    pub fn to_error(&self, path: &std::path::Path, t_column: usize) -> super::SessionError {
+        super::SessionError::Csv {
+            problem: super::Problem::Gap,
+            path: path.to_path_buf(),
+            line: self.line,
+            column: format!("{t_column} (t)"),
+            msg: format!(
+                "{}; expected a gap of at most 5 sample periods (strict mode; without --strict gaps are warnings)",
+                self.message
+            ),
+        }
+    }
+}
+
 /// Flat runs at one running extreme of a channel: exact for the record's final extreme,
 /// since its value cannot occur before it is first reached.
 #[derive(Debug, Clone, Copy)]
@@ -183,8 +199,9 @@ impl Flat {
         Self { value, run: 0, samples: 0, first: None }
     }
 
-    /// Sample k with value v; `beyond(v, extreme)` says v is a new extreme.
+    /// Sample k with value v; `beyond` says v is a new extreme.
     #[allow(clippy::float_cmp)]
+    #[inline]
     fn push(&mut self, k: usize, v: f64, beyond: bool) {
         if beyond {
             *self = Self::new(v);
@@ -233,6 +250,7 @@ impl SpikeWatch {
     }
 
     /// The second difference centred on sample `j + 1`; `range` is the channel's range so far.
+    #[inline]
     fn push(&mut self, d2: f64, range: f64) {
         match self.scale {
             Some(_) => self.judge(d2, range),
@@ -259,16 +277,14 @@ impl SpikeWatch {
 
     /// Feeds the detector; decides about the previous value now that its right neighbour is
     /// known (`None`: the record ended).
+    #[inline]
     fn judge_value(&mut self, v: Option<f64>, range: f64) {
         let limit = (SPIKE_Z * self.scale.unwrap_or(0.0)).max(1e-6 * range.max(f64::MIN_POSITIVE));
         if self.seen > 0 {
             let (left, mid) = (if self.seen > 1 { self.prev[0] } else { 0.0 }, self.prev[1]);
             let right = v.unwrap_or(0.0);
             if mid > limit && mid >= left && mid >= right {
-                self.count += 1;
-                if self.at.len() < SPIKES_LISTED {
-                    self.at.push(self.seen);
-                }
+                self.record();
             }
         }
         if let Some(v) = v {
@@ -277,6 +293,16 @@ impl SpikeWatch {
         }
     }
 
+    /// Counts a spike at the detector's middle value (sample `seen`).
+    #[cold]
+    fn record(&mut self) {
+        self.count += 1;
+        if self.at.len() < SPIKES_LISTED {
+            self.at.push(self.seen);
+        }
+    }
+
+    #[inline]
     fn judge(&mut self, d2: f64, range: f64) {
         self.judge_value(Some((d2 - self.centre).abs()), range);
     }
@@ -291,16 +317,24 @@ impl SpikeWatch {
 
 /// The checks of a recording read as a stream, in fixed memory (what a unit could do as the
 /// samples arrive): gaps in t of more than 5 times the median step of the first
-/// [`STREAM_REFERENCE`] steps; saturation exactly as [`scan`]; spikes as [`scan`] but
+/// [`STREAM_REFERENCE`] steps (of all of them in shorter records, as the whole-record
+/// reader); saturation exactly as [`scan`]; spikes as [`scan`] but
 /// against the median and MAD of the first [`STREAM_REFERENCE`] second differences and the
 /// range seen so far.
 #[derive(Debug, Clone)]
 pub struct StreamScan {
+    time_unit_s: f64,
     n: usize,
     /// Stamps of the first samples (those the reference phase may name).
     first_times: Vec<f64>,
-    /// The last samples' stamps (ring of 8, for the times of findings).
-    times: [f64; 8],
+    /// The last [`TIME_RING`] samples' stamps (for the times of findings).
+    times: Box<[f64; TIME_RING]>,
+    /// Samples not yet through the channel checks, by channel.
+    cols: Box<[[f64; SCAN_BLOCK]; 6]>,
+    /// Samples in `cols`.
+    fill: usize,
+    /// Samples through the channel checks.
+    done: usize,
     /// Times of the samples findings name (sample index, t).
     named: Vec<(usize, f64)>,
     /// Steps held until the reference step is set: (sample after the step, line, step, t).
@@ -311,25 +345,28 @@ pub struct StreamScan {
     last: [[f64; 2]; 6],
     lo: [Flat; 6],
     hi: [Flat; 6],
-    spikes: Vec<SpikeWatch>,
+    spikes: [SpikeWatch; 6],
 }
 
 /// Gaps listed by position.
 const GAPS_LISTED: usize = 20;
-
-impl Default for StreamScan {
-    fn default() -> Self {
-        Self::new()
-    }
-}
+/// Samples checked a channel at a time (a block's loop keeps its state in registers).
+const SCAN_BLOCK: usize = 256;
+/// Stamps remembered (a block and the few before it that a finding may name).
+const TIME_RING: usize = 512;
 
 impl StreamScan {
-    /// A scan before the first sample.
-    pub fn new() -> Self {
+    /// A scan before the first sample; `time_unit_s`: seconds per unit of the file's t (gap
+    /// messages speak the file's unit).
+    pub fn new(time_unit_s: f64) -> Self {
         Self {
+            time_unit_s,
             n: 0,
             first_times: Vec::with_capacity(STREAM_REFERENCE + 8),
-            times: [f64::NAN; 8],
+            times: Box::new([f64::NAN; TIME_RING]),
+            cols: Box::new([[0.0; SCAN_BLOCK]; 6]),
+            fill: 0,
+            done: 0,
             named: Vec::new(),
             steps: Vec::with_capacity(STREAM_REFERENCE),
             median_step: None,
@@ -338,7 +375,7 @@ impl StreamScan {
             last: [[0.0; 2]; 6],
             lo: [Flat::new(f64::INFINITY); 6],
             hi: [Flat::new(f64::NEG_INFINITY); 6],
-            spikes: (0..6).map(|_| SpikeWatch::new()).collect(),
+            spikes: std::array::from_fn(|_| SpikeWatch::new()),
         }
     }
 
@@ -349,7 +386,7 @@ impl StreamScan {
         let k = self.n;
         let before = self.gaps.len();
         if k > 0 {
-            let step = t_s - self.times[(k - 1) % 8];
+            let step = t_s - self.times[(k - 1) % TIME_RING];
             match self.median_step {
                 Some(m) => self.judge_step(k, line, step, t_s, m),
                 None => {
@@ -360,38 +397,85 @@ impl StreamScan {
                 }
             }
         }
-        self.times[k % 8] = t_s;
+        self.times[k % TIME_RING] = t_s;
         if self.first_times.len() < self.first_times.capacity() {
             self.first_times.push(t_s);
         }
-        for c in 0..6 {
-            let v = if c < 3 { gyro[c] } else { accel[c - 3] };
-            let (above, below) = (v > self.hi[c].value, v < self.lo[c].value);
-            for (flat, beyond) in [(&mut self.hi[c], above), (&mut self.lo[c], below)] {
-                flat.push(k, v, beyond);
-                if flat.run == SATURATION_RUN && flat.first == Some(k + 1 - SATURATION_RUN) {
-                    let first = k + 1 - SATURATION_RUN;
-                    self.named.push((first, self.times[first % 8]));
-                }
-            }
-            if k >= 2 {
-                let [x0, x1] = self.last[c];
-                let range = self.hi[c].value - self.lo[c].value;
-                let listed = self.spikes[c].at.len();
-                self.spikes[c].push(x0 - 2.0 * x1 + v, range);
-                self.name_spikes(c, listed);
-            }
-            self.last[c] = [self.last[c][1], v];
+        for c in 0..3 {
+            self.cols[c][self.fill] = gyro[c];
+            self.cols[c + 3][self.fill] = accel[c];
         }
+        self.fill += 1;
         self.n += 1;
+        if self.fill == SCAN_BLOCK {
+            self.channels();
+        }
         self.gaps[before..].first()
     }
 
-    /// Stamp of sample k if it is one of the first or one of the last eight.
+    /// Saturation and spike checks of the samples in `cols`, a channel at a time.
+    fn channels(&mut self) {
+        let n = self.fill;
+        let start = self.done;
+        for c in 0..6 {
+            let listed = self.spikes[c].at.len();
+            let (mut hi, mut lo) = (self.hi[c], self.lo[c]);
+            let firsts = (hi.first, lo.first);
+            let [mut x0, mut x1] = self.last[c];
+            let col = &self.cols[c][..n];
+            let w = &mut self.spikes[c];
+            match w.scale {
+                // The detector's reference is set and it has two values: its state stays in
+                // registers for the block.
+                Some(scale) if w.seen > 1 && start >= 2 => {
+                    let (z, centre) = (SPIKE_Z * scale, w.centre);
+                    let ([mut left, mut mid], mut seen) = (w.prev, w.seen);
+                    for (i, &v) in col.iter().enumerate() {
+                        hi.push(start + i, v, v > hi.value);
+                        lo.push(start + i, v, v < lo.value);
+                        let value = (x0 - 2.0 * x1 + v - centre).abs();
+                        let limit = z.max(1e-6 * (hi.value - lo.value).max(f64::MIN_POSITIVE));
+                        if mid > limit && mid >= left && mid >= value {
+                            w.seen = seen;
+                            w.record();
+                        }
+                        (left, mid, seen) = (mid, value, seen + 1);
+                        (x0, x1) = (x1, v);
+                    }
+                    (w.prev, w.seen) = ([left, mid], seen);
+                }
+                _ => {
+                    for (i, &v) in col.iter().enumerate() {
+                        hi.push(start + i, v, v > hi.value);
+                        lo.push(start + i, v, v < lo.value);
+                        if start + i >= 2 {
+                            w.push(x0 - 2.0 * x1 + v, hi.value - lo.value);
+                        }
+                        (x0, x1) = (x1, v);
+                    }
+                }
+            }
+            (self.hi[c], self.lo[c], self.last[c]) = (hi, lo, [x0, x1]);
+            // A flat run's first sample is at most four samples before the block.
+            for (before, now) in [(firsts.0, hi.first), (firsts.1, lo.first)] {
+                if let Some(first) = now.filter(|_| now != before) {
+                    let t = self.time_at(first);
+                    self.named.push((first, t));
+                }
+            }
+            if self.spikes[c].at.len() > listed {
+                self.name_spikes(c, listed);
+            }
+        }
+        self.done += n;
+        self.fill = 0;
+    }
+
+    /// Stamp of sample k if it is one of the first or one of the last [`TIME_RING`].
     fn time_at(&self, k: usize) -> f64 {
         match self.first_times.get(k) {
             Some(t) => *t,
-            None if k + 8 > self.n => self.times[k % 8],
+            None if k + TIME_RING > self.n => self.times[k % TIME_RING],
             None => f64::NAN,
         }
     }
@@ -422,10 +506,11 @@ impl StreamScan {
                     sample: k,
                     line,
                     message: format!(
-                        "gap in t of {step} s before sample {} (t = {t_s} s): {:.1} times the median step of the first {} steps",
+                        "gap in t of {} before sample {} (t = {}): {:.1} median sample periods",
+                        step / self.time_unit_s,
                         k + 1,
-                        step / median,
-                        STREAM_REFERENCE
+                        t_s / self.time_unit_s,
+                        step / median
                     ),
                 });
             }
@@ -435,6 +520,7 @@ impl StreamScan {
     /// Ends the record: the gaps (in order) and the warnings, each message prefixed with
     /// `file`.
     pub fn finish(mut self, file: &str) -> (Vec<StreamGap>, Vec<String>) {
+        self.channels();
         if self.median_step.is_none() && self.steps.len() >= 2 {
             self.set_step();
         }
@@ -468,7 +554,7 @@ impl StreamScan {
         let time_of = |k: usize| named.iter().rev().find(|(j, _)| *j == k).map_or(f64::NAN, |(_, t)| *t);
         let mut warnings: Vec<String> = self.gaps.iter().map(|g| format!("{file}: {}", g.message)).collect();
         if self.gaps_total > self.gaps.len() {
-            warnings.push(format!("{file}: further gaps not listed ({} in all)", self.gaps_total));
+            warnings.push(format!("{file}: further gaps not listed"));
         }
         warnings.extend(describe_with(&findings, &time_of, file));
         (self.gaps, warnings)
@@ -518,7 +604,7 @@ mod tests {
     }
 
     fn stream(g: &[[f64; 3]], a: &[[f64; 3]], t: &[f64]) -> (Vec<StreamGap>, Vec<String>) {
-        let mut s = StreamScan::new();
+        let mut s = StreamScan::new(1.0);
         for k in 0..t.len() {
             s.push(k as u64 + 2, t[k], g[k], a[k]);
         }
