@@ -230,7 +230,7 @@ struct SpikeWatch {
     scale: Option<f64>,
     /// |d2 − centre| of the last two second differences seen by the detector.
     prev: [f64; 2],
-    /// Index (of the detector's input) of the newest.
+    /// Values seen (the newest's index + 1; a decided middle value's sample index).
     seen: usize,
     count: usize,
     at: Vec<usize>,
