@@ -145,7 +145,11 @@ fn fit_vs_peer(table: &mut Table, sizes: &[usize]) {
         report(
             table,
             format!("`fit` vs `benches/peer/fit_numpy.py` (pandas + numpy), 10 runs, {n:.0e} samples"),
-            format!("{tc:.2} s / {mc:.0} MB; peer {tp:.2} s / {mp:.0} MB: {:.1}× faster, {:.2}× the memory", tp / tc, mc / mp),
+            format!(
+                "{tc:.2} s / {mc:.0} MB; peer {tp:.2} s / {mp:.0} MB: {:.1}× faster, {:.2}× the memory",
+                tp / tc,
+                mc / mp
+            ),
         );
         let _ = std::fs::remove_dir_all(&dir);
     }

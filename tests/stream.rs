@@ -17,6 +17,15 @@ fn rel(p: f64, q: f64) -> f64 {
     }
 }
 
+/// The paper's unit with the paper's noise on conic runs at `rates_deg_s` (cone 10°).
+fn noisy_cones(rates_deg_s: &[f64], mounts: usize, duration_s: f64) -> SimConfig {
+    let mut c = SimConfig::paper();
+    c.runs = conic_plan(rates_deg_s, &[10.0], &cyclic_mounts(mounts), duration_s);
+    c.gyro_noise_deg_s = 0.002;
+    c.accel_noise_g = 2e-5;
+    c
+}
+
 fn same(a: &Fit, b: &Fit) -> f64 {
     let mut worst: f64 = 0.0;
     for (sa, sb) in [(&a.gyro, &b.gyro), (&a.accel, &b.accel)] {
@@ -99,11 +108,8 @@ fn read_back(text: &str) -> (String, Vec<Vec<f64>>) {
 fn csv_correction_streams_the_same_bits_as_the_in_memory_corrector() {
     use crosscal::correct::{correct_csv_streaming, correct_streaming, Calibration, OutputScale, StreamCsvOptions};
     use crosscal::session::{parse_recording, ReadOptions};
-    let mut c = SimConfig::paper();
     // 2500 samples a run: two full blocks of the streamed corrector and a partial one.
-    c.runs = conic_plan(&[10.0, -20.0], &[10.0], &cyclic_mounts(2), 25.0);
-    c.gyro_noise_deg_s = 0.002;
-    c.accel_noise_g = 2e-5;
+    let mut c = noisy_cones(&[10.0, -20.0], 2, 25.0);
     let tmp = tempfile::tempdir().unwrap();
     let plain = write_session(&c.generate(), &tmp.path().join("plain")).unwrap();
     c.temperature_c = Some((20.0, 30.0));
@@ -173,52 +179,24 @@ fn csv_correction_reports_gaps_and_refuses_them_in_strict_mode() {
     }
     let path = std::path::Path::new("gappy.csv");
     let scale = OutputScale { time: 1.0, gyro: 1.0, accel: 1.0 };
-    let mut out = Vec::new();
-    let s = correct_csv_streaming(
-        path,
-        text.as_bytes(),
-        &mut out,
-        &cal,
-        &Units::default(),
-        9.80665,
-        StreamCsvOptions { scale, strict: false },
-    )
-    .unwrap();
+    let run = |text: &str, strict: bool| {
+        let opts = StreamCsvOptions { scale, strict };
+        correct_csv_streaming(path, text.as_bytes(), &mut Vec::new(), &cal, &Units::default(), 9.80665, opts)
+    };
+    let s = run(&text, false).unwrap();
     assert_eq!(s.samples, 200);
     assert!(s.warnings.iter().any(|w| w.contains("gap in t") && w.contains("before sample 121")), "{:?}", s.warnings);
-    let e = correct_csv_streaming(
-        path,
-        text.as_bytes(),
-        &mut Vec::new(),
-        &cal,
-        &Units::default(),
-        9.80665,
-        StreamCsvOptions { scale, strict: true },
-    )
-    .unwrap_err();
-    match e {
+    match run(&text, true).unwrap_err() {
         StreamCsvError::Read(SessionError::Csv { problem: Problem::Gap, line, .. }) => assert_eq!(line, 122),
         other => panic!("{other}"),
     }
-    let e = correct_csv_streaming(
-        path,
-        "t,gx,gy,gz,ax,ay,az\n".as_bytes(),
-        &mut Vec::new(),
-        &cal,
-        &Units::default(),
-        9.80665,
-        StreamCsvOptions { scale, strict: false },
-    )
-    .unwrap_err();
+    let e = run("t,gx,gy,gz,ax,ay,az\n", false).unwrap_err();
     assert!(e.to_string().contains("gappy.csv:1:") && e.to_string().contains("no samples"), "{e}");
 }
 
 #[test]
 fn streamed_fit_warns_as_the_in_memory_reader_and_refuses_gaps_when_strict() {
-    let mut c = SimConfig::paper();
-    c.runs = conic_plan(&[10.0, -20.0], &[10.0], &cyclic_mounts(1), 12.0);
-    c.gyro_noise_deg_s = 0.002;
-    c.accel_noise_g = 2e-5;
+    let c = noisy_cones(&[10.0, -20.0], 1, 12.0);
     let tmp = tempfile::tempdir().unwrap();
     let manifest = write_session(&c.generate(), tmp.path()).unwrap();
     // In the first run: a spike in gy (line 402), az clipped at its maximum, stamps shifted
