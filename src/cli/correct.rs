@@ -94,14 +94,16 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         accel: if units.accel == AccelUnit::Raw { AccelUnit::G } else { units.accel },
         time: units.time,
     };
-    let kg = 1.0 / out_units.gyro.to_rad_s();
-    let ka = 1.0 / out_units.accel.to_m_s2(profile.g_m_s2);
-    let kt = 1.0 / units.time.to_s();
+    let scale = OutputScale {
+        time: 1.0 / units.time.to_s(),
+        gyro: 1.0 / out_units.gyro.to_rad_s(),
+        accel: 1.0 / out_units.accel.to_m_s2(profile.g_m_s2),
+    };
     if matches!(a.mode, ModeArg::Streaming) {
         if a.resample {
             anyhow::bail!("--resample needs the whole record: use it with --mode offline");
         }
-        return run_streaming(&a, &profile, &cal, &units, out_units, OutputScale { time: kt, gyro: kg, accel: ka });
+        return run_streaming(&a, &profile, &cal, &units, out_units, scale);
     }
     let bytes = std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
     let rec = parse_recording(
@@ -127,29 +129,13 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let has_flags = !corrected.flags.is_empty();
     let offset = corrected.time_offset_s;
     crosscal::atomic::write_atomic(&a.output, a.force, |w| {
-        writeln!(
-            w,
-            "t,gx,gy,gz,ax,ay,az{}{}",
-            if has_temp { ",temp" } else { "" },
-            if has_flags { ",flags" } else { "" }
-        )?;
+        writeln!(w, "{}", OutputScale::header(has_temp, has_flags))?;
         let mut line = CsvLine::new();
         for k in 0..run.rec.len() {
-            let (g, ac) = (corrected.w_rad_s[k], corrected.a_m_s2[k]);
-            line.float((run.rec.t_s[k] - offset) * kt);
-            for v in g {
-                line.float(v * kg);
-            }
-            for v in ac {
-                line.float(v * ka);
-            }
-            if let Some(t) = &run.rec.temp_c {
-                line.float(t[k]);
-            }
-            if has_flags {
-                line.uint(corrected.flags[k].into());
-            }
-            line.write_to(w)?;
+            let temp = run.rec.temp_c.as_ref().map(|t| t[k]);
+            let flag = has_flags.then(|| corrected.flags[k]);
+            let (t, g, ac) = (run.rec.t_s[k], corrected.w_rad_s[k], corrected.a_m_s2[k]);
+            scale.write_row(&mut line, w, t, offset, g, ac, temp, flag)?;
         }
         Ok(())
     })

@@ -21,6 +21,43 @@ pub struct OutputScale {
     pub accel: f64,
 }
 
+impl OutputScale {
+    /// The header of a corrected recording.
+    pub fn header(has_temp: bool, has_flags: bool) -> String {
+        format!("t,gx,gy,gz,ax,ay,az{}{}", if has_temp { ",temp" } else { "" }, if has_flags { ",flags" } else { "" })
+    }
+
+    /// Writes one corrected sample (SI) as a row: t − `time_offset_s`, ω, a, then the
+    /// temperature and the flags when given.
+    #[allow(clippy::too_many_arguments)]
+    pub fn write_row(
+        &self,
+        line: &mut CsvLine,
+        out: &mut impl Write,
+        t_s: f64,
+        time_offset_s: f64,
+        w_rad_s: [f64; 3],
+        a_m_s2: [f64; 3],
+        temp_c: Option<f64>,
+        flags: Option<u8>,
+    ) -> std::io::Result<()> {
+        line.float((t_s - time_offset_s) * self.time);
+        for v in w_rad_s {
+            line.float(v * self.gyro);
+        }
+        for v in a_m_s2 {
+            line.float(v * self.accel);
+        }
+        if let Some(t) = temp_c {
+            line.float(t);
+        }
+        if let Some(f) = flags {
+            line.uint(f.into());
+        }
+        line.write_to(out)
+    }
+}
+
 /// Settings of [`correct_csv_streaming`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StreamCsvOptions {
@@ -86,12 +123,7 @@ pub fn correct_csv_streaming(
     let per_sample = has_temp || has_flags;
     let time_offset_s = cal.lag_s();
     let mut corrector = Streaming::new(cal.clone());
-    writeln!(
-        out,
-        "t,gx,gy,gz,ax,ay,az{}{}",
-        if has_temp { ",temp" } else { "" },
-        if has_flags { ",flags" } else { "" }
-    )?;
+    writeln!(out, "{}", OutputScale::header(has_temp, has_flags))?;
     let mut scan = StreamScan::new(units.time.to_s());
     let (mut t, mut gyro, mut accel, mut temp) =
         (Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK));
@@ -123,21 +155,9 @@ pub fn correct_csv_streaming(
             corrector.push_block(&t, &gyro, &accel, &mut w_out, &mut a_out);
         }
         for k in 0..n {
-            line.float((t[k] - time_offset_s) * scale.time);
-            for v in w_out[k] {
-                line.float(v * scale.gyro);
-            }
-            for v in a_out[k] {
-                line.float(v * scale.accel);
-            }
-            if has_temp {
-                line.float(temp[k]);
-            }
-            if has_flags {
-                line.uint(flags[k].into());
-                flagged += usize::from(flags[k] != 0);
-            }
-            line.write_to(out)?;
+            let (temp, flag) = (has_temp.then_some(temp[k]), has_flags.then_some(flags[k]));
+            scale.write_row(&mut line, out, t[k], time_offset_s, w_out[k], a_out[k], temp, flag)?;
+            flagged += usize::from(flag.unwrap_or(0) != 0);
         }
         samples += n;
         if n < BLOCK {
