@@ -192,11 +192,13 @@ struct Flat {
     run: usize,
     samples: usize,
     first: Option<usize>,
+    /// The stamp of sample `first`.
+    first_t: f64,
 }
 
 impl Flat {
     fn new(value: f64) -> Self {
-        Self { value, run: 0, samples: 0, first: None }
+        Self { value, run: 0, samples: 0, first: None, first_t: f64::NAN }
     }
 
     /// Sample k with value v; `beyond` says v is a new extreme.
@@ -335,7 +337,8 @@ pub struct StreamScan {
     fill: usize,
     /// Samples through the channel checks.
     done: usize,
-    /// Times of the samples findings name (sample index, t).
+    /// Times of the spikes listed and of the flat tops found (sample index, t): at most ten
+    /// spikes and one flat top per channel.
     named: Vec<(usize, f64)>,
     /// Steps held until the reference step is set: (sample after the step, line, step, t).
     steps: Vec<(usize, u64, f64, f64)>,
@@ -455,14 +458,13 @@ impl StreamScan {
                     }
                 }
             }
-            (self.hi[c], self.lo[c], self.last[c]) = (hi, lo, [x0, x1]);
             // A flat run's first sample is at most four samples before the block.
-            for (before, now) in [(firsts.0, hi.first), (firsts.1, lo.first)] {
-                if let Some(first) = now.filter(|_| now != before) {
-                    let t = self.time_at(first);
-                    self.named.push((first, t));
+            for (f, before) in [(&mut hi, firsts.0), (&mut lo, firsts.1)] {
+                if let Some(first) = f.first.filter(|_| f.first != before) {
+                    f.first_t = self.time_at(first);
                 }
             }
+            (self.hi[c], self.lo[c], self.last[c]) = (hi, lo, [x0, x1]);
             if self.spikes[c].at.len() > listed {
                 self.name_spikes(c, listed);
             }
@@ -534,15 +536,9 @@ impl StreamScan {
             }
             let name = CHANNELS[c];
             if self.n >= SATURATION_RUN && range > 0.0 {
-                if let Some(f) = [self.hi[c], self.lo[c]].iter().find_map(|f| {
-                    f.first.map(|first| Finding::Saturation {
-                        channel: name,
-                        value: f.value,
-                        samples: f.samples,
-                        first,
-                    })
-                }) {
-                    findings.push(f);
+                if let Some((f, first)) = [self.hi[c], self.lo[c]].into_iter().find_map(|f| f.first.map(|k| (f, k))) {
+                    self.named.push((first, f.first_t));
+                    findings.push(Finding::Saturation { channel: name, value: f.value, samples: f.samples, first });
                 }
             }
             let w = &self.spikes[c];
@@ -665,5 +661,26 @@ mod tests {
             "{all}"
         );
         assert_eq!(warnings.len(), 5, "{all}");
+    }
+
+    #[test]
+    fn the_stream_scan_keeps_fixed_memory_on_a_rising_staircase() {
+        // Every new maximum is held for six samples: a flat top at each step, but only the
+        // last is the record's extreme.
+        let mut s = StreamScan::new(1.0);
+        let n = 120_000;
+        for k in 0..n {
+            let v = (k / 6) as f64 * 1e-3;
+            s.push(k as u64 + 2, k as f64 * 0.01, [v, 0.1 * ((k % 7) as f64), 0.3], [0.0, 0.0, 1.0]);
+        }
+        assert!(s.named.len() <= 10 * 6, "{}", s.named.len());
+        assert!(s.first_times.len() <= STREAM_REFERENCE + 8);
+        let (_, warnings) = s.finish("f.csv");
+        let top = warnings.iter().find(|w| w.contains("channel gx looks saturated")).expect("flat top");
+        assert!(
+            top.contains("6 samples")
+                && top.contains(&format!("sample {} (t = {} s)", n - 6 + 1, (n - 6) as f64 * 0.01)),
+            "{top}"
+        );
     }
 }
