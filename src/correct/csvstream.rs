@@ -3,7 +3,7 @@
 
 use super::{Calibration, CorrectError, Streaming};
 use crate::session::sanity::StreamScan;
-use crate::session::{CsvLine, Problem, ReadOptions, Row, RowReader, SessionError, Units};
+use crate::session::{CsvLine, ReadOptions, Row, RowReader, SessionError, Units};
 use std::io::{Read, Write};
 use std::path::Path;
 
@@ -165,14 +165,7 @@ pub fn correct_csv_streaming(
         }
     }
     if samples == 0 {
-        return Err(SessionError::Csv {
-            problem: Problem::Empty,
-            path: path.to_path_buf(),
-            line: rdr.header_line(),
-            column: "-".into(),
-            msg: "the file has a header but no samples".into(),
-        }
-        .into());
+        return Err(rdr.no_samples().into());
     }
     let (gaps, warnings) = scan.finish(&path.display().to_string());
     // A record shorter than the scan's reference has its steps judged only now.

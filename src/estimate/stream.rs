@@ -16,8 +16,7 @@ use crate::motion::{Conic, Kinematics, V3};
 use crate::profile::RunUsed;
 use crate::session::sanity::StreamScan;
 use crate::session::{
-    read_manifest, rows_past_end, run_path, Manifest, MotionSpec, Problem, ReadOptions, Row, RowReader, RunSpec,
-    SessionError,
+    read_manifest, rows_past_end, run_path, Manifest, MotionSpec, ReadOptions, Row, RowReader, RunSpec, SessionError,
 };
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -231,13 +230,7 @@ impl Samples for StreamRun<'_> {
         }
         emit(None);
         if k == 0 {
-            return Err(SessionError::Csv {
-                problem: Problem::Empty,
-                path: self.path.clone(),
-                line: rdr.header_line(),
-                column: "-".into(),
-                msg: "the file has a header but no samples".into(),
-            });
+            return Err(rdr.no_samples());
         }
         if self.spec.rows.is_some_and(|(_, end)| end > k) {
             return Err(rows_past_end(&self.manifest_path, self.spec, k));

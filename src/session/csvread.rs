@@ -461,6 +461,11 @@ impl<R: std::io::Read> RowReader<R> {
         self.header_line
     }
 
+    /// The error of a file with a header and no samples (names the header's line).
+    pub fn no_samples(&self) -> SessionError {
+        csv_err(Problem::Empty, &self.path, self.header_line, "-", "the file has a header but no samples")
+    }
+
     /// Whether the file has a `temp` column.
     pub fn has_temp(&self) -> bool {
         self.temp_idx.is_some()
@@ -672,7 +677,7 @@ fn read_stream<R: std::io::Read, S: std::io::Read>(
     }
     let header_line = rows.header_line();
     if out.t_s.is_empty() {
-        return Err(csv_err(Problem::Empty, path, header_line, "-", "the file has a header but no samples"));
+        return Err(rows.no_samples());
     }
     out.reference = refc;
     out.sha256 = rows.sha256();
