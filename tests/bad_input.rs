@@ -81,6 +81,12 @@ macro_rules! bad_csv_case {
 
 bad_csv_case!(empty_file, |d| edit_csv(d, |_| String::new()), 4, ["cone+10.csv:1", "empty"]);
 bad_csv_case!(
+    header_only,
+    |d| edit_csv(d, |t| t.lines().next().unwrap_or_default().to_string() + "\n"),
+    4,
+    ["cone+10.csv:1:", "no samples"]
+);
+bad_csv_case!(
     header_missing,
     |d| edit_csv(d, |t| t.lines().skip(1).collect::<Vec<_>>().join("\n")),
     5,
