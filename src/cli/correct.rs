@@ -5,7 +5,9 @@ use anyhow::Context;
 use crosscal::correct::{correct_csv_streaming, Calibration, OutputScale, StreamCsvError, StreamCsvOptions};
 use crosscal::pipeline::{correct_run, Mode};
 use crosscal::profile::Profile;
-use crosscal::session::{parse_recording, AccelUnit, CsvLine, GyroUnit, MotionSpec, ReadOptions, Run, RunSpec, Units};
+use crosscal::session::{
+    parse_recording, recording_header, AccelUnit, CsvLine, GyroUnit, MotionSpec, ReadOptions, Run, RunSpec, Units,
+};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -129,13 +131,13 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let has_flags = !corrected.flags.is_empty();
     let offset = corrected.time_offset_s;
     crosscal::atomic::write_atomic(&a.output, a.force, |w| {
-        writeln!(w, "{}", OutputScale::header(has_temp, has_flags))?;
+        writeln!(w, "{}", recording_header(has_temp, has_flags))?;
         let mut line = CsvLine::new();
         for k in 0..run.rec.len() {
             let temp = run.rec.temp_c.as_ref().map(|t| t[k]);
             let flag = has_flags.then(|| corrected.flags[k]);
             let (t, g, ac) = (run.rec.t_s[k], corrected.w_rad_s[k], corrected.a_m_s2[k]);
-            scale.write_row(&mut line, w, t, offset, g, ac, temp, flag)?;
+            line.sample(t - offset, g, ac, scale.factors(), temp, flag).write_to(w)?;
         }
         Ok(())
     })

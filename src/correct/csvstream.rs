@@ -3,7 +3,7 @@
 
 use super::{Calibration, CorrectError, Streaming};
 use crate::session::sanity::StreamScan;
-use crate::session::{CsvLine, ReadOptions, Row, RowReader, SessionError, Units};
+use crate::session::{recording_header, CsvLine, ReadOptions, Row, RowReader, SessionError, Units};
 use std::io::{Read, Write};
 use std::path::Path;
 
@@ -22,39 +22,9 @@ pub struct OutputScale {
 }
 
 impl OutputScale {
-    /// The header of a corrected recording.
-    pub fn header(has_temp: bool, has_flags: bool) -> String {
-        format!("t,gx,gy,gz,ax,ay,az{}{}", if has_temp { ",temp" } else { "" }, if has_flags { ",flags" } else { "" })
-    }
-
-    /// Writes one corrected sample (SI) as a row: t − `time_offset_s`, ω, a, then the
-    /// temperature and the flags when given.
-    #[allow(clippy::too_many_arguments)]
-    pub fn write_row(
-        &self,
-        line: &mut CsvLine,
-        out: &mut impl Write,
-        t_s: f64,
-        time_offset_s: f64,
-        w_rad_s: [f64; 3],
-        a_m_s2: [f64; 3],
-        temp_c: Option<f64>,
-        flags: Option<u8>,
-    ) -> std::io::Result<()> {
-        line.float((t_s - time_offset_s) * self.time);
-        for v in w_rad_s {
-            line.float(v * self.gyro);
-        }
-        for v in a_m_s2 {
-            line.float(v * self.accel);
-        }
-        if let Some(t) = temp_c {
-            line.float(t);
-        }
-        if let Some(f) = flags {
-            line.uint(f.into());
-        }
-        line.write_to(out)
+    /// The factors as [time, gyro, accel] (for [`CsvLine::sample`]).
+    pub fn factors(&self) -> [f64; 3] {
+        [self.time, self.gyro, self.accel]
     }
 }
 
@@ -123,7 +93,7 @@ pub fn correct_csv_streaming(
     let per_sample = has_temp || has_flags;
     let time_offset_s = cal.lag_s();
     let mut corrector = Streaming::new(cal.clone());
-    writeln!(out, "{}", OutputScale::header(has_temp, has_flags))?;
+    writeln!(out, "{}", recording_header(has_temp, has_flags))?;
     let mut scan = StreamScan::new(units.time.to_s());
     let (mut t, mut gyro, mut accel, mut temp) =
         (Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK));
@@ -156,7 +126,7 @@ pub fn correct_csv_streaming(
         }
         for k in 0..n {
             let (temp, flag) = (has_temp.then_some(temp[k]), has_flags.then_some(flags[k]));
-            scale.write_row(&mut line, out, t[k], time_offset_s, w_out[k], a_out[k], temp, flag)?;
+            line.sample(t[k] - time_offset_s, w_out[k], a_out[k], scale.factors(), temp, flag).write_to(out)?;
             flagged += usize::from(flag.unwrap_or(0) != 0);
         }
         samples += n;

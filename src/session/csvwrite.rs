@@ -38,6 +38,33 @@ impl CsvLine {
         self
     }
 
+    /// Appends one sample's fields: t, gyro x y z, accel x y z, each times its factor in
+    /// `scale` = [time, gyro, accel], then the temperature and the flags when given.
+    pub fn sample(
+        &mut self,
+        t: f64,
+        gyro: [f64; 3],
+        accel: [f64; 3],
+        scale: [f64; 3],
+        temp: Option<f64>,
+        flags: Option<u8>,
+    ) -> &mut Self {
+        self.float(t * scale[0]);
+        for v in gyro {
+            self.float(v * scale[1]);
+        }
+        for v in accel {
+            self.float(v * scale[2]);
+        }
+        if let Some(t) = temp {
+            self.float(t);
+        }
+        if let Some(f) = flags {
+            self.uint(f.into());
+        }
+        self
+    }
+
     /// Writes the line and a `\n`, and empties it for the next row.
     pub fn write_to(&mut self, w: &mut impl Write) -> std::io::Result<()> {
         self.line.push(b'\n');
@@ -45,6 +72,11 @@ impl CsvLine {
         self.line.clear();
         r
     }
+}
+
+/// The header of a recording (`t,gx,gy,gz,ax,ay,az`, then `temp` and `flags` when present).
+pub fn recording_header(has_temp: bool, has_flags: bool) -> String {
+    format!("t,gx,gy,gz,ax,ay,az{}{}", if has_temp { ",temp" } else { "" }, if has_flags { ",flags" } else { "" })
 }
 
 /// A recording as CSV text (`t,gx,gy,gz,ax,ay,az[,temp]`), the gyro and accelerometer
@@ -57,21 +89,14 @@ pub fn recording_csv(
     scale: [f64; 2],
 ) -> Vec<u8> {
     let mut text = Vec::with_capacity(t_s.len() * 128 + 32);
-    text.extend_from_slice(if temp_c.is_some() { b"t,gx,gy,gz,ax,ay,az,temp\n" } else { b"t,gx,gy,gz,ax,ay,az\n" });
+    text.extend_from_slice(recording_header(temp_c.is_some(), false).as_bytes());
+    text.push(b'\n');
     let mut line = CsvLine::new();
     for (k, t) in t_s.iter().enumerate() {
-        line.float(*t);
-        for v in gyro.get(k).copied().unwrap_or([f64::NAN; 3]) {
-            line.float(v * scale[0]);
-        }
-        for v in accel.get(k).copied().unwrap_or([f64::NAN; 3]) {
-            line.float(v * scale[1]);
-        }
-        if let Some(temp) = temp_c {
-            line.float(temp.get(k).copied().unwrap_or(f64::NAN));
-        }
+        let (g, a) = (gyro.get(k).copied().unwrap_or([f64::NAN; 3]), accel.get(k).copied().unwrap_or([f64::NAN; 3]));
+        let temp = temp_c.map(|tc| tc.get(k).copied().unwrap_or(f64::NAN));
         // Writing to memory cannot fail.
-        let _ = line.write_to(&mut text);
+        let _ = line.sample(*t, g, a, [1.0, scale[0], scale[1]], temp, None).write_to(&mut text);
     }
     text
 }

@@ -15,7 +15,7 @@ pub mod units;
 pub use csvread::{
     parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
 };
-pub use csvwrite::{recording_csv, CsvLine};
+pub use csvwrite::{recording_csv, recording_header, CsvLine};
 pub use error::{Problem, SessionError};
 pub use units::{AccelUnit, GyroUnit, TimeUnit, Units};
 
