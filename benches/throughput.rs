@@ -57,7 +57,7 @@ fn noise(table: &mut Table) {
 
 /// Batch calibration of 16 units with one worker and with two: the parallel speed-up.
 fn batch(table: &mut Table) {
-    use crosscal::batch::{run, unit_dirs, BatchOptions};
+    use crosscal::app::batch::{run, unit_dirs, BatchOptions};
     use crosscal::simulate::{conic_plan, cyclic_mounts, write_session, SimConfig};
     let tmp = tempfile::tempdir().expect("temp dir");
     let lot = tmp.path().join("lot");
@@ -193,7 +193,8 @@ fn noise_1e8(table: &mut Table) {
 /// CSV parsing (one core, in memory) and streaming correction (gyro + accelerometer with
 /// ε estimation, in memory) of the paper's session.
 fn parse_and_correct(table: &mut Table) {
-    use crosscal::session::{parse_recording, ReadOptions, Units};
+    use crosscal::session::{parse_recording, ReadOptions};
+    use crosscal::units::Units;
     let mut c = crosscal::simulate::SimConfig::paper();
     c.gyro_noise_deg_s = 0.002;
     c.accel_noise_g = 2e-5;
@@ -227,9 +228,11 @@ fn parse_and_correct(table: &mut Table) {
         ),
         format!("{:.0} MB/s ({:.1} M rows/s)", (reps * one.len()) as f64 / secs / 1e6, n as f64 / secs / 1e6),
     );
-    let f = crosscal::pipeline::fit_session(&session, &crosscal::model::Model::default_model(), &Default::default())
-        .expect("fit");
-    let cal = crosscal::pipeline::calibration_of(&crosscal::model::Model::default_model(), &f).expect("calibration");
+    let f =
+        crosscal::app::pipeline::fit_session(&session, &crosscal::model::Model::default_model(), &Default::default())
+            .expect("fit");
+    let cal =
+        crosscal::app::pipeline::calibration_of(&crosscal::model::Model::default_model(), &f).expect("calibration");
     // The corrector as a streaming user drives it: caller-owned buffers, no allocation.
     let longest = session.runs.iter().map(|r| r.rec.len()).max().unwrap_or(0);
     let (mut w_out, mut a_out) = (vec![[0.0; 3]; longest], vec![[0.0; 3]; longest]);
@@ -284,8 +287,8 @@ fn correct_csv(table: &mut Table) {
     let session = c.generate();
     let manifest = write_session(&session, &tmp.path().join("s")).expect("write session");
     let model = crosscal::model::Model::default_model();
-    let fit = crosscal::pipeline::fit_session(&session, &model, &Default::default()).expect("fit");
-    let cal = crosscal::pipeline::calibration_of(&model, &fit).expect("calibration");
+    let fit = crosscal::app::pipeline::fit_session(&session, &model, &Default::default()).expect("fit");
+    let cal = crosscal::app::pipeline::calibration_of(&model, &fit).expect("calibration");
     let profile = crosscal::profile::Profile::from_fit(&session, &model, fit, Vec::new());
     let profile_path = tmp.path().join("profile.json");
     std::fs::write(&profile_path, profile.to_json()).expect("profile");

@@ -9,17 +9,20 @@
 //! Conventions: sensor frame, SI units inside (rad/s, rad/s², m/s², s); forward models
 //! `u = f(true)`; matrices row-major (`C[i][j]` is the weight of input j in output i).
 
+pub mod app;
 pub mod atomic;
-pub mod batch;
 pub mod check;
 pub mod correct;
 pub mod diagnose;
 pub mod estimate;
+pub mod frames;
+pub mod html;
 pub mod model;
 pub mod motion;
 pub mod noise;
-pub mod pipeline;
 pub mod plan;
 pub mod profile;
 pub mod session;
 pub mod simulate;
+pub mod stats;
+pub mod units;

@@ -12,11 +12,12 @@
 //! fewest coefficients unidentifiable, then the smallest worst error, then the shortest.
 
 use crate::estimate::{fit, CoefStatus, Correlation, EstimateError, Fit, FitOptions, Unidentifiable};
-use crate::model::{Model, SensorKind};
+use crate::estimate::{fit_runs, tracks};
+use crate::model::Model;
 use crate::motion::DerivativeConfig;
-use crate::pipeline::{fit_runs, tracks};
 use crate::session::MotionSpec;
 use crate::simulate::{RunPlan, SimConfig};
+use crate::units::SensorKind;
 use serde::Serialize;
 
 /// A proposed calibration: runs, sample rate and the sensor's white noise.

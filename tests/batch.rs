@@ -1,7 +1,7 @@
 //! Production batches: per-unit verdicts with reasons, batch outliers, interruption safety.
 
 use crate::common::run_in;
-use crosscal::batch::{BatchReport, Verdict};
+use crosscal::app::batch::{BatchReport, Verdict};
 use crosscal::simulate::{conic_plan, cyclic_mounts, write_session, SimConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -89,7 +89,7 @@ fn report(dir: &Path) -> BatchReport {
     serde_json::from_str(&std::fs::read_to_string(dir.join("batch-report.json")).unwrap()).unwrap()
 }
 
-fn folder(u: &crosscal::batch::UnitResult) -> String {
+fn folder(u: &crosscal::app::batch::UnitResult) -> String {
     u.dir.file_name().unwrap().to_string_lossy().into_owned()
 }
 

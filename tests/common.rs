@@ -1,9 +1,9 @@
 //! Shared helpers.
 
+use crosscal::app::pipeline::fit_session;
 use crosscal::correct::Calibration;
 use crosscal::estimate::{Fit, FitOptions};
 use crosscal::model::Model;
-use crosscal::pipeline::fit_session;
 use crosscal::profile::Profile;
 use crosscal::session::Session;
 

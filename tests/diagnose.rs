@@ -2,9 +2,9 @@
 
 use crosscal::diagnose::{channel_reports, diagnose, residuals, Diagnosis, Verdict};
 use crosscal::estimate::FitOptions;
+use crosscal::estimate::{fit_runs, tracks};
 use crosscal::model::Model;
 use crosscal::motion::DerivativeConfig;
-use crosscal::pipeline::{fit_runs, tracks};
 use crosscal::session::{MotionSpec, Session};
 use crosscal::simulate::SimConfig;
 
@@ -54,8 +54,8 @@ fn discovers(effect: &str, values: &[(&str, f64)]) {
     let before: Vec<_> = d.channels.iter().filter(|c| c.sensor == sensor).collect();
     let after: Vec<_> = d.steps.last().unwrap().channels.iter().filter(|c| c.sensor == sensor).collect();
     let noise = match sensor {
-        crosscal::model::SensorKind::Gyro => cfg.gyro_noise_deg_s * DEG,
-        crosscal::model::SensorKind::Accel => cfg.accel_noise_g * G,
+        crosscal::units::SensorKind::Gyro => cfg.gyro_noise_deg_s * DEG,
+        crosscal::units::SensorKind::Accel => cfg.accel_noise_g * G,
     };
     for a in &after {
         assert!(
@@ -81,7 +81,7 @@ fn discovers(effect: &str, values: &[(&str, f64)]) {
     // Coefficients of the added effect within 4 standard errors of truth.
     let mut m = Model::default_model();
     m.add_effect(effect).unwrap();
-    let f = crosscal::pipeline::fit_session(&s, &m, &FitOptions::default()).unwrap();
+    let f = crosscal::app::pipeline::fit_session(&s, &m, &FitOptions::default()).unwrap();
     let mut checked = 0;
     for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients).filter(|c| c.effect == effect) {
         let t = cfg.truth.value(&c.name).unwrap();
@@ -106,7 +106,7 @@ fn discovers_time_delay_of_5_ms() {
     let (_, s) = hidden("time-delay", &[("time_delay", 0.005)], 3);
     let mut m = Model::default_model();
     m.add_effect("time-delay").unwrap();
-    let f = crosscal::pipeline::fit_session(&s, &m, &FitOptions::default()).unwrap();
+    let f = crosscal::app::pipeline::fit_session(&s, &m, &FitOptions::default()).unwrap();
     let tau = f.nonlinear[0].value;
     assert!((tau - 0.005).abs() < 2e-4, "τ = {tau}");
 }

@@ -1,9 +1,9 @@
 //! The committed fixtures are what `crosscal simulate` makes, and they fit to truth.
 
 use crate::common::run_in;
+use crosscal::app::pipeline::fit_session;
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
-use crosscal::pipeline::fit_session;
 use crosscal::session::Session;
 use crosscal::simulate::UnitTruth;
 use std::path::Path;

@@ -1,12 +1,14 @@
 //! Property tests: the readers never panic on arbitrary or mutated input (≥ 100,000 cases
 //! per CI run), and simulate → fit recovers random units within their uncertainty.
 
+use crosscal::app::pipeline::fit_session;
 use crosscal::estimate::FitOptions;
-use crosscal::model::{Model, SensorKind};
-use crosscal::pipeline::fit_session;
+use crosscal::model::Model;
 use crosscal::profile::Profile;
-use crosscal::session::{parse_manifest, parse_recording, ReadOptions, Units};
+use crosscal::session::{parse_manifest, parse_recording, ReadOptions};
 use crosscal::simulate::{conic_plan, cyclic_mounts, SimConfig};
+use crosscal::units::SensorKind;
+use crosscal::units::Units;
 use proptest::prelude::*;
 use std::path::Path;
 

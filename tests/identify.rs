@@ -1,8 +1,8 @@
 //! Identifiability: what a session cannot determine is named, with the run that fixes it.
 
+use crosscal::app::pipeline::fit_session;
 use crosscal::estimate::{CoefStatus, FitOptions};
 use crosscal::model::Model;
-use crosscal::pipeline::fit_session;
 use crosscal::simulate::{conic_plan, cyclic_mounts, SimConfig};
 
 #[test]

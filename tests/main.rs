@@ -1,6 +1,7 @@
 //! crosscal's integration tests: one test binary (links once), modules mirror the product.
 
 mod allan;
+mod architecture;
 mod bad_input;
 mod batch;
 mod cli;

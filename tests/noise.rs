@@ -1,9 +1,9 @@
 //! Noisy sessions: fitted coefficients lie within their predicted uncertainty, and the
 //! predicted standard errors match the Monte Carlo spread.
 
+use crosscal::app::pipeline::fit_session;
 use crosscal::estimate::{CoefStatus, Fit, FitOptions};
 use crosscal::model::Model;
-use crosscal::pipeline::fit_session;
 use crosscal::simulate::SimConfig;
 
 /// Paper preset with gyro noise 0.002 °/s and accelerometer noise 2e-5 g per sample.

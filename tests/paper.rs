@@ -2,11 +2,12 @@
 //! numbers of the core pipeline.
 
 use crate::common::fit_and_calibrate;
+use crosscal::app::pipeline::{check_session, Mode};
 use crosscal::check::paper::paper_rows;
 use crosscal::check::Thresholds;
-use crosscal::model::{forward, Model, SensorKind, State};
-use crosscal::pipeline::{check_session, Mode};
+use crosscal::model::{forward, Model, State};
 use crosscal::simulate::{SimConfig, UnitTruth};
+use crosscal::units::SensorKind;
 
 /// The forward model's regressors reproduce paper eq. 3 and eq. 4 written out by hand.
 #[test]

@@ -1,9 +1,9 @@
 //! Profiles: exact JSON round trip, identical correction after reading back, no overwrite.
 
 use crate::common::fit_and_calibrate;
+use crosscal::app::pipeline::{correct_run, Mode};
 use crosscal::correct::Calibration;
 use crosscal::model::Model;
-use crosscal::pipeline::{correct_run, Mode};
 use crosscal::profile::{save, Profile};
 use crosscal::simulate::SimConfig;
 
@@ -164,7 +164,7 @@ fn imucal_reference_calibration_imports_and_exports_to_the_same_matrices() {
         return;
     };
     let p = crosscal::profile::interop::from_imucal(file, &text, "IMUCAL-REF", 9.81).unwrap();
-    assert_eq!(p.input_units.gyro, crosscal::session::GyroUnit::Raw);
+    assert_eq!(p.input_units.gyro, crosscal::units::GyroUnit::Raw);
     let (v, _) = crosscal::profile::interop::to_imucal(&p);
     let orig: serde_json::Value = serde_json::from_str(&text).unwrap();
     let m = |v: &serde_json::Value, k: &str| -> Vec<Vec<f64>> {

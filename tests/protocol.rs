@@ -3,8 +3,9 @@
 
 use crosscal::estimate::protocol::{fit_protocol, ProtocolOptions};
 use crosscal::estimate::{CoefStatus, Fit};
-use crosscal::model::{matrix_name, Model, SensorKind, AXES};
+use crosscal::model::{matrix_name, Model};
 use crosscal::simulate::protocol::{ferraris, multi_position, ProtocolTruth};
+use crosscal::units::{SensorKind, AXES};
 
 /// Largest |estimate − truth| / σ over the named coefficients, and the worst name.
 fn worst_z(fit: &Fit, truth: &[(String, f64)]) -> (f64, String) {
@@ -244,7 +245,7 @@ fn importers_name_file_line_and_column_of_bad_input() {
 
 #[test]
 fn ferraris_sections_are_found_from_the_data() {
-    use crosscal::motion::statics::detect_ferraris;
+    use crosscal::stats::segment::detect_ferraris;
     let truth = ProtocolTruth::mems(false);
     for (turn, sign) in [(-360.0, -1.0), (360.0, 1.0)] {
         let sim = ferraris(&truth, 3.0, turn, 9);

@@ -1,12 +1,14 @@
 //! Reference-column sessions on non-uniform time stamps, plus static runs: the reader,
 //! the derived ε and the fit work together.
 
+use crosscal::app::pipeline::fit_session;
 use crosscal::estimate::{CoefStatus, FitOptions};
-use crosscal::model::{forward, SensorKind, State};
-use crosscal::motion::{Conic, Mount, Stand, V3};
-use crosscal::pipeline::fit_session;
+use crosscal::frames::{Mount, Stand, V3};
+use crosscal::model::{forward, State};
+use crosscal::motion::Conic;
 use crosscal::session::Session;
 use crosscal::simulate::UnitTruth;
+use crosscal::units::SensorKind;
 use std::fmt::Write;
 
 const G: f64 = 9.80665;

@@ -1,8 +1,8 @@
 //! Spikes and determinism.
 
+use crosscal::app::pipeline::fit_session;
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
-use crosscal::pipeline::fit_session;
 use crosscal::profile::Profile;
 use crosscal::simulate::SimConfig;
 

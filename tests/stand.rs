@@ -1,9 +1,9 @@
 //! The stand's own settings (cone angle, rate, phase per run) estimated with the unit.
 
+use crosscal::app::pipeline::fit_session;
 use crosscal::estimate::{fit_with_stand, FitOptions};
 use crosscal::model::Model;
 use crosscal::motion::DerivativeConfig;
-use crosscal::pipeline::fit_session;
 use crosscal::session::{MotionSpec, Session};
 use crosscal::simulate::SimConfig;
 

@@ -3,8 +3,8 @@
 
 use crosscal::estimate::stream::{fit_streaming, StreamError};
 use crosscal::estimate::{fit, Fit, FitOptions};
+use crosscal::estimate::{fit_runs, tracks};
 use crosscal::model::Model;
-use crosscal::pipeline::{fit_runs, tracks};
 use crosscal::session::Session;
 use crosscal::simulate::{conic_plan, cyclic_mounts, write_session, RunPlan, SimConfig};
 
@@ -117,8 +117,8 @@ fn csv_correction_streams_the_same_bits_as_the_in_memory_corrector() {
     // A fitted linear calibration; and one with a dead zone wide enough to catch the rates'
     // zero crossings (flags), on the recording with a temp column.
     let session = Session::load(&plain).unwrap();
-    let f = crosscal::pipeline::fit_session(&session, &Model::default_model(), &FitOptions::default()).unwrap();
-    let fitted = crosscal::pipeline::calibration_of(&Model::default_model(), &f).unwrap();
+    let f = crosscal::app::pipeline::fit_session(&session, &Model::default_model(), &FitOptions::default()).unwrap();
+    let fitted = crosscal::app::pipeline::calibration_of(&Model::default_model(), &f).unwrap();
     let mut dz = Model::default_model();
     dz.fix_nonlinear("gyro-dead-zone", vec![0.002, 0.003, 0.001]).unwrap();
     let mut dead = Calibration::from_model(&dz, Default::default()).unwrap();
@@ -170,7 +170,8 @@ fn csv_correction_streams_the_same_bits_as_the_in_memory_corrector() {
 #[test]
 fn csv_correction_reports_gaps_and_refuses_them_in_strict_mode() {
     use crosscal::correct::{correct_csv_streaming, Calibration, OutputScale, StreamCsvError, StreamCsvOptions};
-    use crosscal::session::{Problem, SessionError, Units};
+    use crosscal::session::{Problem, SessionError};
+    use crosscal::units::Units;
     let cal = Calibration::from_model(&Model::default_model(), Default::default()).unwrap();
     let mut text = String::from("t,gx,gy,gz,ax,ay,az\n");
     for k in 0..200 {

@@ -1,9 +1,9 @@
 //! Calibrated uncertainty (issue: trustworthy numbers): interval coverage with white and
 //! coloured noise, efficiency against the Cramér–Rao bound, and `plan` against Monte Carlo.
 
+use crosscal::app::pipeline::fit_session;
 use crosscal::estimate::{CoefStatus, Fit, FitOptions};
 use crosscal::model::Model;
-use crosscal::pipeline::fit_session;
 use crosscal::plan::{default_candidates, plan, PlanSpec};
 use crosscal::simulate::{conic_plan, cyclic_mounts, RunPlan, SimConfig};
 

@@ -11,14 +11,14 @@
 //! from its white noise (one χ² test pooled over all runs, at 0.001 %) is reported as
 //! noise-limited and passes: the data cannot show a remaining error.
 
-pub mod harmonics;
 pub mod paper;
 pub mod rules;
 
 use crate::correct::Corrected;
-use crate::model::{SensorKind, AXES};
 use crate::motion::Track;
+use crate::profile::AxisSummary;
 use crate::session::{MotionSpec, Run};
+use crate::units::{SensorKind, AXES};
 use serde::{Deserialize, Serialize};
 
 /// Harmonics of the cone phase in the systematic-error fit.
@@ -101,34 +101,6 @@ pub struct RunCheck {
     pub axes: Vec<AxisCheck>,
 }
 
-/// Summary of one sensor axis over all runs.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct AxisSummary {
-    /// Sensor.
-    pub sensor: SensorKind,
-    /// Axis letter.
-    pub axis: char,
-    /// Largest before-correction error over runs, % of amplitude.
-    pub before_pct: Option<f64>,
-    /// Largest after-correction error over runs, % of amplitude.
-    pub after_pct: Option<f64>,
-    /// before / after (raw).
-    pub reduction: Option<f64>,
-    /// Largest systematic error before, % of amplitude.
-    pub before_sys_pct: Option<f64>,
-    /// Largest systematic error after, % of amplitude.
-    pub after_sys_pct: Option<f64>,
-    /// before / after (systematic): the pass criterion.
-    pub reduction_sys: Option<f64>,
-    /// The corrected error has no systematic part distinguishable from its noise (pooled χ²
-    /// over runs): the check cannot resolve any remaining error, so the axis passes.
-    pub noise_limited: bool,
-    /// Reduction needed.
-    pub threshold: f64,
-    /// Whether this axis passes.
-    pub pass: bool,
-}
-
 /// A full check.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CheckReport {
@@ -144,7 +116,7 @@ pub struct CheckReport {
 
 fn stats(err: &[f64], t_s: &[f64], motion: &MotionSpec) -> ErrorStats {
     let n = err.len().max(1) as f64;
-    let sys = harmonics::systematic(err, t_s, motion, HARMONICS);
+    let sys = crate::stats::systematic(err, t_s, crate::motion::cone_phase(motion), HARMONICS);
     ErrorStats {
         max_abs: err.iter().map(|e| e.abs()).fold(0.0, f64::max),
         rms: (err.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
@@ -239,7 +211,7 @@ pub fn summarize(runs: Vec<RunCheck>, thresholds: Thresholds) -> CheckReport {
         let (chi, dof) = runs
             .iter()
             .fold((0.0, 0usize), |(c, d), r| (c + r.axes[idx].after.sys_chi2, d + r.axes[idx].after.sys_dof));
-        let noise_limited = dof > 0 && chi <= harmonics::chi2_upper(dof, 4.265);
+        let noise_limited = dof > 0 && chi <= crate::stats::chi2_upper(dof, 4.265);
         let pass = noise_limited || reduction_sys.is_none_or(|r| r >= threshold);
         summary.push(AxisSummary {
             sensor,

@@ -1,7 +1,7 @@
 //! The comparison with the paper's published figures (α = 10°, ω_s = 10 °/s, nominal mount).
 
 use super::{AxisCheck, CheckReport};
-use crate::model::SensorKind;
+use crate::units::SensorKind;
 use serde::{Deserialize, Serialize};
 
 /// Paper: gyro error before correction, z axis, % (eq. 3 unit on the SRS-1 stand).

@@ -21,8 +21,8 @@
 //! that reason when none was checked.
 
 use super::CheckReport;
-use crate::model::SensorKind;
 use crate::profile::Profile;
+use crate::units::SensorKind;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 

@@ -33,7 +33,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         Some(path) => {
             let s = Session::load(path).with_context(|| format!("reading session {}", path.display()))?;
             profile.ensure_unit(&a.profile, &s.manifest.serial)?;
-            Some(crosscal::pipeline::acceptance(&profile, &s, a.diagnose)?)
+            Some(crosscal::app::pipeline::acceptance(&profile, &s, a.diagnose)?)
         }
         None if a.diagnose => anyhow::bail!("--diagnose needs --session"),
         None => None,

@@ -3,7 +3,7 @@
 use super::fit::build_model;
 use super::Outcome;
 use anyhow::Context;
-use crosscal::batch::{run as run_batch, to_csv, to_html, unit_dirs, BatchOptions, UnitResult, Verdict};
+use crosscal::app::batch::{run as run_batch, to_csv, to_html, unit_dirs, BatchOptions, UnitResult, Verdict};
 use crosscal::check::rules::Rules;
 use std::io::IsTerminal;
 use std::path::PathBuf;

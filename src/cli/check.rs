@@ -3,9 +3,9 @@
 use super::correct::ModeArg;
 use super::{format, Outcome};
 use anyhow::Context;
+use crosscal::app::pipeline::{check_session, cross_validate, holdout_check};
 use crosscal::check::{CheckReport, Thresholds};
 use crosscal::correct::Calibration;
-use crosscal::pipeline::{check_session, cross_validate, holdout_check};
 use crosscal::profile::Profile;
 use crosscal::session::Session;
 use std::path::PathBuf;

@@ -2,10 +2,11 @@
 
 use super::Outcome;
 use anyhow::Context;
-use crosscal::diagnose::{compare, plot};
+use crosscal::diagnose::compare;
 use crosscal::estimate::FitOptions;
+use crosscal::estimate::{fit_runs, tracks};
+use crosscal::html::plot;
 use crosscal::motion::DerivativeConfig;
-use crosscal::pipeline::{fit_runs, tracks};
 use crosscal::session::{MotionSpec, Session};
 use std::path::PathBuf;
 

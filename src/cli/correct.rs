@@ -2,12 +2,11 @@
 
 use super::Outcome;
 use anyhow::Context;
+use crosscal::app::pipeline::{correct_run, Mode};
 use crosscal::correct::{correct_csv_streaming, Calibration, OutputScale, StreamCsvError, StreamCsvOptions};
-use crosscal::pipeline::{correct_run, Mode};
 use crosscal::profile::Profile;
-use crosscal::session::{
-    parse_recording, recording_header, AccelUnit, CsvLine, GyroUnit, MotionSpec, ReadOptions, Run, RunSpec, Units,
-};
+use crosscal::session::{parse_recording, recording_header, CsvLine, MotionSpec, ReadOptions, Run, RunSpec};
+use crosscal::units::{AccelUnit, GyroUnit, Units};
 use std::io::Write;
 use std::path::PathBuf;
 

@@ -2,12 +2,12 @@
 
 use super::{format, Outcome};
 use anyhow::Context;
+use crosscal::app::pipeline::{check_session, fit_session, Mode};
 use crosscal::check::paper::paper_rows;
 use crosscal::check::Thresholds;
 use crosscal::correct::Calibration;
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
-use crosscal::pipeline::{check_session, fit_session, Mode};
 use crosscal::profile::{save, Profile};
 use crosscal::session::Session;
 use crosscal::simulate::{write_session, SimConfig};

@@ -5,8 +5,8 @@ use super::{format, Outcome};
 use anyhow::Context;
 use crosscal::diagnose::{diagnose, ChannelReport, Verdict};
 use crosscal::estimate::FitOptions;
+use crosscal::estimate::{fit_runs, tracks};
 use crosscal::motion::DerivativeConfig;
-use crosscal::pipeline::{fit_runs, tracks};
 use crosscal::session::{MotionSpec, Session};
 use std::path::PathBuf;
 

@@ -3,9 +3,9 @@
 use super::{format, Outcome};
 use anyhow::Context;
 use crosscal::estimate::FitOptions;
+use crosscal::estimate::{fit_runs, tracks};
 use crosscal::model::Model;
 use crosscal::motion::DerivativeConfig;
-use crosscal::pipeline::{fit_runs, tracks};
 use crosscal::profile::{save, Profile};
 use crosscal::session::Session;
 use std::path::PathBuf;
@@ -114,7 +114,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let session = if a.holdout.is_empty() {
         std::borrow::Cow::Borrowed(&full)
     } else {
-        std::borrow::Cow::Owned(crosscal::pipeline::subset(&full, |n| !a.holdout.iter().any(|h| h == n)))
+        std::borrow::Cow::Owned(crosscal::app::pipeline::subset(&full, |n| !a.holdout.iter().any(|h| h == n)))
     };
     let deriv = DerivativeConfig::default();
     let tr = tracks(&session, &deriv);
@@ -136,12 +136,12 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let mut profile = Profile::from_fit(&session, &model, fit, notes);
     attach_noise(&a, &mut profile)?;
     if !a.holdout.is_empty() {
-        let held = crosscal::pipeline::subset(&full, |n| a.holdout.iter().any(|h| h == n));
+        let held = crosscal::app::pipeline::subset(&full, |n| a.holdout.iter().any(|h| h == n));
         let cal = crosscal::correct::Calibration::from_profile(&profile)?;
-        let report = crosscal::pipeline::check_session(
+        let report = crosscal::app::pipeline::check_session(
             &held,
             &cal,
-            crosscal::pipeline::Mode::Offline,
+            crosscal::app::pipeline::Mode::Offline,
             crosscal::check::Thresholds::default(),
         )?;
         profile.validation = Some(crosscal::profile::Validation {

@@ -2,7 +2,7 @@
 
 use crosscal::check::CheckReport;
 use crosscal::estimate::{CoefStatus, SensorFit};
-use crosscal::model::SensorKind;
+use crosscal::units::SensorKind;
 use std::fmt::Write;
 
 const RAD2DEG: f64 = 180.0 / std::f64::consts::PI;
@@ -177,7 +177,7 @@ pub fn stand(params: &[crosscal::estimate::StandParams]) -> String {
 /// Both sensors' coefficients of a profile, in the units of its recordings (protocol
 /// profiles show their residuals in the protocol report instead of per channel).
 pub fn profile_fits(p: &crosscal::profile::Profile) -> String {
-    use crosscal::session::{AccelUnit, GyroUnit};
+    use crosscal::units::{AccelUnit, GyroUnit};
     let per_channel = p.protocol.is_none();
     sensor_fit(&p.gyro, p.input_units.gyro == GyroUnit::Raw, per_channel)
         + &sensor_fit(&p.accel, p.input_units.accel == AccelUnit::Raw, per_channel)

@@ -4,7 +4,8 @@ use super::Outcome;
 use anyhow::Context;
 use crosscal::noise::{analyse, read_channels, report, NoiseOptions, NoiseReport, Span, CHANNELS};
 use crosscal::profile::{latest, save};
-use crosscal::session::{read_manifest, AccelUnit, GyroUnit, MotionSpec, Units};
+use crosscal::session::{read_manifest, MotionSpec};
+use crosscal::units::{AccelUnit, GyroUnit, Units};
 use std::path::{Path, PathBuf};
 
 /// Options of `noise`.

@@ -4,9 +4,9 @@ use super::fit::build_model;
 use super::{format, Outcome};
 use anyhow::Context;
 use crosscal::estimate::CoefStatus;
-use crosscal::model::SensorKind;
 use crosscal::noise::NoiseReport;
 use crosscal::plan::{default_candidates, plan, PlanSpec};
+use crosscal::units::SensorKind;
 use std::path::PathBuf;
 
 /// Options of `plan`.

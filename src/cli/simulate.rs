@@ -2,8 +2,8 @@
 
 use super::{parse_list, parse_triple, List, Outcome};
 use anyhow::Context;
-use crosscal::model::{SensorKind, AXES};
 use crosscal::simulate::{write_session, SimConfig};
+use crosscal::units::{SensorKind, AXES};
 use std::path::PathBuf;
 
 /// Options of `simulate`.

@@ -3,7 +3,8 @@
 
 use super::{Calibration, CorrectError, Streaming};
 use crate::session::sanity::StreamScan;
-use crate::session::{recording_header, CsvLine, ReadOptions, Row, RowReader, SessionError, Units};
+use crate::session::{recording_header, CsvLine, ReadOptions, Row, RowReader, SessionError};
+use crate::units::Units;
 use std::io::{Read, Write};
 use std::path::Path;
 

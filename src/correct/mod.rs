@@ -25,9 +25,10 @@
 //! ([`Corrected::time_offset_s`], the same offline and streaming), and offline output can be
 //! put back on the input stamps by cubic interpolation ([`resample_to_stamps`]).
 
-use crate::model::{Effect, Model, Role, SensorKind, State};
+use crate::model::{Effect, Model, Role, State};
 use crate::motion::{derivative_offline, DerivativeConfig, SlopeWeights};
 use crate::profile::{CorrectionSettings, Profile};
+use crate::units::SensorKind;
 use nalgebra::{Matrix3, Vector3};
 use std::sync::Arc;
 

@@ -17,14 +17,14 @@
 //!    effects bring the systematic residual to the noise floor), or unexplained (the channel,
 //!    harmonic and runs where the systematic residual stays).
 
-pub mod plot;
 pub mod protocol;
 pub mod report;
 
-use crate::check::harmonics::{chi2_upper, systematic, Systematic};
 use crate::estimate::{fit, CoefStatus, EstimateError, Fit, FitOptions, FitRun};
-use crate::model::{catalog, forward, nonlinear_catalog, Model, SensorKind, AXES};
+use crate::model::{catalog, forward, nonlinear_catalog, Model};
 use crate::session::MotionSpec;
+use crate::stats::{chi2_upper, systematic, Systematic};
+use crate::units::{SensorKind, AXES};
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
@@ -278,7 +278,7 @@ pub fn channel_reports(res: &[RunResiduals], motions: &RunMotions<'_>) -> Vec<Ch
             diffs.extend(r.windows(2).map(|w| (w[1] - w[0]).abs()));
             ss += r.iter().map(|v| v * v).sum::<f64>();
             n += r.len();
-            let sys: Systematic = systematic(r, &run.t_s, motions[ri], HARMONICS);
+            let sys: Systematic = systematic(r, &run.t_s, crate::motion::cone_phase(motions[ri]), HARMONICS);
             sys_ss += sys.curve.iter().map(|v| v * v).sum::<f64>();
             if sys.sigma2 > 0.0 {
                 chi += sys.explained / sys.sigma2;

@@ -10,8 +10,9 @@
 
 use crate::estimate::protocol::{can_fit, fit_protocol, pose_identifiable, pose_rows, ProtocolOptions, ProtocolReport};
 use crate::estimate::{fit, CoefStatus, EstimateError, FitOptions, FitRun, SensorFit};
-use crate::model::{catalog, Model, SensorKind};
+use crate::model::{catalog, Model};
 use crate::session::Session;
+use crate::units::SensorKind;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 

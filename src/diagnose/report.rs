@@ -1,11 +1,12 @@
 //! A self-contained HTML report (inline SVG, no scripts, no network) of a diagnosis:
 //! residual versus time, versus cone phase (binned) and harmonic amplitudes per channel.
 
-use super::plot::{bars, lines};
 use super::{ChannelReport, Diagnosis, RunResiduals, Verdict, HARMONICS};
-use crate::check::harmonics::systematic;
-use crate::model::SensorKind;
+use crate::html::plot::{bars, lines};
+use crate::html::{esc, page_start};
 use crate::session::MotionSpec;
+use crate::stats::systematic;
+use crate::units::SensorKind;
 use std::fmt::Write;
 
 const CHANNELS: [&str; 6] = ["gyro x", "gyro y", "gyro z", "accel x", "accel y", "accel z"];
@@ -13,26 +14,6 @@ const CHANNELS: [&str; 6] = ["gyro x", "gyro y", "gyro z", "accel x", "accel y",
 fn unit(c: usize) -> (&'static str, f64) {
     let sensor = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
     sensor.display_unit()
-}
-
-/// The start of a self-contained report page (project style), with its title as heading.
-pub fn page_start(title: &str) -> String {
-    let mut s = String::with_capacity(1 << 20);
-    let _ = write!(
-        s,
-        "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
-         body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}}\
-         table{{border-collapse:collapse;margin:0.5em 0}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
-         th{{background:#eee}}.verdict{{font-size:1.2em;padding:0.5em;background:#f4f4f4}}</style></head><body>\
-         <h1>{t}</h1>",
-        t = esc(title)
-    );
-    s
-}
-
-/// Escapes text for HTML.
-pub fn esc(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
 /// Residual of channel `c` against time, runs end to end, averaged in buckets (≤ 1500 points).
@@ -76,7 +57,7 @@ fn harmonics(res: &[RunResiduals], motions: &[&MotionSpec], c: usize) -> Vec<(St
     let mut acc = [0.0; HARMONICS + 1];
     let mut n = 0usize;
     for (r, m) in res.iter().zip(motions) {
-        let s = systematic(&r.r[c], &r.t_s, m, HARMONICS);
+        let s = systematic(&r.r[c], &r.t_s, crate::motion::cone_phase(m), HARMONICS);
         if s.amplitudes.len() == HARMONICS + 1 {
             for (a, v) in acc.iter_mut().zip(&s.amplitudes) {
                 *a += v * v;

@@ -1,7 +1,8 @@
 //! Identifiability: naming the coefficients a set of runs cannot determine, and the run
 //! that would.
 
-use crate::model::{TermRef, AXES};
+use crate::model::TermRef;
+use crate::units::AXES;
 use serde::{Deserialize, Serialize};
 
 /// A combination of coefficients the runs cannot separate.

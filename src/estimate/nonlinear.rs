@@ -7,8 +7,9 @@
 //! p̂.
 
 use super::{fit_sensor, EstimateError, Fit, FitOptions, FitRun, SensorFit};
-use crate::model::{Model, SensorKind};
+use crate::model::Model;
 use crate::motion::Track;
+use crate::units::SensorKind;
 use argmin::core::{CostFunction, Executor, State, TerminationReason};
 use argmin::solver::neldermead::NelderMead;
 use serde::{Deserialize, Serialize};

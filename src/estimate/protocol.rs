@@ -23,10 +23,12 @@
 
 use super::lm::{minimise, numeric_jacobian, LeastSquares};
 use super::{fit, ChannelFit, CoefStatus, Coefficient, EstimateError, Fit, FitOptions, FitRun, SensorFit};
-use crate::model::{Model, SensorKind, TermStatus, AXES};
-use crate::motion::statics::{mean3, moving_variance_norm, static_intervals, variance_norm};
-use crate::motion::{Track, V3};
+use crate::frames::V3;
+use crate::model::{Model, TermStatus};
+use crate::motion::Track;
 use crate::session::{MotionSpec, Run, Session};
+use crate::stats::segment::{mean3, moving_variance_norm, static_intervals, variance_norm};
+use crate::units::{SensorKind, AXES};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 

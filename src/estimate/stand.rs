@@ -12,11 +12,12 @@
 //! channel's coefficient covariance gains G M⁻¹ Gᵀ with G = R₁₁⁻¹R₁₂ (the part of θ that
 //! moves with s), so the standard errors of C and K include the stand's uncertainty.
 
-use super::qr::QrAccumulator;
 use super::{fit, CoefStatus, EstimateError, Fit, FitOptions, FitRun};
-use crate::model::{Model, SensorKind};
+use crate::model::Model;
 use crate::motion::{track_for, DerivativeConfig, Track};
 use crate::session::{MotionSpec, Session};
+use crate::stats::QrAccumulator;
+use crate::units::SensorKind;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -128,7 +129,7 @@ pub fn fit_with_stand(
             .collect()
     };
     let fit_at = |tracks: &[Track]| -> Result<Fit, EstimateError> {
-        let runs: Vec<FitRun<'_>> = crate::pipeline::fit_runs(session, tracks);
+        let runs: Vec<FitRun<'_>> = crate::estimate::fit_runs(session, tracks);
         fit(model, &runs, opts)
     };
 
@@ -194,7 +195,7 @@ pub fn fit_with_stand(
     // own settings: a wrong label or a local minimum. Refused, not reported.
     reweight(&f, &mut sigma2);
     let pred = Predictor::new(model, &f);
-    let runs = crate::pipeline::fit_runs(session, &tracks);
+    let runs = crate::estimate::fit_runs(session, &tracks);
     let per_run: Vec<f64> = runs
         .iter()
         .map(|run| {
@@ -310,7 +311,7 @@ fn linearise(
     let mut accs: Vec<QrAccumulator> =
         (0..6).map(|c| QrAccumulator::new(fitted[c].len() + m + 1, opts.chunk)).collect();
     let mut rows: Vec<Vec<f64>> = (0..6).map(|c| vec![0.0; fitted[c].len() + m + 1]).collect();
-    let runs = crate::pipeline::fit_runs(session, tracks);
+    let runs = crate::estimate::fit_runs(session, tracks);
     let mut ci = 0usize;
     for (ri, run) in runs.iter().enumerate() {
         let rs = session.runs[ri].spec.motion.clone();

@@ -11,10 +11,11 @@
 //! order through the same accumulators, so the two agree to the last bit.
 
 use super::{fit_samples, BlockFn, FitOptions, Samples, SamplesError, BLOCK};
+use crate::frames::V3;
 use crate::model::{Model, State};
-use crate::motion::{Conic, Kinematics, V3};
-use crate::profile::RunUsed;
+use crate::motion::{Conic, Kinematics};
 use crate::session::sanity::StreamScan;
+use crate::session::RunUsed;
 use crate::session::{
     read_manifest, rows_past_end, run_path, Manifest, MotionSpec, ReadOptions, Row, RowReader, RunSpec, SessionError,
 };

@@ -50,58 +50,10 @@ pub use temp_bias::TempBias;
 pub use temp_scale::TempScale;
 pub use time_delay::TimeDelay;
 
+pub(crate) use crate::units::{SensorKind, AXES};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::sync::Arc;
-
-/// Which sensor triad an effect or coefficient belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum SensorKind {
-    /// Three-axis rate gyroscope.
-    Gyro,
-    /// Three-axis accelerometer.
-    Accel,
-}
-
-impl SensorKind {
-    /// Both sensors, gyro first.
-    pub const BOTH: [SensorKind; 2] = [SensorKind::Gyro, SensorKind::Accel];
-
-    /// Lower-case name used in coefficient names.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Gyro => "gyro",
-            Self::Accel => "accel",
-        }
-    }
-
-    /// Unit shown to users and the factor from SI to it: deg/s for the gyro, m/s² for the
-    /// accelerometer.
-    pub fn display_unit(self) -> (&'static str, f64) {
-        match self {
-            Self::Gyro => ("deg/s", 180.0 / std::f64::consts::PI),
-            Self::Accel => ("m/s^2", 1.0),
-        }
-    }
-
-    /// 0 for the gyro, 1 for the accelerometer (channels gx..gz are 0..3, ax..az 3..6).
-    pub fn index(self) -> usize {
-        match self {
-            Self::Gyro => 0,
-            Self::Accel => 1,
-        }
-    }
-}
-
-impl fmt::Display for SensorKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-/// Axis letters, index 0..3.
-pub const AXES: [char; 3] = ['x', 'y', 'z'];
 
 /// The true state a regressor may depend on (sensor frame, SI).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -9,13 +9,9 @@
 //! ```
 
 pub mod derivative;
-pub mod frame;
-pub mod mount;
-pub mod statics;
 
+use crate::frames::{Mount, Stand, V3};
 pub use derivative::{derivative_offline, DerivativeConfig, SlopeWeights};
-pub use frame::{Coupling, Output, Sensor, Stand, Truth, V3};
-pub use mount::{Mount, MountError};
 
 use crate::session::{MotionSpec, Run};
 
@@ -47,6 +43,21 @@ pub struct Conic {
 }
 
 impl Conic {
+    /// The conic motion a run declares, if it is one.
+    pub fn of(motion: &MotionSpec) -> Option<Self> {
+        match motion {
+            MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
+                Some(Self::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg))
+            }
+            _ => None,
+        }
+    }
+
+    /// The cone phase θ(t) as a phase line (for harmonic analysis of residuals).
+    pub fn phase_line(&self) -> crate::stats::PhaseLine {
+        crate::stats::PhaseLine { rate_rad_s: self.rate_rad_s, phase_rad: self.phase_rad }
+    }
+
     /// From the manifest's degrees.
     pub fn from_deg(cone_angle_deg: f64, rate_deg_s: f64, phase_deg: f64) -> Self {
         Self {
@@ -242,4 +253,9 @@ mod tests {
             assert!((norm - 9.8).abs() < 1e-12);
         }
     }
+}
+
+/// The cone phase of a run's declared motion (None unless conic).
+pub fn cone_phase(motion: &MotionSpec) -> Option<crate::stats::PhaseLine> {
+    Conic::of(motion).map(|c| c.phase_line())
 }

@@ -19,7 +19,7 @@
 pub mod allan;
 pub mod report;
 
-use crate::model::SensorKind;
+use crate::units::SensorKind;
 use allan::NoiseType;
 use serde::{Deserialize, Serialize};
 
@@ -302,7 +302,7 @@ pub struct Span {
 /// anything but those columns: rows are streamed and validated like every recording.
 pub fn read_channels(
     path: &std::path::Path,
-    units: &crate::session::Units,
+    units: &crate::units::Units,
     g_m_s2: f64,
     channels: &[usize],
     span: Span,

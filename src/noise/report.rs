@@ -2,9 +2,9 @@
 //! deviation plot per channel (measured points with intervals, fitted curve, slope lines).
 
 use super::{NoiseReport, FLAT};
-use crate::diagnose::plot::loglog;
-use crate::diagnose::report::{esc, page_start};
-use crate::model::SensorKind;
+use crate::html::plot::loglog;
+use crate::html::{esc, page_start};
+use crate::units::SensorKind;
 use std::fmt::Write;
 
 fn opt(v: Option<f64>, digits: usize) -> String {

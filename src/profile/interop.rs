@@ -12,8 +12,9 @@
 
 use super::{Profile, ProfileError, PROFILE_FORMAT};
 use crate::estimate::{CoefStatus, Coefficient, SensorFit};
-use crate::model::{Model, SensorKind, AXES};
-use crate::session::{AccelUnit, GyroUnit, TimeUnit, Units};
+use crate::model::Model;
+use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
+use crate::units::{SensorKind, AXES};
 use std::path::Path;
 
 const DEG: f64 = std::f64::consts::PI / 180.0;

@@ -8,8 +8,10 @@
 
 pub mod interop;
 use crate::estimate::{CoefStatus, Fit, SensorFit};
-use crate::model::{find_effect, Model, ModelError, SensorKind};
-use crate::session::{Session, Units};
+use crate::model::{find_effect, Model, ModelError};
+use crate::session::{RunUsed, Session};
+use crate::units::SensorKind;
+use crate::units::Units;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -40,27 +42,43 @@ impl Default for Conventions {
     }
 }
 
-/// A run used to fit (or validate) the profile.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RunUsed {
-    /// Run name.
-    pub name: String,
-    /// CSV file as named in the manifest.
-    pub file: String,
-    /// SHA-256 of the CSV's bytes.
-    pub sha256: String,
-    /// Number of samples.
-    pub samples: usize,
-}
-
 /// Validation of a profile on runs the fit never saw.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Validation {
     /// The held-out runs.
     pub runs: Vec<RunUsed>,
     /// Errors before/after and reduction factors on those runs, per sensor axis.
-    pub summary: Vec<crate::check::AxisSummary>,
+    pub summary: Vec<AxisSummary>,
     /// Whether the held-out check passed.
+    pub pass: bool,
+}
+
+/// Summary of one sensor axis over the runs of a check (written by `check`, stored in a
+/// profile's [`Validation`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AxisSummary {
+    /// Sensor.
+    pub sensor: SensorKind,
+    /// Axis letter.
+    pub axis: char,
+    /// Largest before-correction error over runs, % of amplitude.
+    pub before_pct: Option<f64>,
+    /// Largest after-correction error over runs, % of amplitude.
+    pub after_pct: Option<f64>,
+    /// before / after (raw).
+    pub reduction: Option<f64>,
+    /// Largest systematic error before, % of amplitude.
+    pub before_sys_pct: Option<f64>,
+    /// Largest systematic error after, % of amplitude.
+    pub after_sys_pct: Option<f64>,
+    /// before / after (systematic): the pass criterion.
+    pub reduction_sys: Option<f64>,
+    /// The corrected error has no systematic part distinguishable from its noise (pooled χ²
+    /// over runs): the check cannot resolve any remaining error, so the axis passes.
+    pub noise_limited: bool,
+    /// Reduction needed.
+    pub threshold: f64,
+    /// Whether this axis passes.
     pub pass: bool,
 }
 

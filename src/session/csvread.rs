@@ -1,7 +1,7 @@
 //! Reading one recording CSV into SI arrays, without a `String` per field.
 
 use super::error::{Problem, SessionError};
-use super::units::Units;
+use crate::units::{AccelUnit, GyroUnit, Units};
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
@@ -434,8 +434,8 @@ impl<R: std::io::Read> RowReader<R> {
         let kg = units.gyro.to_rad_s();
         let ka = units.accel.to_m_s2(g_m_s2);
         // Reference columns of a raw session are read as deg/s and g.
-        let kwr = if units.gyro == super::units::GyroUnit::Raw { std::f64::consts::PI / 180.0 } else { kg };
-        let kar = if units.accel == super::units::AccelUnit::Raw { g_m_s2 } else { ka };
+        let kwr = if units.gyro == GyroUnit::Raw { std::f64::consts::PI / 180.0 } else { kg };
+        let kar = if units.accel == AccelUnit::Raw { g_m_s2 } else { ka };
         Ok(Self {
             lines,
             rec,

@@ -11,7 +11,8 @@
 //! Sections named `x_p`/`x_a` (and y, z) are static poses with +axis / −axis up; `x_rot`
 //! (and y, z) are turns about +axis through `turn_angle_deg`.
 
-use super::{AccelUnit, GyroUnit, Manifest, MotionSpec, Problem, RunSpec, SessionError, TimeUnit, Units};
+use super::{Manifest, MotionSpec, Problem, RunSpec, SessionError};
+use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
 use std::path::{Path, PathBuf};
 
 /// Settings shared by the importers.
@@ -217,7 +218,7 @@ const FERRARIS_SECTIONS: [&str; 9] = ["x_p", "x_a", "y_p", "y_a", "z_p", "z_a", 
 /// imucal's example layout: `n_samples,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z` (deg/s, m/s²,
 /// no time column: `rate_hz` is required) and a section list `{"x_p": {"start": …, "end":
 /// …}, …}` (iloc, end exclusive). Without a section list the six faces and three turns are
-/// found from the data ([`crate::motion::statics::detect_ferraris`]), each turn's sign from
+/// found from the data ([`crate::stats::segment::detect_ferraris`]), each turn's sign from
 /// its gyro integral (the magnitude of `turn_angle_deg` is used).
 pub fn imucal_ferraris(
     csv: &Path,
@@ -261,11 +262,11 @@ pub fn imucal_ferraris(
             let found = [10.0, 5.0, 20.0]
                 .iter()
                 .map(|&m| {
-                    crate::motion::statics::detect_ferraris(&table.t, &table.gyro, &table.accel, window, m, min_len)
+                    crate::stats::segment::detect_ferraris(&table.t, &table.gyro, &table.accel, window, m, min_len)
                 })
                 .find(Result::is_ok)
                 .unwrap_or_else(|| {
-                    crate::motion::statics::detect_ferraris(&table.t, &table.gyro, &table.accel, window, 10.0, min_len)
+                    crate::stats::segment::detect_ferraris(&table.t, &table.gyro, &table.accel, window, 10.0, min_len)
                 })
                 .map_err(|e| csv_err(csv, 1, "-", Problem::Value, format!("finding the Ferraris sections: {e}")))?;
             for sec in found {

@@ -10,16 +10,16 @@ mod csvwrite;
 mod error;
 pub mod import;
 pub mod sanity;
-pub mod units;
 
+use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
 pub use csvread::{
     parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
 };
 pub use csvwrite::{recording_csv, recording_header, CsvLine};
 pub use error::{Problem, SessionError};
-pub use units::{AccelUnit, GyroUnit, TimeUnit, Units};
 
-use crate::motion::Mount;
+use crate::frames::Mount;
+use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -175,6 +175,20 @@ impl Manifest {
         });
         serde_json::to_string_pretty(&manifest).unwrap_or_default() + "\n"
     }
+}
+
+/// Provenance of a run that went into a fit or a validation: which file, its hash, how many
+/// samples (what a profile records of the data it came from).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunUsed {
+    /// Run name.
+    pub name: String,
+    /// CSV file as named in the manifest.
+    pub file: String,
+    /// SHA-256 of the CSV's bytes.
+    pub sha256: String,
+    /// Number of samples.
+    pub samples: usize,
 }
 
 /// One run as declared in the manifest.

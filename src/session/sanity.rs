@@ -567,7 +567,8 @@ mod tests {
                 let t = k as f64 * 0.01;
                 // Pseudo-random noise (an LCG), uniform in ±0.5e-3.
                 let e = if noise {
-                    1e-3 * ((((k as u64 + 1) * 6364136223846793005) >> 40) as f64 / (1u64 << 24) as f64 - 0.5)
+                    1e-3 * ((((k as u64 + 1).wrapping_mul(6364136223846793005)) >> 40) as f64 / (1u64 << 24) as f64
+                        - 0.5)
                 } else {
                     0.0
                 };

@@ -8,9 +8,12 @@ pub mod noise;
 pub mod protocol;
 
 use crate::atomic::write_new;
-use crate::model::{forward, Model, SensorKind, State};
-use crate::motion::{track_for, DerivativeConfig, Mount};
-use crate::session::{AccelUnit, GyroUnit, Manifest, MotionSpec, Recording, Run, RunSpec, Session, TimeUnit, Units};
+use crate::frames::Mount;
+use crate::model::{forward, Model, State};
+use crate::motion::{track_for, DerivativeConfig};
+use crate::session::{Manifest, MotionSpec, Recording, Run, RunSpec, Session};
+use crate::units::SensorKind;
+use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};

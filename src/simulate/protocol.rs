@@ -5,7 +5,8 @@
 //! Forward model (sensor frame): `u_a = b_a + K a + n_a`, `u_g = b_g + C ω + G a + n_g`;
 //! the hand is idealised as a pure rotation (no linear acceleration), so `a = Rᵀ g_up`.
 
-use crate::session::{AccelUnit, GyroUnit, Manifest, MotionSpec, Recording, Run, RunSpec, Session, TimeUnit, Units};
+use crate::session::{Manifest, MotionSpec, Recording, Run, RunSpec, Session};
+use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -1,10 +1,26 @@
 //! The systematic part of an error or residual series: a least-squares fit of a constant
-//! and the first H harmonics of the cone phase θ (conic runs), or block means (other runs),
-//! with a χ² test of whether it stands out of the series' white noise.
+//! and the first H harmonics of a phase θ = ω t + φ (the cone phase of a conic run), or
+//! block means (runs without a phase), with a χ² test of whether it stands out of the
+//! series' white noise.
 
-use crate::estimate::QrAccumulator;
-use crate::motion::Conic;
-use crate::session::MotionSpec;
+use super::QrAccumulator;
+
+/// A phase that advances linearly in time: θ(t) = `rate_rad_s` · t + `phase_rad`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhaseLine {
+    /// dθ/dt, rad/s.
+    pub rate_rad_s: f64,
+    /// θ at t = 0, rad.
+    pub phase_rad: f64,
+}
+
+impl PhaseLine {
+    /// θ at time t, rad.
+    #[inline]
+    pub fn theta(&self, t_s: f64) -> f64 {
+        self.rate_rad_s * t_s + self.phase_rad
+    }
+}
 
 /// The systematic part of one series.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,11 +72,11 @@ fn basis(th: f64, harmonics: usize, row: &mut [f64]) {
     }
 }
 
-/// Fits the systematic part of `err` sampled at `t_s` during `motion`.
-pub fn systematic(err: &[f64], t_s: &[f64], motion: &MotionSpec, harmonics: usize) -> Systematic {
+/// Fits the systematic part of `err` sampled at `t_s`: harmonics of `phase` when given,
+/// block means otherwise.
+pub fn systematic(err: &[f64], t_s: &[f64], phase: Option<PhaseLine>, harmonics: usize) -> Systematic {
     let n = err.len().min(t_s.len());
-    if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = motion {
-        let c = Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
+    if let Some(c) = phase {
         let p = 2 * harmonics + 1;
         if n > 4 * p && c.rate_rad_s != 0.0 {
             let mut acc = QrAccumulator::new(p + 1, 4096);

@@ -154,7 +154,7 @@ pub fn detect_ferraris(
     if finite.is_empty() {
         return Err(format!("the recording is shorter than the detector window ({window} samples)"));
     }
-    let baseline = crate::session::sanity::median(&mut finite[..]).max(0.0);
+    let baseline = super::median(&mut finite[..]).unwrap_or(0.0).max(0.0);
     finite.sort_by(f64::total_cmp);
     let quiet = finite[finite.len() / 10].max(baseline * 1e-6).max(f64::MIN_POSITIVE);
     let intervals: Vec<(usize, usize)> =

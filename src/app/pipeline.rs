@@ -2,33 +2,11 @@
 
 use crate::check::{check_run, summarize, CheckReport, Thresholds};
 use crate::correct::{correct_offline, correct_streaming, Calibration, CorrectError, Corrected};
-use crate::estimate::{fit, EstimateError, Fit, FitOptions, FitRun};
+use crate::estimate::{fit, fit_runs, tracks, EstimateError, Fit, FitOptions};
 use crate::model::Model;
-use crate::motion::{track, DerivativeConfig, Track};
-use crate::session::{AccelUnit, GyroUnit, Run, Session};
-
-/// The true motion of every run of a session, in sensor axes.
-pub fn tracks(session: &Session, deriv: &DerivativeConfig) -> Vec<Track> {
-    use rayon::prelude::*;
-    session.runs.par_iter().map(|r| track(r, session.manifest.g_m_s2, deriv)).collect()
-}
-
-/// Pairs each run's outputs with its track, for the estimator.
-pub fn fit_runs<'a>(session: &'a Session, tracks: &'a [Track]) -> Vec<FitRun<'a>> {
-    session
-        .runs
-        .iter()
-        .zip(tracks)
-        .map(|(r, tr)| FitRun {
-            name: &r.spec.name,
-            track: tr,
-            gyro: &r.rec.gyro,
-            accel: &r.rec.accel,
-            temp_c: r.rec.temp_c.as_deref(),
-            temp_const_c: r.spec.temperature_c,
-        })
-        .collect()
-}
+use crate::motion::DerivativeConfig;
+use crate::session::{Run, Session};
+use crate::units::{AccelUnit, GyroUnit};
 
 /// Fits a model to all runs of a session.
 pub fn fit_session(session: &Session, model: &Model, opts: &FitOptions) -> Result<Fit, EstimateError> {

@@ -132,7 +132,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
     let (path, profile, reused) = match existing(&opts.store, &session).filter(|_| opts.resume) {
         Some((path, p)) => (path, p, true),
         None => {
-            let fit = match crate::pipeline::fit_session(&session, &opts.model, &FitOptions::default()) {
+            let fit = match crate::app::pipeline::fit_session(&session, &opts.model, &FitOptions::default()) {
                 Ok(f) => f,
                 Err(e) => {
                     r.reasons.push(format!("fit failed: {e}"));
@@ -163,7 +163,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
         .map(|c| (c.name.clone(), c.value))
         .collect();
     let diagnose = opts.rules.rules.iter().any(|x| matches!(x, crate::check::rules::Rule::Adequate { .. }));
-    let acc = match crate::pipeline::acceptance(&profile, &session, diagnose) {
+    let acc = match crate::app::pipeline::acceptance(&profile, &session, diagnose) {
         Ok(a) => a,
         Err(e) => {
             r.reasons.push(format!("check failed: {e}"));
@@ -271,7 +271,7 @@ pub fn to_csv(r: &BatchReport) -> String {
 /// The batch as a self-contained HTML page: verdict table, then each coefficient's
 /// distribution over the batch (histogram) with its median and robust σ.
 pub fn to_html(r: &BatchReport, title: &str) -> String {
-    use crate::diagnose::report::{esc, page_start};
+    use crate::html::{esc, page_start};
     use std::fmt::Write;
     let mut s = page_start(title);
     let _ = write!(
@@ -315,7 +315,7 @@ pub fn to_html(r: &BatchReport, title: &str) -> String {
             .enumerate()
             .map(|(i, &c)| (format!("{:.3e}", lo + (i as f64 + 0.5) * width), c as f64))
             .collect();
-        s.push_str(&crate::diagnose::plot::bars(
+        s.push_str(&crate::html::plot::bars(
             &format!("{name}: median {med:.6e}, robust σ {sigma:.2e}"),
             "value (bin centre)",
             "units",

@@ -4,7 +4,7 @@
 //! along the stand's +y, its y along +z, its z along +x. The mount matrix M has the named
 //! stand unit vectors as rows, so `w_sensor = M w_stand`.
 
-use super::frame::{Sensor, Stand, V3};
+use super::{Sensor, Stand, V3};
 use nalgebra::Matrix3;
 
 /// A proper rotation from stand axes to sensor axes built from signed axis names.

@@ -1,10 +1,14 @@
-//! Frame-tagged 3-vectors and couplings (the "cheap half" of sguaba).
+//! Leaf layer: frame-tagged 3-vectors, couplings and mounts (the "cheap half" of sguaba).
 //!
 //! A [`V3<F>`] is a plain `[f64; 3]` with a zero-size frame marker, so a stand-frame
 //! vector cannot be handed to code that expects a sensor-frame one. A
 //! [`Coupling<From, To>`] is a 3×3 matrix that maps `From` quantities to `To`
 //! quantities; its [`Coupling::try_inverse`] maps them back, so "forward model versus
 //! its inverse" is a type, not a comment.
+
+pub mod mount;
+
+pub use mount::{Mount, MountError};
 
 use nalgebra::{Matrix3, Vector3};
 use std::marker::PhantomData;

@@ -1,6 +1,8 @@
-//! Units of a session's columns and their conversion to the SI units used inside crosscal
-//! (rad/s, rad/s², m/s², s). `raw` channels are kept as recorded: the fitted scale then
-//! carries the unit.
+//! Leaf layer: the two sensor triads and the units of their channels, with the conversions
+//! to the SI units used inside crosscal (rad/s, rad/s², m/s², s). `raw` channels are kept
+//! as recorded: the fitted scale then carries the unit.
+//!
+//! Nothing here knows about files or models; every other module may use it.
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -157,3 +159,78 @@ impl fmt::Display for AccelUnit {
         })
     }
 }
+
+/// Which sensor triad an effect, coefficient or channel belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SensorKind {
+    /// Three-axis rate gyroscope.
+    Gyro,
+    /// Three-axis accelerometer.
+    Accel,
+}
+
+impl SensorKind {
+    /// Both sensors, gyro first.
+    pub const BOTH: [SensorKind; 2] = [SensorKind::Gyro, SensorKind::Accel];
+
+    /// Lower-case name used in coefficient names.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Gyro => "gyro",
+            Self::Accel => "accel",
+        }
+    }
+
+    /// Unit shown to users and the factor from SI to it: deg/s for the gyro, m/s² for the
+    /// accelerometer.
+    pub fn display_unit(self) -> (&'static str, f64) {
+        match self {
+            Self::Gyro => ("deg/s", DEG_PER_RAD),
+            Self::Accel => ("m/s^2", 1.0),
+        }
+    }
+
+    /// 0 for the gyro, 1 for the accelerometer (channels gx..gz are 0..3, ax..az 3..6).
+    pub fn index(self) -> usize {
+        match self {
+            Self::Gyro => 0,
+            Self::Accel => 1,
+        }
+    }
+
+    /// The sensor of channel `c` in 0..6 (gx, gy, gz, ax, ay, az).
+    pub fn of_channel(c: usize) -> Self {
+        if c < 3 {
+            Self::Gyro
+        } else {
+            Self::Accel
+        }
+    }
+
+    /// SI unit of the sensor's output.
+    pub fn si_unit(self) -> &'static str {
+        match self {
+            Self::Gyro => "rad/s",
+            Self::Accel => "m/s^2",
+        }
+    }
+}
+
+impl fmt::Display for SensorKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Axis letters, index 0..3.
+pub const AXES: [char; 3] = ['x', 'y', 'z'];
+
+/// The six channel names of a recording, gyro first.
+pub const CHANNELS: [&str; 6] = ["gx", "gy", "gz", "ax", "ay", "az"];
+
+/// Degrees per radian (multiply rad/s by this for deg/s).
+pub const DEG_PER_RAD: f64 = 180.0 / std::f64::consts::PI;
+
+/// Radians per degree.
+pub const RAD_PER_DEG: f64 = std::f64::consts::PI / 180.0;

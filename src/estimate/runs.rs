@@ -1,0 +1,81 @@
+//! The runs of a session prepared for the estimator: each run's true motion in sensor axes
+//! (its track) beside the sensor's outputs.
+
+use crate::model::State;
+use crate::motion::{track, DerivativeConfig, Track};
+use crate::session::Session;
+use crate::units::SensorKind;
+
+/// One run's data prepared for fitting: its true motion and the sensor outputs.
+#[derive(Debug, Clone, Copy)]
+pub struct FitRun<'a> {
+    /// Run name.
+    pub name: &'a str,
+    /// True motion in sensor axes.
+    pub track: &'a Track,
+    /// Gyro outputs (SI or raw).
+    pub gyro: &'a [[f64; 3]],
+    /// Accelerometer outputs (SI or raw).
+    pub accel: &'a [[f64; 3]],
+    /// Temperature per sample, °C.
+    pub temp_c: Option<&'a [f64]>,
+    /// Constant temperature, °C, when there is no per-sample temperature.
+    pub temp_const_c: Option<f64>,
+}
+
+impl FitRun<'_> {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.track.t_s.len().min(self.gyro.len()).min(self.accel.len())
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The true state at sample k (t measured from the run's first sample).
+    #[inline]
+    pub fn state(&self, k: usize) -> State {
+        let tr = self.track;
+        State {
+            t_s: tr.t_s[k] - tr.t_s[0],
+            w: tr.w_rad_s[k],
+            e: tr.e_rad_s2[k],
+            a: tr.a_m_s2[k],
+            temp_c: self.temp_c.map(|t| t[k]).or(self.temp_const_c).unwrap_or(f64::NAN),
+        }
+    }
+
+    /// The sensor output at sample k.
+    #[inline]
+    pub fn output(&self, sensor: SensorKind, k: usize) -> [f64; 3] {
+        match sensor {
+            SensorKind::Gyro => self.gyro[k],
+            SensorKind::Accel => self.accel[k],
+        }
+    }
+}
+
+/// The true motion of every run of a session, in sensor axes.
+pub fn tracks(session: &Session, deriv: &DerivativeConfig) -> Vec<Track> {
+    use rayon::prelude::*;
+    session.runs.par_iter().map(|r| track(r, session.manifest.g_m_s2, deriv)).collect()
+}
+
+/// Pairs each run's outputs with its track, for the estimator.
+pub fn fit_runs<'a>(session: &'a Session, tracks: &'a [Track]) -> Vec<FitRun<'a>> {
+    session
+        .runs
+        .iter()
+        .zip(tracks)
+        .map(|(r, tr)| FitRun {
+            name: &r.spec.name,
+            track: tr,
+            gyro: &r.rec.gyro,
+            accel: &r.rec.accel,
+            temp_c: r.rec.temp_c.as_deref(),
+            temp_const_c: r.spec.temperature_c,
+        })
+        .collect()
+}

@@ -1,0 +1,26 @@
+//! Leaf layer: self-contained HTML pages (inline SVG, no scripts, no network) and the plots
+//! drawn into them, shared by every report (diagnose, noise, batch).
+
+pub mod plot;
+
+use std::fmt::Write;
+
+/// The start of a self-contained report page (project style), with its title as heading.
+pub fn page_start(title: &str) -> String {
+    let mut s = String::with_capacity(1 << 20);
+    let _ = write!(
+        s,
+        "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
+         body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}}\
+         table{{border-collapse:collapse;margin:0.5em 0}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
+         th{{background:#eee}}.verdict{{font-size:1.2em;padding:0.5em;background:#f4f4f4}}</style></head><body>\
+         <h1>{t}</h1>",
+        t = esc(title)
+    );
+    s
+}
+
+/// Escapes text for HTML.
+pub fn esc(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}

@@ -1,0 +1,51 @@
+//! Leaf layer: the statistics and numerical kernels every other layer shares — one median,
+//! one robust scale, the chi-square quantiles, autocovariances and the long-run variance,
+//! harmonic regression on a phase, and the streamed QR factor.
+//!
+//! Nothing here knows about sessions, motions or models: inputs are plain slices.
+
+pub mod autocov;
+pub mod harmonics;
+pub mod qr;
+pub mod segment;
+
+pub use autocov::{dot, newey_west_lags, AutoCov, LongRunVariance};
+pub use harmonics::{chi2_999, chi2_upper, systematic, PhaseLine, Systematic};
+pub use qr::QrAccumulator;
+
+/// 1/Φ⁻¹(3/4): the factor that turns a median absolute deviation into the standard
+/// deviation of Gaussian data (σ ≈ 1.4826 · MAD).
+pub const MAD_TO_SIGMA: f64 = 1.482_602_218_505_602;
+
+/// The median of `v` by selection (O(n), reorders `v`): for an even count the upper of the
+/// two middle values (element n/2 of the sorted values), so that every median in crosscal
+/// is one of the data and the same whatever the caller. `None` when `v` is empty.
+pub fn median(v: &mut [f64]) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    let mid = v.len() / 2;
+    Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
+}
+
+/// Robust standard deviation of `v` about `centre`: [`MAD_TO_SIGMA`] times the median of
+/// |v − centre| (reorders a copy); `None` when `v` is empty.
+pub fn robust_sigma(v: &[f64], centre: f64) -> Option<f64> {
+    let mut dev: Vec<f64> = v.iter().map(|x| (x - centre).abs()).collect();
+    median(&mut dev).map(|m| MAD_TO_SIGMA * m)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_is_the_upper_middle_value_and_none_when_empty() {
+        assert_eq!(median(&mut []), None);
+        assert_eq!(median(&mut [3.0]), Some(3.0));
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), Some(3.0));
+        assert_eq!(median(&mut [5.0, 1.0, 3.0]), Some(3.0));
+        let s = robust_sigma(&[1.0, -1.0, 1.0, -1.0], 0.0).unwrap();
+        assert!((s - MAD_TO_SIGMA).abs() < 1e-15);
+    }
+}
