@@ -217,6 +217,11 @@ pub fn track_for(
     tr
 }
 
+/// The cone phase of a run's declared motion (None unless conic).
+pub fn cone_phase(motion: &MotionSpec) -> Option<crate::stats::PhaseLine> {
+    Conic::of(motion).map(|c| c.phase_line())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -253,9 +258,4 @@ mod tests {
             assert!((norm - 9.8).abs() < 1e-12);
         }
     }
-}
-
-/// The cone phase of a run's declared motion (None unless conic).
-pub fn cone_phase(motion: &MotionSpec) -> Option<crate::stats::PhaseLine> {
-    Conic::of(motion).map(|c| c.phase_line())
 }
