@@ -80,7 +80,7 @@ fn batch(table: &mut Table) {
     let mut times = Vec::new();
     for jobs in [1, 2] {
         let opts = BatchOptions {
-            model: crosscal::model::Model::default_model(),
+            model: crosscal::model::ModelSpec::default(),
             store: tmp.path().join(format!("store{jobs}")),
             rules: rules.clone(),
             resume: false,
@@ -228,11 +228,14 @@ fn parse_and_correct(table: &mut Table) {
         ),
         format!("{:.0} MB/s ({:.1} M rows/s)", (reps * one.len()) as f64 / secs / 1e6, n as f64 / secs / 1e6),
     );
-    let f =
-        crosscal::app::pipeline::fit_session(&session, &crosscal::model::Model::default_model(), &Default::default())
-            .expect("fit");
+    let f = crosscal::estimate::fit(&crosscal::estimate::FitRequest::session(
+        &crosscal::model::Model::default_model(),
+        &session,
+    ))
+    .map(|o| o.fit)
+    .expect("fit");
     let cal =
-        crosscal::app::pipeline::calibration_of(&crosscal::model::Model::default_model(), &f).expect("calibration");
+        crosscal::app::validate::calibration_of(&crosscal::model::Model::default_model(), &f).expect("calibration");
     // The corrector as a streaming user drives it: caller-owned buffers, no allocation.
     let longest = session.runs.iter().map(|r| r.rec.len()).max().unwrap_or(0);
     let (mut w_out, mut a_out) = (vec![[0.0; 3]; longest], vec![[0.0; 3]; longest]);
@@ -287,8 +290,10 @@ fn correct_csv(table: &mut Table) {
     let session = c.generate();
     let manifest = write_session(&session, &tmp.path().join("s")).expect("write session");
     let model = crosscal::model::Model::default_model();
-    let fit = crosscal::app::pipeline::fit_session(&session, &model, &Default::default()).expect("fit");
-    let cal = crosscal::app::pipeline::calibration_of(&model, &fit).expect("calibration");
+    let fit = crosscal::estimate::fit(&crosscal::estimate::FitRequest::session(&model, &session))
+        .map(|o| o.fit)
+        .expect("fit");
+    let cal = crosscal::app::validate::calibration_of(&model, &fit).expect("calibration");
     let profile = crosscal::profile::Profile::from_fit(&session, &model, fit, Vec::new());
     let profile_path = tmp.path().join("profile.json");
     std::fs::write(&profile_path, profile.to_json()).expect("profile");

@@ -11,14 +11,19 @@
 //! accelerometer and ε terms compare). The suggested extra run is the candidate that leaves
 //! fewest coefficients unidentifiable, then the smallest worst error, then the shortest.
 
-use crate::estimate::{fit, CoefStatus, Correlation, EstimateError, Fit, FitOptions, Unidentifiable};
-use crate::estimate::{fit_runs, tracks};
+use crate::estimate::{fit_runs, tracks, FitRun};
+use crate::estimate::{CoefStatus, Correlation, EstimateError, Fit, FitOptions, FitRequest, Unidentifiable};
 use crate::model::Model;
 use crate::motion::DerivativeConfig;
 use crate::session::MotionSpec;
 use crate::simulate::{RunPlan, SimConfig};
 use crate::units::SensorKind;
 use serde::Serialize;
+
+/// Fits exactly `model` to prepared runs through the one entry point.
+fn refit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
+    Ok(crate::estimate::fit(&FitRequest::runs(model, runs).options(*opts))?.fit)
+}
 
 /// A proposed calibration: runs, sample rate and the sensor's white noise.
 #[derive(Debug, Clone)]
@@ -112,7 +117,7 @@ pub fn predict(model: &Model, spec: &PlanSpec) -> Result<(Fit, Vec<Vec<f64>>), E
     let tr = tracks(&session, &DerivativeConfig::default());
     let runs = fit_runs(&session, &tr);
     let opts = FitOptions { known_sigma: Some(spec.sigma()), ..FitOptions::default() };
-    let f = fit(model, &runs, &opts)?;
+    let f = refit(model, &runs, &opts)?;
     // RMS of every regressor over the plan, per sensor, in model term order.
     let mut rms = Vec::new();
     for sensor in SensorKind::BOTH {

@@ -1,11 +1,15 @@
 //! Shared helpers.
 
-use crosscal::app::pipeline::fit_session;
 use crosscal::correct::Calibration;
-use crosscal::estimate::{Fit, FitOptions};
+use crosscal::estimate::{EstimateError, Fit, FitOptions, FitRequest};
 use crosscal::model::Model;
 use crosscal::profile::Profile;
 use crosscal::session::Session;
+
+/// Fits exactly `model` to a session in memory through the one fit entry point.
+pub fn fit_session(session: &Session, model: &Model, opts: &FitOptions) -> Result<Fit, EstimateError> {
+    Ok(crosscal::estimate::fit(&FitRequest::session(model, session).options(*opts))?.fit)
+}
 
 /// Fits the default model and builds the calibration (through a profile, like the CLI).
 pub fn fit_and_calibrate(session: &Session, model: &Model) -> (Fit, Profile, Calibration) {

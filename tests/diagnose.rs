@@ -70,7 +70,7 @@ fn discovers(effect: &str, values: &[(&str, f64)]) {
     let tr = tracks(&s, &DerivativeConfig::default());
     let runs = fit_runs(&s, &tr);
     let motions: Vec<&MotionSpec> = s.runs.iter().map(|r| &r.spec.motion).collect();
-    let pf = crosscal::estimate::fit(&paper, &runs, &FitOptions::default()).unwrap();
+    let pf = crosscal::estimate::fit(&crosscal::estimate::FitRequest::runs(&paper, &runs)).unwrap().fit;
     let paper_channels = channel_reports(&residuals(&paper, &pf, &runs, &motions), &motions);
     let sys_paper: f64 =
         paper_channels.iter().filter(|c| c.sensor == sensor).map(|c| c.systematic_rms).fold(0.0, f64::max);
@@ -81,7 +81,7 @@ fn discovers(effect: &str, values: &[(&str, f64)]) {
     // Coefficients of the added effect within 4 standard errors of truth.
     let mut m = Model::default_model();
     m.add_effect(effect).unwrap();
-    let f = crosscal::app::pipeline::fit_session(&s, &m, &FitOptions::default()).unwrap();
+    let f = crate::common::fit_session(&s, &m, &FitOptions::default()).unwrap();
     let mut checked = 0;
     for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients).filter(|c| c.effect == effect) {
         let t = cfg.truth.value(&c.name).unwrap();
@@ -106,7 +106,7 @@ fn discovers_time_delay_of_5_ms() {
     let (_, s) = hidden("time-delay", &[("time_delay", 0.005)], 3);
     let mut m = Model::default_model();
     m.add_effect("time-delay").unwrap();
-    let f = crosscal::app::pipeline::fit_session(&s, &m, &FitOptions::default()).unwrap();
+    let f = crate::common::fit_session(&s, &m, &FitOptions::default()).unwrap();
     let tau = f.nonlinear[0].value;
     assert!((tau - 0.005).abs() < 2e-4, "τ = {tau}");
 }

@@ -1,7 +1,7 @@
 //! The committed fixtures are what `crosscal simulate` makes, and they fit to truth.
 
+use crate::common::fit_session;
 use crate::common::run_in;
-use crosscal::app::pipeline::fit_session;
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
 use crosscal::session::Session;

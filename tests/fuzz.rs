@@ -1,7 +1,7 @@
 //! Property tests: the readers never panic on arbitrary or mutated input (≥ 100,000 cases
 //! per CI run), and simulate → fit recovers random units within their uncertainty.
 
-use crosscal::app::pipeline::fit_session;
+use crate::common::fit_session;
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
 use crosscal::profile::Profile;

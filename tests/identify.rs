@@ -1,6 +1,6 @@
 //! Identifiability: what a session cannot determine is named, with the run that fixes it.
 
-use crosscal::app::pipeline::fit_session;
+use crate::common::fit_session;
 use crosscal::estimate::{CoefStatus, FitOptions};
 use crosscal::model::Model;
 use crosscal::simulate::{conic_plan, cyclic_mounts, SimConfig};

@@ -1,7 +1,7 @@
 //! Noisy sessions: fitted coefficients lie within their predicted uncertainty, and the
 //! predicted standard errors match the Monte Carlo spread.
 
-use crosscal::app::pipeline::fit_session;
+use crate::common::fit_session;
 use crosscal::estimate::{CoefStatus, Fit, FitOptions};
 use crosscal::model::Model;
 use crosscal::simulate::SimConfig;

@@ -2,7 +2,7 @@
 //! numbers of the core pipeline.
 
 use crate::common::fit_and_calibrate;
-use crosscal::app::pipeline::{check_session, Mode};
+use crosscal::app::validate::{check_session, Mode};
 use crosscal::check::paper::paper_rows;
 use crosscal::check::Thresholds;
 use crosscal::model::{forward, Model, State};

@@ -1,7 +1,7 @@
 //! Profiles: exact JSON round trip, identical correction after reading back, no overwrite.
 
 use crate::common::fit_and_calibrate;
-use crosscal::app::pipeline::{correct_run, Mode};
+use crosscal::app::validate::{correct_run, Mode};
 use crosscal::correct::Calibration;
 use crosscal::model::Model;
 use crosscal::profile::{save, Profile};

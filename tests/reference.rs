@@ -1,7 +1,7 @@
 //! Reference-column sessions on non-uniform time stamps, plus static runs: the reader,
 //! the derived ε and the fit work together.
 
-use crosscal::app::pipeline::fit_session;
+use crate::common::fit_session;
 use crosscal::estimate::{CoefStatus, FitOptions};
 use crosscal::frames::{Mount, Stand, V3};
 use crosscal::model::{forward, State};

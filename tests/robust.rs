@@ -1,6 +1,6 @@
 //! Spikes and determinism.
 
-use crosscal::app::pipeline::fit_session;
+use crate::common::fit_session;
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
 use crosscal::profile::Profile;

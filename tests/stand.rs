@@ -1,9 +1,8 @@
 //! The stand's own settings (cone angle, rate, phase per run) estimated with the unit.
 
-use crosscal::app::pipeline::fit_session;
-use crosscal::estimate::{fit_with_stand, FitOptions};
+use crate::common::fit_session;
+use crosscal::estimate::{EstimateError, Fit, FitOptions, FitRequest};
 use crosscal::model::Model;
-use crosscal::motion::DerivativeConfig;
 use crosscal::session::{MotionSpec, Session};
 use crosscal::simulate::SimConfig;
 
@@ -39,7 +38,7 @@ fn stand_settings_and_coefficients_are_recovered_from_mislabelled_runs() {
     let (cfg, s) = mislabelled(7, 36.0, 100.0);
     let model = Model::default_model();
     let t0 = std::time::Instant::now();
-    let f = fit_with_stand(&model, &s, &DerivativeConfig::default(), &FitOptions::default()).unwrap();
+    let f = fit_with_stand(&model, &s).unwrap();
     println!("stand fit: {:?}", t0.elapsed());
     let mut worst = 0.0f64;
     for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients) {
@@ -97,17 +96,20 @@ fn a_wrong_direction_label_fails_clearly() {
     if let MotionSpec::Conic { rate_deg_s, .. } = &mut s.runs[0].spec.motion {
         *rate_deg_s = -*rate_deg_s;
     }
-    let e = fit_with_stand(&Model::default_model(), &s, &DerivativeConfig::default(), &FitOptions::default())
-        .unwrap_err()
-        .to_string();
+    let e = fit_with_stand(&Model::default_model(), &s).unwrap_err().to_string();
     println!("{e}");
     assert!(e.contains("cone+10") && e.contains("label"), "{e}");
     // Without conic runs there is nothing to estimate, and it says so.
     let mut still = s.clone();
     still.runs.retain(|r| !matches!(r.spec.motion, MotionSpec::Conic { .. }));
     still.runs.push(SimConfig::static_recording(5.0, 50.0).generate().runs.remove(0));
-    let e = fit_with_stand(&Model::default_model(), &still, &DerivativeConfig::default(), &FitOptions::default())
-        .unwrap_err()
-        .to_string();
+    let e = fit_with_stand(&Model::default_model(), &still).unwrap_err().to_string();
     assert!(e.contains("conic"), "{e}");
+}
+
+/// The fit with every conic run's cone angle, rate and phase estimated.
+fn fit_with_stand(model: &Model, session: &Session) -> Result<Fit, EstimateError> {
+    let mut req = FitRequest::session(model, session).options(FitOptions::default());
+    req.stand = true;
+    Ok(crosscal::estimate::fit(&req)?.fit)
 }

@@ -1,9 +1,9 @@
 //! The streamed fit (`fit --stream`: recordings read as streams, memory independent of their
 //! length) against the in-memory fit: the same numbers to the last bit.
 
-use crosscal::estimate::stream::{fit_streaming, StreamError};
-use crosscal::estimate::{fit, Fit, FitOptions};
 use crosscal::estimate::{fit_runs, tracks};
+use crosscal::estimate::{EstimateError, FitData, FitOutcome, FitRequest, ModelChoice, StreamPolicy};
+use crosscal::estimate::{Fit, FitOptions};
 use crosscal::model::Model;
 use crosscal::session::Session;
 use crosscal::simulate::{conic_plan, cyclic_mounts, write_session, RunPlan, SimConfig};
@@ -72,15 +72,16 @@ fn streamed_fit_equals_the_in_memory_fit() {
     model.add_effect("gyro-g-sensitivity").unwrap();
     let session = Session::load(&manifest).unwrap();
     let tr = tracks(&session, &Default::default());
-    let in_memory = fit(&model, &fit_runs(&session, &tr), &FitOptions::default()).unwrap();
+    let in_memory = crosscal::estimate::fit(&FitRequest::runs(&model, &fit_runs(&session, &tr))).unwrap().fit;
     let streamed = fit_streaming(&manifest, &model, &FitOptions::default()).unwrap();
     let worst = same(&in_memory, &streamed.fit);
     println!("streamed vs in-memory fit: largest relative difference {worst:e}");
     assert!(worst <= 1e-12, "{worst}");
     // The runs as the profile records them: same hashes and sample counts.
-    let used = crosscal::profile::runs_used(&session);
-    assert_eq!(used, streamed.runs);
-    assert_eq!(streamed.runs.last().map(|r| r.samples), Some(600));
+    let used = session.runs_used();
+    let streamed_runs = &streamed.source.as_ref().unwrap().runs;
+    assert_eq!(&used, streamed_runs);
+    assert_eq!(streamed_runs.last().map(|r| r.samples), Some(600));
 }
 
 #[test]
@@ -91,10 +92,29 @@ fn streamed_fit_refuses_what_needs_the_samples_in_memory() {
     let manifest = write_session(&c.generate(), tmp.path()).unwrap();
     let robust = FitOptions { robust: true, ..FitOptions::default() };
     let e = fit_streaming(&manifest, &Model::default_model(), &robust).unwrap_err();
-    assert!(matches!(e, StreamError::NotStreamable(_)), "{e}");
+    assert!(matches!(e, EstimateError::Request(_)), "{e}");
     let mut m = Model::default_model();
     m.add_effect("time-delay").unwrap();
-    assert!(matches!(fit_streaming(&manifest, &m, &FitOptions::default()), Err(StreamError::NotStreamable(_))));
+    assert!(matches!(fit_streaming(&manifest, &m, &FitOptions::default()), Err(EstimateError::Request(_))));
+}
+
+/// The streamed fit of a session on disk (an error where it cannot be streamed).
+fn fit_streaming(manifest: &std::path::Path, model: &Model, opts: &FitOptions) -> Result<FitOutcome, EstimateError> {
+    streamed_with(manifest, model, opts, false)
+}
+
+fn streamed_with(
+    manifest: &std::path::Path,
+    model: &Model,
+    opts: &FitOptions,
+    strict: bool,
+) -> Result<FitOutcome, EstimateError> {
+    let mut req = FitRequest::new(FitData::Manifest(manifest), ModelChoice::Exact(model)).options(*opts);
+    req.streaming = StreamPolicy::Require;
+    req.strict = strict;
+    let out = crosscal::estimate::fit(&req)?;
+    assert!(out.streamed);
+    Ok(out)
 }
 
 /// A corrected CSV read back: the header and each row's fields.
@@ -117,8 +137,8 @@ fn csv_correction_streams_the_same_bits_as_the_in_memory_corrector() {
     // A fitted linear calibration; and one with a dead zone wide enough to catch the rates'
     // zero crossings (flags), on the recording with a temp column.
     let session = Session::load(&plain).unwrap();
-    let f = crosscal::app::pipeline::fit_session(&session, &Model::default_model(), &FitOptions::default()).unwrap();
-    let fitted = crosscal::app::pipeline::calibration_of(&Model::default_model(), &f).unwrap();
+    let f = crate::common::fit_session(&session, &Model::default_model(), &FitOptions::default()).unwrap();
+    let fitted = crosscal::app::validate::calibration_of(&Model::default_model(), &f).unwrap();
     let mut dz = Model::default_model();
     dz.fix_nonlinear("gyro-dead-zone", vec![0.002, 0.003, 0.001]).unwrap();
     let mut dead = Calibration::from_model(&dz, Default::default()).unwrap();
@@ -227,14 +247,9 @@ fn streamed_fit_warns_as_the_in_memory_reader_and_refuses_gaps_when_strict() {
     assert_eq!(whole.len(), 4, "{whole:?}");
     let streamed = fit_streaming(&manifest, &Model::default_model(), &FitOptions::default()).unwrap();
     assert_eq!(streamed.warnings, whole);
-    let strict = crosscal::estimate::stream::fit_streaming_with(
-        &manifest,
-        &Model::default_model(),
-        &FitOptions::default(),
-        true,
-    )
-    .unwrap_err();
+    let strict = streamed_with(&manifest, &Model::default_model(), &FitOptions::default(), true).unwrap_err();
+    let strict = std::error::Error::source(&strict).expect("the read error").to_string();
     let in_memory = Session::load_with(&manifest, true).unwrap_err();
-    assert_eq!(strict.to_string(), in_memory.to_string());
+    assert_eq!(strict, in_memory.to_string());
     assert!(strict.to_string().contains("cone+10.csv:902:1 (t): gap in t of 1.0"), "{strict}");
 }

@@ -1,7 +1,7 @@
 //! Calibrated uncertainty (issue: trustworthy numbers): interval coverage with white and
 //! coloured noise, efficiency against the Cramér–Rao bound, and `plan` against Monte Carlo.
 
-use crosscal::app::pipeline::fit_session;
+use crate::common::fit_session;
 use crosscal::estimate::{CoefStatus, Fit, FitOptions};
 use crosscal::model::Model;
 use crosscal::plan::{default_candidates, plan, PlanSpec};

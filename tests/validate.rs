@@ -1,7 +1,8 @@
 //! Correction follows the profile, proven on runs the fit never saw.
 
+use crate::common::fit_session;
 use crate::diagnose::hidden;
-use crosscal::app::pipeline::{check_session, cross_validate, fit_session, holdout_check, Mode};
+use crosscal::app::validate::{check_session, cross_validate, holdout_check, Mode};
 use crosscal::check::{CheckReport, Thresholds};
 use crosscal::correct::Calibration;
 use crosscal::model::{catalog, forward, nonlinear_catalog, Model, State};
@@ -180,7 +181,7 @@ fn leave_one_run_out_matches_the_all_runs_figures_on_the_paper_preset() {
     let m = Model::default_model();
     let th = Thresholds::default();
     let all_fit = fit_session(&s, &m, &Default::default()).unwrap();
-    let cal = crosscal::app::pipeline::calibration_of(&m, &all_fit).unwrap();
+    let cal = crosscal::app::validate::calibration_of(&m, &all_fit).unwrap();
     // Streaming gyro: the errors are set by the causal ε derivative, not by rounding, so
     // the held-out and all-runs reductions must agree within 1 %. (The accelerometer has no
     // derivative: its errors are rounding-level in both, checked below.)
@@ -235,7 +236,7 @@ fn temperature_effects_refuse_data_without_temperature() {
     let mut m = Model::default_model();
     m.add_effect("gyro-temp-bias").unwrap();
     let f = fit_session(&s, &m, &Default::default()).unwrap();
-    let cal = crosscal::app::pipeline::calibration_of(&m, &f).unwrap();
+    let cal = crosscal::app::validate::calibration_of(&m, &f).unwrap();
     let r = &s.runs[0];
     for mode in [Mode::Offline, Mode::Streaming] {
         let e = match mode {
@@ -254,10 +255,10 @@ fn streaming_matches_offline_within_the_derivative_approximation() {
     let mut m = Model::default_model();
     m.add_effect("accel-lever-arm").unwrap();
     let f = fit_session(&s, &m, &Default::default()).unwrap();
-    let cal = crosscal::app::pipeline::calibration_of(&m, &f).unwrap();
+    let cal = crosscal::app::validate::calibration_of(&m, &f).unwrap();
     for r in s.runs.iter().take(6) {
-        let off = crosscal::app::pipeline::correct_run(&cal, r, Mode::Offline).unwrap();
-        let st = crosscal::app::pipeline::correct_run(&cal, r, Mode::Streaming).unwrap();
+        let off = crosscal::app::validate::correct_run(&cal, r, Mode::Offline).unwrap();
+        let st = crosscal::app::validate::correct_run(&cal, r, Mode::Streaming).unwrap();
         // After the warm-up the two differ only through ε̂ (causal vs centred window, which
         // passes more of the sensor noise): C_ε ε̂ on the gyro, ε̂ × r on the accelerometer.
         // That stays below a quarter of the sensor's own noise (0.002 °/s, 2e-5 g).
@@ -283,7 +284,7 @@ fn block_correction_equals_sample_by_sample_bit_for_bit() {
     let s = c.generate();
     let m = Model::default_model();
     let f = fit_session(&s, &m, &Default::default()).unwrap();
-    let cal = crosscal::app::pipeline::calibration_of(&m, &f).unwrap();
+    let cal = crosscal::app::validate::calibration_of(&m, &f).unwrap();
     let (mut t, mut gyro, mut accel) = (Vec::new(), Vec::new(), Vec::new());
     for r in s.runs.iter().take(2) {
         let t0 = t.last().map_or(0.0, |&x| x + 0.01);
@@ -323,7 +324,7 @@ fn block_correction_equals_sample_by_sample_bit_for_bit() {
     // And the streamed rates are the calibrated ones: after the warm-up, within a quarter of
     // the sensor noise of the offline correction of the first run.
     let r = &s.runs[0];
-    let off = crosscal::app::pipeline::correct_run(&cal, r, Mode::Offline).unwrap();
+    let off = crosscal::app::validate::correct_run(&cal, r, Mode::Offline).unwrap();
     for k in one.warmup_samples()..700 {
         for i in 0..3 {
             let dw = (off.w_rad_s[k][i] - singles[k].0[i]).abs();

@@ -12,8 +12,8 @@
 //! units that were fitted; |z| > 5 flags the unit even when it passes the fixed rules.
 
 use crate::check::rules::{evaluate, Evidence, RuleResult, Rules};
-use crate::estimate::FitOptions;
-use crate::model::Model;
+use crate::estimate::{FitData, FitRequest, ModelChoice};
+use crate::model::ModelSpec;
 use crate::profile::{history, save, Profile};
 use crate::session::Session;
 use rayon::prelude::*;
@@ -26,8 +26,8 @@ pub const OUTLIER_Z: f64 = 5.0;
 /// Settings of a batch.
 #[derive(Debug, Clone)]
 pub struct BatchOptions {
-    /// Model fitted to every unit.
-    pub model: Model,
+    /// Model fitted to every unit (`default` is a protocol session's own preset).
+    pub model: ModelSpec,
     /// Profile store.
     pub store: PathBuf,
     /// Acceptance rules.
@@ -132,18 +132,15 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
     let (path, profile, reused) = match existing(&opts.store, &session).filter(|_| opts.resume) {
         Some((path, p)) => (path, p, true),
         None => {
-            let fit = match crate::app::pipeline::fit_session(&session, &opts.model, &FitOptions::default()) {
-                Ok(f) => f,
+            let mut req = FitRequest::new(FitData::Session(&session), ModelChoice::Spec(&opts.model));
+            req.strict = true;
+            let p = match super::fit::fit_profile(&req, None) {
+                Ok(f) => f.profile,
                 Err(e) => {
-                    r.reasons.push(format!("fit failed: {e}"));
+                    r.reasons.push(super::chain(&e));
                     return r;
                 }
             };
-            if let Err(e) = fit.ensure_identifiable() {
-                r.reasons.push(e.to_string());
-                return r;
-            }
-            let p = Profile::from_fit(&session, &opts.model, fit, session.warnings());
             match save(&p, &opts.store) {
                 Ok(path) => (path, p, false),
                 Err(e) => {
@@ -163,7 +160,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
         .map(|c| (c.name.clone(), c.value))
         .collect();
     let diagnose = opts.rules.rules.iter().any(|x| matches!(x, crate::check::rules::Rule::Adequate { .. }));
-    let acc = match crate::app::pipeline::acceptance(&profile, &session, diagnose) {
+    let acc = match super::accept::acceptance(&profile, &session, diagnose) {
         Ok(a) => a,
         Err(e) => {
             r.reasons.push(format!("check failed: {e}"));

@@ -1,6 +1,7 @@
 //! `crosscal accept`: a unit's profile (and session) against acceptance rules.
 
 use super::Outcome;
+use crate::outln;
 use anyhow::Context;
 use crosscal::check::rules::{evaluate, Evidence, Rules};
 use crosscal::profile::Profile;
@@ -33,7 +34,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         Some(path) => {
             let s = Session::load(path).with_context(|| format!("reading session {}", path.display()))?;
             profile.ensure_unit(&a.profile, &s.manifest.serial)?;
-            Some(crosscal::app::pipeline::acceptance(&profile, &s, a.diagnose)?)
+            Some(crosscal::app::accept::acceptance(&profile, &s, a.diagnose)?)
         }
         None if a.diagnose => anyhow::bail!("--diagnose needs --session"),
         None => None,
@@ -43,12 +44,12 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let results = evaluate(&rules, &profile, &ev);
     let pass = results.iter().all(|r| r.pass);
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&results)?);
+        outln!("{}", serde_json::to_string_pretty(&results)?);
     } else {
         for r in &results {
-            println!("{:<5} {:<32} {}", if r.pass { "pass" } else { "FAIL" }, r.rule, r.detail);
+            outln!("{:<5} {:<32} {}", if r.pass { "pass" } else { "FAIL" }, r.rule, r.detail);
         }
-        println!("unit {}: {}", profile.serial, if pass { "ACCEPTED" } else { "REJECTED" });
+        outln!("unit {}: {}", profile.serial, if pass { "ACCEPTED" } else { "REJECTED" });
     }
     Ok(if pass { Outcome::Ok } else { Outcome::CheckFailed })
 }

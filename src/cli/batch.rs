@@ -1,7 +1,7 @@
 //! `crosscal batch`: calibrate and accept a production lot.
 
-use super::fit::build_model;
 use super::Outcome;
+use crate::outln;
 use anyhow::Context;
 use crosscal::app::batch::{run as run_batch, to_csv, to_html, unit_dirs, BatchOptions, UnitResult, Verdict};
 use crosscal::check::rules::Rules;
@@ -22,12 +22,9 @@ pub struct Args {
     /// Folder for batch-report.{csv,json,html} (default: DIR).
     #[arg(long)]
     report_dir: Option<PathBuf>,
-    /// Model preset: `default` or `paper`.
-    #[arg(long, default_value = "default")]
-    model: String,
-    /// Add a catalogue effect to the model (repeatable).
-    #[arg(long = "effect")]
-    effects: Vec<String>,
+    /// The model (for `check`: fitted with --holdout / --cross-validate).
+    #[command(flatten)]
+    model: super::ModelArgs,
     /// Skip units whose profile was already fitted on the same files (after an interruption).
     #[arg(long)]
     resume: bool,
@@ -38,7 +35,8 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let rules = Rules::read(&a.rules)?;
-    let model = build_model(&a.model, &a.effects, &[])?;
+    let model = a.model.spec(&[]);
+    model.build()?;
     let dirs = unit_dirs(&a.dir).with_context(|| format!("reading batch folder {}", a.dir.display()))?;
     if dirs.is_empty() {
         anyhow::bail!("{}: no unit folders (expected one sub-folder per unit with its session.json)", a.dir.display());
@@ -87,7 +85,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     write("batch-report.json", serde_json::to_string_pretty(&report)? + "\n")?;
     write("batch-report.html", to_html(&report, &format!("crosscal batch: {}", a.dir.display())))?;
     let outliers: Vec<&UnitResult> = report.units.iter().filter(|u| !u.outliers.is_empty()).collect();
-    println!(
+    outln!(
         "{} units: {} pass, {} fail, {} could not be processed; {} batch outlier(s); reports in {}",
         report.units.len(),
         report.passed(),
@@ -98,7 +96,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     );
     for u in outliers {
         let o: Vec<String> = u.outliers.iter().map(|(n, z)| format!("{n} z = {z:+.1}")).collect();
-        println!("outlier: {} ({})", u.dir.display(), o.join(", "));
+        outln!("outlier: {} ({})", u.dir.display(), o.join(", "));
     }
     Ok(if report.passed() == report.units.len() { Outcome::Ok } else { Outcome::CheckFailed })
 }

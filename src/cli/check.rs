@@ -2,8 +2,9 @@
 
 use super::correct::ModeArg;
 use super::{format, Outcome};
+use crate::{out, outln};
 use anyhow::Context;
-use crosscal::app::pipeline::{check_session, cross_validate, holdout_check};
+use crosscal::app::validate::{check_session, cross_validate, holdout_check};
 use crosscal::check::{CheckReport, Thresholds};
 use crosscal::correct::Calibration;
 use crosscal::profile::Profile;
@@ -25,12 +26,9 @@ pub struct Args {
     /// Leave-one-run-out: check each run with a model fitted on all the others.
     #[arg(long, conflicts_with = "profile")]
     cross_validate: bool,
-    /// Model for --holdout / --cross-validate: `default` or `paper`.
-    #[arg(long, default_value = "default")]
-    model: String,
-    /// Effects added to that model (repeatable).
-    #[arg(long = "effect")]
-    effects: Vec<String>,
+    /// The model (for `check`: fitted with --holdout / --cross-validate).
+    #[command(flatten)]
+    model: super::ModelArgs,
     /// Offline (default) or streaming correction.
     #[arg(long, value_enum, default_value = "offline")]
     mode: ModeArg,
@@ -57,7 +55,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let session =
         Session::load_with(&a.session, a.strict).with_context(|| format!("reading session {}", a.session.display()))?;
     let Some(profile_path) = &a.profile else {
-        let model = super::fit::build_model(&a.model, &a.effects, &[])?;
+        let model = a.model.spec(&[]).build()?;
         let (report, what) = if a.cross_validate {
             let r = cross_validate(&session, &model, a.mode.into(), thresholds)?;
             (r, "leave-one-run-out: each run checked with a model fitted on the others".to_string())
@@ -85,11 +83,11 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
 
 fn print_report(session: &Session, report: &CheckReport, what: &str, json: bool) -> anyhow::Result<Outcome> {
     if json {
-        println!("{}", serde_json::to_string_pretty(report)?);
+        outln!("{}", serde_json::to_string_pretty(report)?);
     } else {
-        println!("unit {}: {} runs checked ({what})", session.manifest.serial, report.runs.len());
-        print!("{}", format::check_summary(report));
-        println!("{}", if report.pass { "PASS" } else { "FAIL" });
+        outln!("unit {}: {} runs checked ({what})", session.manifest.serial, report.runs.len());
+        out!("{}", format::check_summary(report));
+        outln!("{}", if report.pass { "PASS" } else { "FAIL" });
     }
     Ok(if report.pass { Outcome::Ok } else { Outcome::CheckFailed })
 }

@@ -1,6 +1,7 @@
 //! `crosscal compare`: the model ladder.
 
 use super::Outcome;
+use crate::outln;
 use anyhow::Context;
 use crosscal::diagnose::compare;
 use crosscal::estimate::FitOptions;
@@ -63,16 +64,27 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     }
     let (rungs, d) = compare(&runs, &motions, &FitOptions::default(), &extra)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&rungs)?);
+        outln!("{}", serde_json::to_string_pretty(&rungs)?);
     } else {
-        println!(
+        outln!(
             "model ladder for unit {} ({} runs); residual RMS in units of each channel's noise floor",
             session.manifest.serial,
             session.runs.len()
         );
-        println!(
+        outln!(
             "{:<30} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>14} {:>11} {:>11} {:>9}",
-            "model", "params", "gx", "gy", "gz", "ax", "ay", "az", "BIC", "gyro red.", "accel red.", "held-out"
+            "model",
+            "params",
+            "gx",
+            "gy",
+            "gz",
+            "ax",
+            "ay",
+            "az",
+            "BIC",
+            "gyro red.",
+            "accel red.",
+            "held-out"
         );
         for r in &rungs {
             let rel: Vec<String> =
@@ -85,7 +97,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 format!("{worst:.4}")
             };
             let name = if r.model.len() > 30 { format!("{}…", &r.model[..29]) } else { r.model.clone() };
-            println!(
+            outln!(
                 "{:<30} {:>6} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7} {:>14.1} {:>10.1}x {:>10.1}x {:>9}",
                 name,
                 r.params,
@@ -101,11 +113,11 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 held
             );
         }
-        println!("(channels: in-sample residual RMS / noise floor; held-out: worst channel's leave-one-run-out RMS / noise floor)");
+        outln!("(channels: in-sample residual RMS / noise floor; held-out: worst channel's leave-one-run-out RMS / noise floor)");
         for r in rungs.iter().skip(1).filter(|r| !r.heldout_gain) {
-            println!("no held-out gain: '{}' does not predict left-out runs better than the rung before it: its extra terms fit noise", r.model);
+            outln!("no held-out gain: '{}' does not predict left-out runs better than the rung before it: its extra terms fit noise", r.model);
         }
-        println!(
+        outln!(
             "verdict: {:?}{}",
             d.verdict,
             if d.proposal.is_empty() { String::new() } else { format!(": add {}", d.proposal.join(", ")) }

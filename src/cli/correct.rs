@@ -2,7 +2,7 @@
 
 use super::Outcome;
 use anyhow::Context;
-use crosscal::app::pipeline::{correct_run, Mode};
+use crosscal::app::validate::{correct_run, Mode};
 use crosscal::correct::{correct_csv_streaming, Calibration, OutputScale, StreamCsvError, StreamCsvOptions};
 use crosscal::profile::Profile;
 use crosscal::session::{parse_recording, recording_header, CsvLine, MotionSpec, ReadOptions, Run, RunSpec};

@@ -1,12 +1,12 @@
 //! `crosscal demo`: the whole pipeline on the paper's stand, ending in one table.
 
 use super::{format, Outcome};
+use crate::{out, outln};
 use anyhow::Context;
-use crosscal::app::pipeline::{check_session, fit_session, Mode};
+use crosscal::app::validate::{check_session, Mode};
 use crosscal::check::paper::paper_rows;
 use crosscal::check::Thresholds;
 use crosscal::correct::Calibration;
-use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
 use crosscal::profile::{save, Profile};
 use crosscal::session::Session;
@@ -31,18 +31,18 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         }
     };
     let cfg = SimConfig::paper();
-    println!(
+    outln!(
         "1. simulate: the paper's unit (C_w off-diagonal 0.01, C_e 0.001 s, K off-diagonal 0.01) on {} conic runs",
         cfg.runs.len()
     );
     let manifest = write_session(&cfg.generate(), &dir.join("session")).context("writing the demo session")?;
     let session = Session::load(&manifest)?;
-    println!("   {} ({} samples)", manifest.display(), session.n_samples());
+    outln!("   {} ({} samples)", manifest.display(), session.n_samples());
     let model = Model::default_model();
-    let fit = fit_session(&session, &model, &FitOptions::default())?;
+    let fit = crosscal::estimate::fit(&crosscal::estimate::FitRequest::session(&model, &session))?.fit;
     let profile = Profile::from_fit(&session, &model, fit, session.warnings());
     let path = save(&profile, &dir.join("calib-profiles"))?;
-    println!("2. fit: model '{}' -> {}", profile.model, path.display());
+    outln!("2. fit: model '{}' -> {}", profile.model, path.display());
     let worst = profile
         .gyro
         .coefficients
@@ -50,25 +50,31 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         .chain(&profile.accel.coefficients)
         .filter_map(|c| cfg.truth.value(&c.name).map(|truth| (c.value - truth).abs()))
         .fold(0.0, f64::max);
-    println!("   largest |fitted - true| coefficient error: {worst:.2e}");
+    outln!("   largest |fitted - true| coefficient error: {worst:.2e}");
     let profile = Profile::read(&path)?;
     let cal = Calibration::from_profile(&profile)?;
     let thresholds = Thresholds::default();
     let offline = check_session(&session, &cal, Mode::Offline, thresholds)?;
     let streaming = check_session(&session, &cal, Mode::Streaming, thresholds)?;
-    println!("3. correct + check, all {} runs (offline):", offline.runs.len());
-    print!("{}", format::check_summary(&offline));
+    outln!("3. correct + check, all {} runs (offline):", offline.runs.len());
+    out!("{}", format::check_summary(&offline));
     let run = "cone+10";
     let rows = paper_rows(&offline, &streaming, run).context("the paper's run is missing from the demo session")?;
-    println!("\n4. the paper's configuration (run {run}: α = 10°, ω_s = 10 °/s, nominal mount):");
-    println!(
+    outln!("\n4. the paper's configuration (run {run}: α = 10°, ω_s = 10 °/s, nominal mount):");
+    outln!(
         "{:<6} {:<4} {:>12} {:>14} {:>12} {:>14} {:>22}  pass",
-        "sensor", "axis", "before", "after", "reduction", "streaming", "paper before -> after"
+        "sensor",
+        "axis",
+        "before",
+        "after",
+        "reduction",
+        "streaming",
+        "paper before -> after"
     );
     for r in &rows {
         let before = r.paper_before_pct.map_or("-".to_string(), |p| format!("{p} %"));
         let paper = format!("{before} -> {} %", r.paper_after_pct);
-        println!(
+        outln!(
             "{:<6} {:<4} {:>12} {:>14} {:>12} {:>14} {:>22}  {}",
             r.sensor.as_str(),
             r.axis,
@@ -80,8 +86,8 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             if r.pass { "yes" } else { "NO" }
         );
     }
-    println!("(pass: reduction >= the paper's (gyro 30x, accel 40000x), after <= the paper's, streaming <= the paper's / 100)");
+    outln!("(pass: reduction >= the paper's (gyro 30x, accel 40000x), after <= the paper's, streaming <= the paper's / 100)");
     let pass = offline.pass && rows.iter().all(|r| r.pass);
-    println!("{}", if pass { "DEMO PASS" } else { "DEMO FAIL" });
+    outln!("{}", if pass { "DEMO PASS" } else { "DEMO FAIL" });
     Ok(if pass { Outcome::Ok } else { Outcome::CheckFailed })
 }

@@ -1,7 +1,7 @@
 //! `crosscal diagnose`.
 
-use super::fit::build_model;
-use super::{format, Outcome};
+use super::{format, ModelArgs, Outcome};
+use crate::{out, outln};
 use anyhow::Context;
 use crosscal::diagnose::{diagnose, ChannelReport, Verdict};
 use crosscal::estimate::FitOptions;
@@ -15,17 +15,14 @@ use std::path::PathBuf;
 pub struct Args {
     /// The session manifest (session.json).
     session: PathBuf,
-    /// Model to start from: `default` or `paper` (protocol sessions: `ferraris` or `tedaldi`,
-    /// chosen from the session unless given).
-    #[arg(long, default_value = "default", conflicts_with = "profile")]
-    model: String,
+    /// The model to start from (protocol sessions: `ferraris` or `tedaldi`, chosen from the
+    /// session unless given), with effects already in it.
+    #[command(flatten)]
+    model: ModelArgs,
     /// Start from a unit's profile instead: its coefficients are held, nothing is refitted,
     /// and candidates are tried on top of it (is the calibration still adequate on new data?).
     #[arg(long)]
     profile: Option<PathBuf>,
-    /// Effects already in the model (repeatable).
-    #[arg(long = "effect")]
-    effects: Vec<String>,
     /// Print the diagnosis as JSON.
     #[arg(long)]
     json: bool,
@@ -73,7 +70,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
     let d = diagnose(&model, &runs, &motions, &FitOptions::default())?;
     if let Some(path) = &a.report {
-        let base_fit = crosscal::estimate::fit(&model, &runs, &FitOptions::default())?;
+        let base_fit = crosscal::estimate::fit(&crosscal::estimate::FitRequest::runs(&model, &runs))?.fit;
         let before = crosscal::diagnose::residuals(&model, &base_fit, &runs, &motions);
         let after = (!d.steps.is_empty()).then(|| {
             let m = crosscal::diagnose::ladder_model(&model, &d);
@@ -86,33 +83,37 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         eprintln!("report written to {}", path.display());
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&d)?);
+        outln!("{}", serde_json::to_string_pretty(&d)?);
         return Ok(Outcome::Ok);
     }
-    println!(
+    outln!(
         "unit {}: model '{}' against {} runs ({} samples)",
         session.manifest.serial,
         d.model,
         session.runs.len(),
         session.n_samples()
     );
-    println!("\nresidual per channel (units: gyro deg/s, accel m/s^2):");
-    print!("{}", channel_table(&d.channels));
+    outln!("\nresidual per channel (units: gyro deg/s, accel m/s^2):");
+    out!("{}", channel_table(&d.channels));
     if !d.candidates.is_empty() {
-        println!("\ncandidate effects, best first (ΔBIC < {} is strong evidence):", crosscal::diagnose::BIC_EVIDENCE);
-        println!("  {:<28} {:>6} {:>12} {:>11} {:>12}", "effect", "params", "rss change", "p-value", "ΔBIC");
+        outln!("\ncandidate effects, best first (ΔBIC < {} is strong evidence):", crosscal::diagnose::BIC_EVIDENCE);
+        outln!("  {:<28} {:>6} {:>12} {:>11} {:>12}", "effect", "params", "rss change", "p-value", "ΔBIC");
         for c in d.candidates.iter().take(10) {
             let change = if c.rss_before > 0.0 { 100.0 * (c.rss_after / c.rss_before - 1.0) } else { 0.0 };
-            println!(
+            outln!(
                 "  {:<28} {:>6} {:>11.2}% {:>11.2e} {:>12.1}",
-                c.effect, c.added_params, change, c.p_value, c.delta_bic
+                c.effect,
+                c.added_params,
+                change,
+                c.p_value,
+                c.delta_bic
             );
         }
     }
     if !d.disagreements.is_empty() {
-        println!("\ncoefficients that differ between runs (single-run fit vs all runs; something depends on rate, direction, cone angle or mount):");
+        outln!("\ncoefficients that differ between runs (single-run fit vs all runs; something depends on rate, direction, cone angle or mount):");
         for x in d.disagreements.iter().take(12) {
-            println!(
+            outln!(
                 "  {:<14} run {:<18} {:>12} ± {:<10} vs {:>12}  (z = {:.1})",
                 x.coefficient,
                 x.run,
@@ -123,34 +124,34 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             );
         }
         if d.disagreements.len() > 12 {
-            println!("  … {} more", d.disagreements.len() - 12);
+            outln!("  … {} more", d.disagreements.len() - 12);
         }
     }
     for (i, s) in d.steps.iter().enumerate() {
-        println!("\nstep {}: add {} (ΔBIC {:.1})", i + 1, s.effect, s.score.delta_bic);
-        println!("  why: {}", s.score.explanation);
+        outln!("\nstep {}: add {} (ΔBIC {:.1})", i + 1, s.effect, s.score.delta_bic);
+        outln!("  why: {}", s.score.explanation);
         if !s.indistinguishable.is_empty() {
-            println!("  indistinguishable on these runs from: {}", s.indistinguishable.join(", "));
+            outln!("  indistinguishable on these runs from: {}", s.indistinguishable.join(", "));
         }
-        print!("{}", channel_table(&s.channels));
+        out!("{}", channel_table(&s.channels));
     }
     for w in &d.warnings {
-        println!("warning: {w}");
+        outln!("warning: {w}");
     }
     match d.verdict {
         Verdict::Adequate => {
-            println!("\nverdict: the model is adequate: residuals are at the noise floor; nothing to add.")
+            outln!("\nverdict: the model is adequate: residuals are at the noise floor; nothing to add.")
         }
-        Verdict::Explained => println!(
+        Verdict::Explained => outln!(
             "\nverdict: add {} — then the residual is at the noise floor. Fit it with: crosscal fit {} {}",
             d.proposal.join(", "),
             a.session.display(),
             d.proposal.iter().map(|e| format!("--effect {e}")).collect::<Vec<_>>().join(" ")
         ),
         Verdict::Unexplained => {
-            println!("\nverdict: a systematic residual remains that no catalogued effect explains:");
+            outln!("\nverdict: a systematic residual remains that no catalogued effect explains:");
             for u in &d.unexplained {
-                println!("  {u}");
+                outln!("  {u}");
             }
         }
     }
@@ -166,23 +167,23 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
     let d = crosscal::diagnose::protocol::diagnose_protocol(session, &model)
         .with_context(|| format!("diagnosing {}", a.session.display()))?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&d)?);
+        outln!("{}", serde_json::to_string_pretty(&d)?);
         return Ok(Outcome::Ok);
     }
-    println!(
+    outln!(
         "unit {}: model '{}' against {} ({} samples)",
         session.manifest.serial,
         d.model,
         d.report.protocol,
         session.n_samples()
     );
-    print!("{}", format::protocol(&d.report));
+    out!("{}", format::protocol(&d.report));
     let mut poses: Vec<_> = d.report.poses.iter().collect();
     poses.sort_by(|x, y| y.gravity_error_m_s2.abs().total_cmp(&x.gravity_error_m_s2.abs()));
-    println!("\nlargest pose misfits (|a| − g, calibrated rate at rest):");
+    outln!("\nlargest pose misfits (|a| − g, calibrated rate at rest):");
     for p in poses.iter().take(5) {
         let w = p.rate_at_rest_deg_s;
-        println!(
+        outln!(
             "  {:<24} {:>+10.5} m/s^2   ω {:+.4} {:+.4} {:+.4} deg/s",
             format!("{}[{}..{}]", p.run, p.start, p.end),
             p.gravity_error_m_s2,
@@ -192,35 +193,35 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
         );
     }
     for o in &d.outlier_poses {
-        println!("  OUTLIER {o}: did the unit move, or was the pose cut too wide?");
+        outln!("  OUTLIER {o}: did the unit move, or was the pose cut too wide?");
     }
     if !d.candidates.is_empty() {
-        println!("\ncandidate effects on the static poses, best first:");
-        println!("  {:<26} {:>6} {:>12} {:>11}  fit on this session", "effect", "params", "rss change", "p-value");
+        outln!("\ncandidate effects on the static poses, best first:");
+        outln!("  {:<26} {:>6} {:>12} {:>11}  fit on this session", "effect", "params", "rss change", "p-value");
         for c in d.candidates.iter().take(8) {
             let change = if c.rss_before > 0.0 { 100.0 * (c.rss_after / c.rss_before - 1.0) } else { 0.0 };
             let fit = match &c.fittable {
                 Ok(()) => "yes".to_string(),
                 Err(_) => "no".to_string(),
             };
-            println!("  {:<26} {:>6} {:>11.2}% {:>11.2e}  {fit}", c.effect, c.added_params, change, c.p_value);
+            outln!("  {:<26} {:>6} {:>11.2}% {:>11.2e}  {fit}", c.effect, c.added_params, change, c.p_value);
         }
     }
     match d.proposal.as_deref().and_then(|p| d.candidates.iter().find(|c| c.effect == p)) {
         Some(c) => {
-            println!("\nverdict: missing effect {} (p = {:.1e})", c.effect, c.p_value);
+            outln!("\nverdict: missing effect {} (p = {:.1e})", c.effect, c.p_value);
             if !d.indistinguishable.is_empty() {
-                println!(
+                outln!(
                     "  these poses cannot tell it from {}: poses at other angles (e.g. 45° tilts) would separate them",
                     d.indistinguishable.join(", ")
                 );
             }
             match &c.fittable {
-                Ok(()) => println!("next: crosscal fit {} --effect {}", a.session.display(), c.effect),
-                Err(why) => println!("next: {why}"),
+                Ok(()) => outln!("next: crosscal fit {} --effect {}", a.session.display(), c.effect),
+                Err(why) => outln!("next: {why}"),
             }
         }
-        None => println!(
+        None => outln!(
             "\nverdict: adequate: no catalogued effect explains the pose residuals (p ≥ {:.0e} for all)",
             crosscal::diagnose::protocol::P_PROPOSE
         ),
@@ -236,17 +237,18 @@ fn start_model(a: &Args, session: &Session) -> anyhow::Result<crosscal::model::M
             let prof = crosscal::profile::Profile::read(p)?;
             prof.ensure_unit(p, &session.manifest.serial)?;
             let mut m = prof.model().with_context(|| format!("using profile {}", p.display()))?;
-            for e in &a.effects {
+            for e in &a.model.effects {
                 m.add_effect(e)?;
             }
             Ok(m)
         }
         None => {
-            let preset = match a.model.as_str() {
-                "default" if session.is_protocol() => crosscal::estimate::protocol::default_preset(session),
-                other => other,
+            let default = if session.is_protocol() {
+                crosscal::estimate::protocol::default_preset(session)
+            } else {
+                crosscal::model::Preset::Default
             };
-            build_model(preset, &a.effects, &[])
+            Ok(a.model.spec(&[]).build_with_default(default)?)
         }
     }
 }

@@ -1,6 +1,7 @@
 //! `crosscal effects`: the catalogue, readable in the tool.
 
 use super::Outcome;
+use crate::outln;
 use crosscal::model::{catalog, nonlinear_catalog};
 
 /// Options of `effects`.
@@ -17,13 +18,13 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             continue;
         }
         shown += 1;
-        println!("{} ({}; linear)", e.id(), e.sensor());
+        outln!("{} ({}; linear)", e.id(), e.sensor());
         let names: Vec<String> = e.terms().iter().map(|t| format!("{} [{}] × {}", t.name, t.unit, t.key)).collect();
-        println!("  coefficients: {}", names.join(", "));
+        outln!("  coefficients: {}", names.join(", "));
         if e.needs_temperature() {
-            println!("  needs: a temp column or a run temperature_c");
+            outln!("  needs: a temp column or a run temperature_c");
         }
-        println!("  {}\n", e.explain());
+        outln!("  {}\n", e.explain());
     }
     for e in nonlinear_catalog() {
         if a.id.as_deref().is_some_and(|id| id != e.id()) {
@@ -31,10 +32,10 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         }
         shown += 1;
         let sensor = e.sensor().map_or("gyro and accel".to_string(), |s| s.to_string());
-        println!("{} ({sensor}; nonlinear, fitted by variable projection)", e.id());
+        outln!("{} ({sensor}; nonlinear, fitted by variable projection)", e.id());
         let names: Vec<String> = e.params().iter().map(|p| format!("{} [{}]", p.name, p.unit)).collect();
-        println!("  parameters: {}", names.join(", "));
-        println!("  {}\n", e.explain());
+        outln!("  parameters: {}", names.join(", "));
+        outln!("  {}\n", e.explain());
     }
     if shown == 0 {
         anyhow::bail!("unknown effect '{}': run `crosscal effects` for the list", a.id.unwrap_or_default());

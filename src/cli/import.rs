@@ -1,6 +1,7 @@
 //! `crosscal import`: recordings laid out for other tools → crosscal sessions.
 
 use super::Outcome;
+use crate::outln;
 use anyhow::Context;
 use crosscal::session::import::{imu_tk, imucal_annotated, imucal_ferraris, tedaldi_csv, ImportOptions, Imported};
 use std::path::PathBuf;
@@ -94,7 +95,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         }
     }
     .with_context(|| format!("importing into {}", a.out.display()))?;
-    println!(
+    outln!(
         "wrote {} ({} runs, {} samples); fit it with: crosscal fit {}",
         done.manifest_path.display(),
         done.runs,

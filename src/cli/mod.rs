@@ -113,6 +113,62 @@ enum Command {
     Import(import::Args),
 }
 
+/// Stdout was closed by its reader (`crosscal … | head -1`): the command stops quietly
+/// with exit code 0, as `rg | head` does; whatever it had to save is already saved.
+#[derive(Debug, thiserror::Error)]
+#[error("stdout was closed")]
+pub struct StdoutClosed;
+
+/// Writes to stdout, surfacing errors instead of panicking as `print!` does: a closed pipe
+/// becomes [`StdoutClosed`], any other failure (a full disk) an error naming stdout.
+pub fn out(args: std::fmt::Arguments<'_>) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    match o.write_fmt(args).and_then(|()| o.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(StdoutClosed.into()),
+        Err(e) => Err(anyhow::Error::new(e).context("writing to stdout")),
+    }
+}
+
+/// `print!` that returns the write's error (see [`out`]).
+#[macro_export]
+macro_rules! out {
+    ($($t:tt)*) => { $crate::cli::out(format_args!($($t)*))? };
+}
+
+/// `println!` that returns the write's error (see [`out`]).
+#[macro_export]
+macro_rules! outln {
+    () => { $crate::cli::out(format_args!("\n"))? };
+    ($($t:tt)*) => { $crate::cli::out(format_args!("{}\n", format_args!($($t)*)))? };
+}
+
+/// The model flags shared by the commands that fit.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ModelArgs {
+    /// Model preset: `default` (biases, full C_ω, C_ε, K), `paper` (exactly eqs. 3–4),
+    /// `ferraris` (biases, C_ω, gyro g-sensitivity, K) or `tedaldi` (biases, C_ω,
+    /// upper-triangular K). Protocol sessions (static poses, turns, multi-position) use
+    /// `ferraris` or `tedaldi` unless told otherwise.
+    #[arg(long = "model", default_value = "default", value_parser = parse_preset)]
+    pub preset: crosscal::model::Preset,
+    /// Add a catalogue effect to the model (repeatable; `crosscal effects` lists them).
+    #[arg(long = "effect")]
+    pub effects: Vec<String>,
+}
+
+impl ModelArgs {
+    /// The model as named, with `disable` held at their nominal values.
+    pub fn spec(&self, disable: &[String]) -> crosscal::model::ModelSpec {
+        crosscal::model::ModelSpec { preset: self.preset, effects: self.effects.clone(), disable: disable.to_vec() }
+    }
+}
+
+fn parse_preset(s: &str) -> Result<crosscal::model::Preset, String> {
+    s.parse().map_err(|_| format!("expected one of {}", crosscal::model::Preset::NAMES))
+}
+
 /// Outcome of a subcommand that succeeded in running.
 pub enum Outcome {
     /// Everything passed.
@@ -149,6 +205,7 @@ pub fn main() -> ExitCode {
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,
         Ok(Outcome::CheckFailed) => ExitCode::from(EXIT_CHECK_FAILED),
+        Err(e) if e.chain().any(|c| c.is::<StdoutClosed>()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(exit_code(&e))

@@ -1,6 +1,7 @@
 //! `crosscal noise`: Allan deviation and noise terms of a static recording.
 
 use super::Outcome;
+use crate::{out, outln};
 use anyhow::Context;
 use crosscal::noise::{analyse, read_channels, report, NoiseOptions, NoiseReport, Span, CHANNELS};
 use crosscal::profile::{latest, save};
@@ -133,9 +134,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     }
     let r: NoiseReport = analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        outln!("{}", serde_json::to_string_pretty(&r)?);
     } else {
-        print!("{}", report::table(&r, g));
+        out!("{}", report::table(&r, g));
     }
     if let Some(path) = &a.report {
         let html = report::html(&r, g);

@@ -1,7 +1,7 @@
 //! `crosscal plan`: predicted uncertainties of a proposed calibration, before recording.
 
-use super::fit::build_model;
 use super::{format, Outcome};
+use crate::outln;
 use anyhow::Context;
 use crosscal::estimate::CoefStatus;
 use crosscal::noise::NoiseReport;
@@ -15,12 +15,9 @@ pub struct Args {
     /// The stand runs.
     #[command(flatten)]
     runs: super::RunSet,
-    /// Model preset: `default` or `paper`.
-    #[arg(long, default_value = "default")]
-    model: String,
-    /// Add a catalogue effect to the model (repeatable).
-    #[arg(long = "effect")]
-    effects: Vec<String>,
+    /// The model (for `check`: fitted with --holdout / --cross-validate).
+    #[command(flatten)]
+    model: super::ModelArgs,
     /// Gyro angle random walk (white-noise density), °/√h.
     #[arg(long, default_value_t = 0.15)]
     arw: f64,
@@ -50,7 +47,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if !(a.runs.duration > 0.0 && a.runs.rate_hz > 0.0 && a.arw > 0.0 && a.vrw > 0.0) {
         anyhow::bail!("--duration, --rate-hz, --arw and --vrw must be positive");
     }
-    let model = build_model(&a.model, &a.effects, &[])?;
+    let model = a.model.spec(&[]).build()?;
     let mut spec = PlanSpec {
         runs: a.runs.plan(),
         sample_rate_hz: a.runs.rate_hz,
@@ -77,45 +74,45 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let candidates = if a.no_suggest { Vec::new() } else { default_candidates(&spec) };
     let r = plan(&model, &spec, &candidates)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        outln!("{}", serde_json::to_string_pretty(&r)?);
         return Ok(Outcome::Ok);
     }
-    println!(
+    outln!(
         "plan: {} runs, {} samples per channel; gyro σ {:.3e} deg/s, accel σ {:.3e} m/s^2 per sample",
         spec.runs.len(),
         r.samples,
         r.sigma[0].to_degrees(),
         r.sigma[3]
     );
-    println!("{:<22} {:>14} {:>14}  unit", "coefficient", "predicted 2σ", "output err/σ");
+    outln!("{:<22} {:>14} {:>14}  unit", "coefficient", "predicted 2σ", "output err/σ");
     for c in &r.coefficients {
         let (se, out) = match (c.status, c.std_error) {
             (CoefStatus::Fitted, Some(se)) => (format::num(2.0 * se), format!("{:.3e}", c.output_error.unwrap_or(0.0))),
             (CoefStatus::Unidentifiable, _) => ("UNIDENTIFIABLE".to_string(), "-".to_string()),
             _ => ("fixed".to_string(), "-".to_string()),
         };
-        println!("{:<22} {:>14} {:>14}  {}", c.name, se, out, c.unit);
+        outln!("{:<22} {:>14} {:>14}  {}", c.name, se, out, c.unit);
     }
     for u in &r.unidentifiable {
-        println!("UNIDENTIFIABLE {}: {}\n  remedy: {}", u.held, u.reason, u.remedy);
+        outln!("UNIDENTIFIABLE {}: {}\n  remedy: {}", u.held, u.reason, u.remedy);
     }
     for c in &r.correlated {
-        println!("correlated: {} and {} (ρ = {:+.3})", c.a, c.b, c.correlation);
+        outln!("correlated: {} and {} (ρ = {:+.3})", c.a, c.b, c.correlation);
     }
     if let Some((name, e)) = &r.worst {
-        println!("worst: {name} (output error {e:.3e} σ)");
+        outln!("worst: {name} (output error {e:.3e} σ)");
     }
     match &r.suggestion {
         Some(s) => {
-            println!("suggested extra run: {}", s.run);
+            outln!("suggested extra run: {}", s.run);
             if !s.resolves.is_empty() {
-                println!("  makes identifiable: {}", s.resolves.join(", "));
+                outln!("  makes identifiable: {}", s.resolves.join(", "));
             }
             if let (Some(b), Some(a)) = (&s.worst_before, &s.worst_after) {
-                println!("  worst output error {:.3e} σ ({}) → {:.3e} σ ({})", b.1, b.0, a.1, a.0);
+                outln!("  worst output error {:.3e} σ ({}) → {:.3e} σ ({})", b.1, b.0, a.1, a.0);
             }
         }
-        None if !a.no_suggest => println!("no candidate run improves the plan by 10 % or more"),
+        None if !a.no_suggest => outln!("no candidate run improves the plan by 10 % or more"),
         None => {}
     }
     Ok(Outcome::Ok)

@@ -1,6 +1,7 @@
 //! `crosscal profile list|show|diff`: the per-unit profile store.
 
 use super::{format, Outcome};
+use crate::{out, outln};
 use crosscal::profile::{diff, history, latest, serials, Profile};
 use std::path::{Path, PathBuf};
 
@@ -82,10 +83,10 @@ fn list(store: &Path, serial: Option<&str>) -> anyhow::Result<()> {
     };
     for u in units {
         let h = history(store, &u)?;
-        println!("{u}: {} profile(s)", h.len());
+        outln!("{u}: {} profile(s)", h.len());
         for (path, p) in h {
             match p {
-                Ok(p) => println!(
+                Ok(p) => outln!(
                     "  {}  model {:<8} {:>2} runs  {}{}",
                     p.created_utc,
                     p.model,
@@ -93,7 +94,7 @@ fn list(store: &Path, serial: Option<&str>) -> anyhow::Result<()> {
                     path.display(),
                     if p.noise.is_some() { "  (noise)" } else { "" }
                 ),
-                Err(e) => println!("  unreadable: {e}"),
+                Err(e) => outln!("  unreadable: {e}"),
             }
         }
     }
@@ -106,18 +107,12 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         Sub::Show { serial, at, store, json } => {
             let (path, p) = latest(&store, &serial, at.as_deref())?;
             if json {
-                print!("{}", p.to_json());
+                out!("{}", p.to_json());
             } else {
-                println!(
-                    "unit {} profile {} (created {}, model '{}')",
-                    p.serial,
-                    path.display(),
-                    p.created_utc,
-                    p.model
-                );
-                print!("{}", format::profile_fits(&p));
-                print!("{}", format::nonlinear(&p.nonlinear));
-                print!("{}", format::stand(&p.stand));
+                outln!("unit {} profile {} (created {}, model '{}')", p.serial, path.display(), p.created_utc, p.model);
+                out!("{}", format::profile_fits(&p));
+                out!("{}", format::nonlinear(&p.nonlinear));
+                out!("{}", format::stand(&p.stand));
             }
         }
         Sub::Diff { a, b, threshold } => {
@@ -126,12 +121,12 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 anyhow::bail!("{} is unit '{}' but {} is unit '{}'", a.display(), pa.serial, b.display(), pb.serial);
             }
             let changes = diff(&pa, &pb);
-            println!("unit {}: {} → {}", pa.serial, pa.created_utc, pb.created_utc);
-            println!("{:<22} {:>14} {:>14} {:>9}", "coefficient", "before", "after", "z");
+            outln!("unit {}: {} → {}", pa.serial, pa.created_utc, pb.created_utc);
+            outln!("{:<22} {:>14} {:>14} {:>9}", "coefficient", "before", "after", "z");
             let mut drifted = Vec::new();
             for c in &changes {
                 let z = c.z.map_or("-".to_string(), |z| format!("{z:+.2}"));
-                println!(
+                outln!(
                     "{:<22} {:>14} {:>14} {:>9}  {}",
                     c.name,
                     format::num(c.before),
@@ -144,9 +139,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 }
             }
             if drifted.is_empty() {
-                println!("no coefficient moved by more than {threshold} standard errors");
+                outln!("no coefficient moved by more than {threshold} standard errors");
             } else {
-                println!("DRIFTED (|z| > {threshold}): {}", drifted.join(", "));
+                outln!("DRIFTED (|z| > {threshold}): {}", drifted.join(", "));
                 return Ok(Outcome::CheckFailed);
             }
         }
@@ -156,7 +151,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 std::fs::read_to_string(&file).map_err(|e| anyhow::anyhow!("reading {}: {e}", file.display()))?;
             let p = crosscal::profile::interop::from_imucal(&file, &text, &serial, g)?;
             let path = crosscal::profile::save(&p, &store)?;
-            println!("imported {} as {}", file.display(), path.display());
+            outln!("imported {} as {}", file.display(), path.display());
         }
     }
     Ok(Outcome::Ok)
@@ -174,7 +169,7 @@ fn export(profile: &Path, to: &str, output: &Path, rate_hz: f64) -> anyhow::Resu
     };
     crosscal::atomic::write_new(output, text.as_bytes())
         .map_err(|e| anyhow::anyhow!("writing {} (never overwritten): {e}", output.display()))?;
-    println!("exported {} to {} ({to})", profile.display(), output.display());
+    outln!("exported {} to {} ({to})", profile.display(), output.display());
     for l in lost {
         eprintln!("not represented: {l}");
     }

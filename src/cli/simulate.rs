@@ -1,6 +1,7 @@
 //! `crosscal simulate`.
 
 use super::{parse_list, parse_triple, List, Outcome};
+use crate::outln;
 use anyhow::Context;
 use crosscal::simulate::{write_session, SimConfig};
 use crosscal::units::{SensorKind, AXES};
@@ -136,7 +137,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let session = cfg.generate();
     let path =
         write_session(&session, &a.out).with_context(|| format!("writing the session to {}", a.out.display()))?;
-    println!(
+    outln!(
         "wrote {} ({} runs, {} samples, serial {})",
         path.display(),
         session.runs.len(),

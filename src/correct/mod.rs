@@ -36,15 +36,15 @@ mod csvstream;
 pub use csvstream::{correct_csv_streaming, OutputScale, StreamCsvError, StreamCsvOptions, StreamedCsv};
 
 /// Correction errors.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[non_exhaustive]
 pub enum CorrectError {
     /// The scale/coupling matrix cannot be inverted.
     #[error("the {0} scale/coupling matrix of the profile is singular: it cannot be inverted")]
     Singular(SensorKind),
     /// The profile cannot be turned into a model.
-    #[error("{0}")]
-    Model(String),
+    #[error("the profile's model cannot be rebuilt")]
+    Model(#[from] crate::model::ModelError),
     /// The profile has an effect the correction cannot invert yet.
     #[error("the profile contains '{0}', whose correction is not implemented yet; refit without it to correct")]
     Unsupported(String),
@@ -178,7 +178,7 @@ impl Calibration {
 
     /// From a profile (its channel σ set the dead-band flag thresholds).
     pub fn from_profile(p: &Profile) -> Result<Self, CorrectError> {
-        let model = p.model().map_err(|e| CorrectError::Model(e.to_string()))?;
+        let model = p.model()?;
         let mut c = Self::from_model(&model, p.correction)?;
         for (si, sf) in [&p.gyro, &p.accel].iter().enumerate() {
             for (i, ch) in sf.channels.iter().enumerate().take(3) {

@@ -20,13 +20,18 @@
 pub mod protocol;
 pub mod report;
 
-use crate::estimate::{fit, CoefStatus, EstimateError, Fit, FitOptions, FitRun};
+use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::model::{catalog, forward, nonlinear_catalog, Model};
 use crate::session::MotionSpec;
 use crate::stats::{chi2_upper, systematic, Systematic};
 use crate::units::{SensorKind, AXES};
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+/// Fits exactly `model` to prepared runs through the one entry point.
+fn refit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
+    Ok(crate::estimate::fit(&FitRequest::runs(model, runs).options(*opts))?.fit)
+}
 
 /// Cone harmonics in the systematic-residual fit.
 pub const HARMONICS: usize = 6;
@@ -158,14 +163,14 @@ pub fn per_run_disagreements(model: &Model, all: &Fit, runs: &[FitRun<'_>], opts
     let mut out = Vec::new();
     for run in runs {
         let one = std::slice::from_ref(run);
-        let Ok(first) = fit(model, one, opts) else { continue };
+        let Ok(first) = refit(model, one, opts) else { continue };
         let mut m = model.clone();
         for c in first.gyro.unidentifiable.iter().chain(&first.accel.unidentifiable) {
             if let Some(v) = all.get(&c.held).map(|c| c.value) {
                 let _ = m.fix(&c.held, v);
             }
         }
-        let Ok(f) = fit(&m, one, opts) else { continue };
+        let Ok(f) = refit(&m, one, opts) else { continue };
         for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients) {
             let (Some(se), Some(a)) = (c.std_error, all.get(&c.name)) else { continue };
             if c.status != CoefStatus::Fitted || a.status != CoefStatus::Fitted || se <= 0.0 {
@@ -381,7 +386,7 @@ pub fn diagnose(
         warnings.push("no temperature in some runs: temperature effects were not tried".to_string());
     }
     let mut current = model.clone();
-    let mut current_fit = fit(&current, runs, opts)?;
+    let mut current_fit = refit(&current, runs, opts)?;
     let channels = channel_reports(&residuals(&current, &current_fit, runs, motions), motions);
     let disagreements = if current.nonlinear().is_empty() && runs.len() > 1 {
         per_run_disagreements(&current, &current_fit, runs, opts)
@@ -414,7 +419,7 @@ pub fn diagnose(
             if m.add_effect(id).is_err() {
                 continue;
             }
-            let Ok(f) = fit(&m, runs, &screening) else { continue };
+            let Ok(f) = refit(&m, runs, &screening) else { continue };
             scored.push((score(&current_fit, &f, id, explain), id, f));
         }
         scored.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
@@ -429,7 +434,7 @@ pub fn diagnose(
         if m.add_effect(id).is_err() {
             break;
         }
-        let f = fit(&m, runs, opts)?;
+        let f = refit(&m, runs, opts)?;
         let best = score(&current_fit, &f, id, &best.explanation);
         let indistinguishable: Vec<String> = scored[1..]
             .iter()
@@ -559,7 +564,7 @@ pub fn heldout_rms(
     let mut n = 0usize;
     for i in 0..runs.len() {
         let train: Vec<FitRun<'_>> = runs.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, r)| *r).collect();
-        let Ok(f) = fit(&held, &train, opts) else { continue };
+        let Ok(f) = refit(&held, &train, opts) else { continue };
         let res = residuals(&held, &f, std::slice::from_ref(&runs[i]), &motions[i..=i]);
         for c in 0..6 {
             ss[c] += res[0].r[c].iter().map(|v| v * v).sum::<f64>();
@@ -597,7 +602,7 @@ pub fn compare(
     }
     let mut rungs = Vec::with_capacity(models.len());
     for (name, model) in &models {
-        let f = fit(model, runs, opts)?;
+        let f = refit(model, runs, opts)?;
         let mut r = rung(name, &f, &residuals(model, &f, runs, motions), motions);
         if runs.len() > 1 {
             r.heldout_rms = heldout_rms(model, &f, runs, motions, opts);

@@ -8,13 +8,18 @@
 //! residual sum of squares it removes (`F = (ΔRSS/Δp) / (RSS₁/(n − p₁))`). The best effect
 //! with p < [`P_PROPOSE`] is proposed, with whether this kind of session can fit it.
 
-use crate::estimate::protocol::{can_fit, fit_protocol, pose_identifiable, pose_rows, ProtocolOptions, ProtocolReport};
-use crate::estimate::{fit, CoefStatus, EstimateError, FitOptions, FitRun, SensorFit};
+use crate::estimate::protocol::{can_fit, pose_identifiable, pose_rows, ProtocolReport};
+use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun, SensorFit};
 use crate::model::{catalog, Model};
 use crate::session::Session;
 use crate::units::SensorKind;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+
+/// Fits exactly `model` to prepared runs through the one entry point.
+fn refit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
+    Ok(crate::estimate::fit(&FitRequest::runs(model, runs).options(*opts))?.fit)
+}
 
 /// p-value below which a candidate effect is proposed.
 pub const P_PROPOSE: f64 = 1e-3;
@@ -69,11 +74,15 @@ fn rss(f: &SensorFit) -> (f64, usize, usize) {
 
 /// Diagnoses a protocol session with `model` (see the module documentation).
 pub fn diagnose_protocol(session: &Session, model: &Model) -> Result<ProtocolDiagnosis, EstimateError> {
-    let (fitted, report) = fit_protocol(session, model, &ProtocolOptions::default())?;
+    let outcome = crate::estimate::fit(&FitRequest::session(model, session))?;
+    let report = outcome.protocol.ok_or_else(|| {
+        EstimateError::Request(format!("{} is not a protocol session", session.manifest_path.display()))
+    })?;
+    let fitted = outcome.fit;
     let rows = pose_rows(session, &fitted, &report);
     let runs: Vec<FitRun<'_>> = rows.iter().map(|r| r.as_run()).collect();
     let opts = FitOptions::default();
-    let base = fit(model, &runs, &opts)?;
+    let base = refit(model, &runs, &opts)?;
     let mut candidates = Vec::new();
     for e in catalog() {
         if model.effects().iter().any(|m| m.id() == e.id()) || !pose_identifiable(e.as_ref(), false) {
@@ -83,7 +92,7 @@ pub fn diagnose_protocol(session: &Session, model: &Model) -> Result<ProtocolDia
         if m.add_effect(e.id()).is_err() {
             continue;
         }
-        let Ok(with) = fit(&m, &runs, &opts) else { continue };
+        let Ok(with) = refit(&m, &runs, &opts) else { continue };
         let (r0, _, p0) = rss(base.sensor(e.sensor()));
         let (r1, n, p1) = rss(with.sensor(e.sensor()));
         if p1 <= p0 || n <= p1 {
@@ -116,9 +125,8 @@ pub fn diagnose_protocol(session: &Session, model: &Model) -> Result<ProtocolDia
     };
     // Robust z of each pose's |a| − g against the others (median / MAD).
     let mut errs: Vec<f64> = report.poses.iter().map(|p| p.gravity_error_m_s2).collect();
-    let med = crate::session::sanity::median(&mut errs);
-    let mut dev: Vec<f64> = errs.iter().map(|e| (e - med).abs()).collect();
-    let mad = crate::session::sanity::median(&mut dev) * 1.4826;
+    let med = crate::stats::median(&mut errs).unwrap_or(0.0);
+    let mad = crate::stats::robust_sigma(&errs, med).unwrap_or(0.0);
     let outlier_poses = report
         .poses
         .iter()

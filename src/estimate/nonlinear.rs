@@ -6,7 +6,8 @@
 //! J ≈ J₀ + Δpᵀ (JᵀJ/σ²) Δp). The linear coefficients' standard errors are conditional on
 //! p̂.
 
-use super::{fit_sensor, EstimateError, Fit, FitOptions, FitRun, SensorFit};
+use super::linear::fit_sensor;
+use super::{EstimateError, Fit, FitOptions, FitRun, SensorFit};
 use crate::model::Model;
 use crate::motion::Track;
 use crate::units::SensorKind;
@@ -155,7 +156,7 @@ pub fn seen_tracks(model: &Model, fit: &Fit, sensor: SensorKind, runs: &[FitRun<
 }
 
 /// Fits a model with nonlinear effects.
-pub fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
+pub(crate) fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
     let start: Vec<Vec<f64>> = model.nonlinear().iter().map(|e| e.values.clone()).collect();
     let defs: Vec<(String, crate::model::ParamDef)> = model
         .nonlinear()

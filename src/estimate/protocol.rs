@@ -21,8 +21,9 @@
 //! (`u = b + K a`, `u = b + C ω + G a`, sensor frame, row-major, `K = M⁻¹`, `C = W⁻¹`), with
 //! a [`ProtocolReport`] of per-pose and per-turn residuals.
 
+use super::linear::fit_in_memory as fit;
 use super::lm::{minimise, numeric_jacobian, LeastSquares};
-use super::{fit, ChannelFit, CoefStatus, Coefficient, EstimateError, Fit, FitOptions, FitRun, SensorFit};
+use super::{ChannelFit, CoefStatus, Coefficient, EstimateError, Fit, FitOptions, FitRun, SensorFit};
 use crate::frames::V3;
 use crate::model::{Model, TermStatus};
 use crate::motion::Track;
@@ -82,11 +83,11 @@ pub fn is_multi_position(session: &Session) -> bool {
 
 /// The model preset a protocol session starts from: `tedaldi` when the poses' orientations
 /// are unknown, else `ferraris`.
-pub fn default_preset(session: &Session) -> &'static str {
+pub fn default_preset(session: &Session) -> crate::model::Preset {
     if is_multi_position(session) {
-        "tedaldi"
+        crate::model::Preset::Tedaldi
     } else {
-        "ferraris"
+        crate::model::Preset::Ferraris
     }
 }
 

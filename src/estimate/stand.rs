@@ -12,7 +12,8 @@
 //! channel's coefficient covariance gains G M⁻¹ Gᵀ with G = R₁₁⁻¹R₁₂ (the part of θ that
 //! moves with s), so the standard errors of C and K include the stand's uncertainty.
 
-use super::{fit, CoefStatus, EstimateError, Fit, FitOptions, FitRun};
+use super::linear::fit_in_memory as fit;
+use super::{CoefStatus, EstimateError, Fit, FitOptions, FitRun};
 use crate::model::Model;
 use crate::motion::{track_for, DerivativeConfig, Track};
 use crate::session::{MotionSpec, Session};
@@ -94,7 +95,7 @@ impl<'m> Predictor<'m> {
 
 /// Fits the model with every conic run's α, ω_s and φ free. Fails with
 /// [`EstimateError::NotConverged`] rather than return a wrong answer.
-pub fn fit_with_stand(
+pub(crate) fn fit_with_stand(
     model: &Model,
     session: &Session,
     deriv: &DerivativeConfig,

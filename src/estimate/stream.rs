@@ -10,7 +10,8 @@
 //! The arithmetic is that of the in-memory fit ([`super::fit`]): the same rows in the same
 //! order through the same accumulators, so the two agree to the last bit.
 
-use super::{fit_samples, BlockFn, FitOptions, Samples, SamplesError, BLOCK};
+use super::linear::{fit_samples, BlockFn, Samples, SamplesError, BLOCK};
+use super::FitOptions;
 use crate::frames::V3;
 use crate::model::{Model, State};
 use crate::motion::{Conic, Kinematics};
@@ -93,10 +94,6 @@ impl<'a> StreamRun<'a> {
 }
 
 impl Samples for StreamRun<'_> {
-    fn run_name(&self) -> &str {
-        &self.spec.name
-    }
-
     fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), SessionError> {
         let io = |source| SessionError::Io { path: self.path.clone(), source };
         let g = self.manifest.g_m_s2;
@@ -282,13 +279,9 @@ pub enum StreamError {
     NotStreamable(String),
 }
 
-/// Fits a linear model to a session read straight from its files (see the module docs).
-pub fn fit_streaming(manifest_path: &Path, model: &Model, opts: &FitOptions) -> Result<StreamedFit, StreamError> {
-    fit_streaming_with(manifest_path, model, opts, false)
-}
-
-/// [`fit_streaming`]; with `strict`, a gap in t is an error naming its line.
-pub fn fit_streaming_with(
+/// Fits a linear model to a session read straight from its files (see the module docs);
+/// with `strict`, a gap in t is an error naming its line.
+pub(crate) fn fit_streaming(
     manifest_path: &Path,
     model: &Model,
     opts: &FitOptions,

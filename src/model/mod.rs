@@ -272,6 +272,94 @@ pub enum ModelError {
     UnknownCoefficient(String),
 }
 
+/// The named starting points of a model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Preset {
+    /// Biases, full C_ω, full C_ε (gyro); bias, full K (accelerometer). On a protocol
+    /// session it stands for that protocol's own preset (`ferraris` or `tedaldi`).
+    #[default]
+    Default,
+    /// Exactly the paper's eqs. 3–4.
+    Paper,
+    /// What a Ferraris session identifies (imucal's model).
+    Ferraris,
+    /// What a multi-position session identifies (imu_tk's model).
+    Tedaldi,
+}
+
+impl Preset {
+    /// Every preset's name, for messages.
+    pub const NAMES: &'static str = "default, paper, ferraris, tedaldi";
+
+    /// The preset's model.
+    pub fn model(self) -> Model {
+        match self {
+            Self::Default => Model::default_model(),
+            Self::Paper => Model::paper(),
+            Self::Ferraris => Model::ferraris(),
+            Self::Tedaldi => Model::tedaldi(),
+        }
+    }
+}
+
+impl std::str::FromStr for Preset {
+    type Err = ModelError;
+
+    fn from_str(s: &str) -> Result<Self, ModelError> {
+        match s {
+            "default" => Ok(Self::Default),
+            "paper" => Ok(Self::Paper),
+            "ferraris" => Ok(Self::Ferraris),
+            "tedaldi" => Ok(Self::Tedaldi),
+            other => Err(ModelError::UnknownPreset(other.to_string())),
+        }
+    }
+}
+
+impl fmt::Display for Preset {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Default => "default",
+            Self::Paper => "paper",
+            Self::Ferraris => "ferraris",
+            Self::Tedaldi => "tedaldi",
+        })
+    }
+}
+
+/// A model as a user names it: a preset, catalogue effects added to it, coefficients held
+/// at their nominal values. [`ModelSpec::build`] makes the model; the fit entry point
+/// resolves [`Preset::Default`] for the kind of session it is given.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct ModelSpec {
+    /// The starting point.
+    pub preset: Preset,
+    /// Catalogue effect ids added to it, in order.
+    pub effects: Vec<String>,
+    /// Coefficients held at their nominal values.
+    pub disable: Vec<String>,
+}
+
+impl ModelSpec {
+    /// The model, with `default` standing for `default_preset` (the session's own default).
+    pub fn build_with_default(&self, default_preset: Preset) -> Result<Model, ModelError> {
+        let preset = if self.preset == Preset::Default { default_preset } else { self.preset };
+        let mut m = preset.model();
+        for e in &self.effects {
+            m.add_effect(e)?;
+        }
+        for d in &self.disable {
+            m.disable(d)?;
+        }
+        Ok(m)
+    }
+
+    /// The model for a stand session.
+    pub fn build(&self) -> Result<Model, ModelError> {
+        self.build_with_default(Preset::Default)
+    }
+}
+
 /// Paper eq. 3 coefficients (gyro) that the `paper` preset fits.
 const PAPER_GYRO: [&str; 9] = [
     "gyro.c_xx",
@@ -353,13 +441,7 @@ impl Model {
 
     /// A preset by name (`default`, `paper`, `ferraris`, `tedaldi`).
     pub fn preset(name: &str) -> Result<Self, ModelError> {
-        match name {
-            "default" => Ok(Self::default_model()),
-            "paper" => Ok(Self::paper()),
-            "ferraris" => Ok(Self::ferraris()),
-            "tedaldi" => Ok(Self::tedaldi()),
-            other => Err(ModelError::UnknownPreset(other.to_string())),
-        }
+        Ok(name.parse::<Preset>()?.model())
     }
 
     /// Adds a catalogue effect (no-op when already present).

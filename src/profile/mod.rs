@@ -212,7 +212,7 @@ pub enum ProfileError {
 impl Profile {
     /// Builds a profile from a fit of a session.
     pub fn from_fit(session: &Session, model: &Model, fit: Fit, notes: Vec<String>) -> Self {
-        Self::from_fit_of(&session.manifest, runs_used(session), model, fit, notes)
+        Self::from_fit_of(&session.manifest, session.runs_used(), model, fit, notes)
     }
 
     /// Builds a profile from a fit of the runs of a manifest (for fits streamed from the
@@ -441,20 +441,6 @@ pub fn parse_time(s: &str) -> Result<jiff::Timestamp, ProfileError> {
         .and_then(|d| d.at(23, 59, 59, 999_000_000).to_zoned(jiff::tz::TimeZone::UTC).ok())
         .map(|z| z.timestamp())
         .ok_or_else(|| ProfileError::BadTime(s.to_string()))
-}
-
-/// The runs of a session as recorded in a profile (name, file, SHA-256, samples).
-pub fn runs_used(session: &Session) -> Vec<RunUsed> {
-    session
-        .runs
-        .iter()
-        .map(|r| RunUsed {
-            name: r.spec.name.clone(),
-            file: r.spec.file.clone(),
-            sha256: r.rec.sha256.clone(),
-            samples: r.rec.len(),
-        })
-        .collect()
 }
 
 /// Saves a profile under `root/<serial>/<timestamp>.json` atomically, never overwriting:

@@ -310,6 +310,27 @@ impl Session {
         self.runs.iter().any(|r| r.spec.motion.is_protocol())
     }
 
+    /// The session restricted to the runs whose names `keep` accepts (samples copied).
+    pub fn subset(&self, keep: impl Fn(&str) -> bool) -> Session {
+        let runs: Vec<Run> = self.runs.iter().filter(|r| keep(&r.spec.name)).cloned().collect();
+        let mut manifest = self.manifest.clone();
+        manifest.runs = runs.iter().map(|r| r.spec.clone()).collect();
+        Session { manifest_path: self.manifest_path.clone(), manifest, runs }
+    }
+
+    /// What a profile records of each run: name, file, SHA-256 and samples.
+    pub fn runs_used(&self) -> Vec<RunUsed> {
+        self.runs
+            .iter()
+            .map(|r| RunUsed {
+                name: r.spec.name.clone(),
+                file: r.spec.file.clone(),
+                sha256: r.rec.sha256.clone(),
+                samples: r.rec.len(),
+            })
+            .collect()
+    }
+
     /// Non-fatal findings of all recordings.
     pub fn warnings(&self) -> Vec<String> {
         self.runs.iter().flat_map(|r| r.rec.warnings.iter().cloned()).collect()

@@ -1,0 +1,620 @@
+//! The linear estimator: each output channel of each sensor is its own problem
+//! `y = Φ θ + noise` over all runs. Samples arrive in blocks from any [`Samples`] source
+//! (in-memory runs or streamed files); the design is accumulated into an R factor
+//! ([`QrAccumulator`]) in one pass per source, each channel is solved from R (so the
+//! condition number is never squared), and a second pass gives the residual statistics.
+
+use super::robust::robust_refit;
+use super::{identify, nonlinear, ChannelFit, CoefStatus, Coefficient, Correlation, EstimateError, Fit, FitOptions};
+use super::{FitRun, SensorFit, Unidentifiable};
+use crate::model::{Model, State, TermStatus};
+use crate::stats::{newey_west_lags, AutoCov, LongRunVariance, QrAccumulator};
+use crate::units::{SensorKind, AXES};
+use faer::Mat;
+use nalgebra::DMatrix;
+
+/// Fits both sensors of a model to in-memory runs (nonlinear effects by variable
+/// projection).
+pub(crate) fn fit_in_memory(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
+    if runs.iter().all(|r| r.is_empty()) {
+        return Err(EstimateError::NoData);
+    }
+    for e in model.effects().iter().filter(|e| e.needs_temperature()) {
+        if let Some(r) = runs.iter().find(|r| r.temp_c.is_none() && r.temp_const_c.is_none()) {
+            return Err(EstimateError::MissingTemperature { effect: e.id().to_string(), run: r.name.to_string() });
+        }
+    }
+    if !model.nonlinear().is_empty() {
+        return nonlinear::fit(model, runs, opts);
+    }
+    let sources: Vec<&dyn Samples> = runs.iter().map(|r| r as &dyn Samples).collect();
+    fit_samples(model, &sources, runs, opts).map_err(SamplesError::in_memory)
+}
+
+/// Fits both sensors of a linear model to any [`Samples`] (streamed files or in-memory
+/// runs) in one pass per source plus one residual pass; `robust_runs` serve the robust
+/// refit, which needs the samples in memory.
+pub(crate) fn fit_samples(
+    model: &Model,
+    sources: &[&dyn Samples],
+    robust_runs: &[FitRun<'_>],
+    opts: &FitOptions,
+) -> Result<Fit, SamplesError> {
+    if opts.robust && robust_runs.is_empty() {
+        return Err(EstimateError::Request("the robust fit needs the samples in memory".into()).into());
+    }
+    let mut v = fit_core(model, &SensorKind::BOTH, sources, robust_runs, opts)?;
+    let accel = v.pop().ok_or(EstimateError::NoData)?;
+    let gyro = v.pop().ok_or(EstimateError::NoData)?;
+    Ok(Fit { gyro, accel, nonlinear: Vec::new(), stand: Vec::new() })
+}
+
+/// Regressor columns of one sensor: unique keys, with the term that evaluates each.
+pub(crate) struct Columns {
+    /// Index (into the sensor's term list) of the term that evaluates column c.
+    pub source: Vec<usize>,
+    /// Column of each term.
+    pub of_term: Vec<usize>,
+}
+
+impl Columns {
+    pub(crate) fn new(terms: &[crate::model::TermRef<'_>]) -> Self {
+        let mut keys: Vec<&str> = Vec::new();
+        let mut source = Vec::new();
+        let mut of_term = Vec::with_capacity(terms.len());
+        for (ti, t) in terms.iter().enumerate() {
+            match keys.iter().position(|k| *k == t.term.key) {
+                Some(c) => of_term.push(c),
+                None => {
+                    keys.push(&t.term.key);
+                    source.push(ti);
+                    of_term.push(keys.len() - 1);
+                }
+            }
+        }
+        Self { source, of_term }
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.source.len()
+    }
+
+    /// Design row of sample k: the regressor columns, then the sensor's three outputs.
+    #[inline]
+    pub(crate) fn fill_row(
+        &self,
+        terms: &[crate::model::TermRef<'_>],
+        run: &FitRun<'_>,
+        sensor: SensorKind,
+        k: usize,
+        row: &mut [f64],
+    ) {
+        self.fill_state_row(terms, &run.state(k), &run.output(sensor, k), row);
+    }
+
+    /// Design columns of a block of samples, column-major with stride [`BLOCK`]: regressor
+    /// column c at `cols[c·BLOCK..][..n]`, then the sensor's three outputs.
+    pub(crate) fn fill_block(
+        &self,
+        terms: &[crate::model::TermRef<'_>],
+        states: &[State],
+        outputs: &[[f64; 3]],
+        cols: &mut [f64],
+    ) {
+        let n = states.len();
+        for (c, &ti) in self.source.iter().enumerate() {
+            terms[ti].regressors(states, &mut cols[c * BLOCK..c * BLOCK + n]);
+        }
+        let q = self.source.len();
+        for ch in 0..3 {
+            for (o, u) in cols[(q + ch) * BLOCK..(q + ch) * BLOCK + n].iter_mut().zip(outputs) {
+                *o = u[ch];
+            }
+        }
+    }
+
+    /// Design row at a state with the sensor's output.
+    #[inline]
+    pub(crate) fn fill_state_row(
+        &self,
+        terms: &[crate::model::TermRef<'_>],
+        s: &State,
+        output: &[f64; 3],
+        row: &mut [f64],
+    ) {
+        for (c, &ti) in self.source.iter().enumerate() {
+            row[c] = terms[ti].regressor(s);
+        }
+        row[self.source.len()..].copy_from_slice(output);
+    }
+}
+
+/// Samples per block handed to the estimator by [`Samples`].
+pub(crate) const BLOCK: usize = 256;
+
+/// The per-block callback of [`Samples`]: true states, gyro outputs, accelerometer
+/// outputs (equal lengths, 1 to [`BLOCK`] samples).
+pub(crate) type BlockFn<'f> = dyn FnMut(&[State], &[[f64; 3]], &[[f64; 3]]) + 'f;
+
+/// A sequence of samples for the linear estimator: the true state and both outputs of
+/// each, in order, in blocks. In memory ([`FitRun`]) or streamed from a file ([`stream`]);
+/// both go through the same arithmetic sample by sample (block boundaries change nothing),
+/// so their fits are identical.
+pub(crate) trait Samples: Sync {
+    /// Calls `f(states, gyro, accel)` for consecutive blocks of samples, in order.
+    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError>;
+}
+
+impl Samples for FitRun<'_> {
+    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError> {
+        let n = self.len();
+        let mut states = Vec::with_capacity(BLOCK.min(n));
+        let mut k0 = 0;
+        while k0 < n {
+            let k1 = (k0 + BLOCK).min(n);
+            states.clear();
+            states.extend((k0..k1).map(|k| self.state(k)));
+            f(&states, &self.gyro[k0..k1], &self.accel[k0..k1]);
+            k0 = k1;
+        }
+        Ok(())
+    }
+}
+
+/// Failure of a fit over [`Samples`]: reading a streamed file, or the estimate itself.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub(crate) enum SamplesError {
+    /// A streamed recording could not be read.
+    #[error(transparent)]
+    Read(#[from] crate::session::SessionError),
+    /// The estimate failed.
+    #[error(transparent)]
+    Estimate(#[from] EstimateError),
+}
+
+impl SamplesError {
+    /// The estimate's error of a fit over in-memory runs (which cannot fail to read).
+    pub(crate) fn in_memory(self) -> EstimateError {
+        match self {
+            Self::Estimate(e) => e,
+            Self::Read(source) => EstimateError::Read { path: std::path::PathBuf::new(), source },
+        }
+    }
+}
+
+/// One sensor's regressors.
+struct SensorDesign<'m> {
+    sensor: SensorKind,
+    terms: Vec<crate::model::TermRef<'m>>,
+    cols: Columns,
+}
+
+/// A sensor's solution before the residual pass.
+struct Solved {
+    values: Vec<f64>,
+    std_errors: Vec<Option<f64>>,
+    status: Vec<CoefStatus>,
+    channels: Vec<ChannelFit>,
+    unidentifiable: Vec<Unidentifiable>,
+    correlated: Vec<Correlation>,
+    fitted_sets: Vec<Vec<usize>>,
+}
+
+/// Pass 1 over one source: the R factor of each sensor's design and the sample count.
+fn accumulate(
+    designs: &[SensorDesign<'_>],
+    src: &dyn Samples,
+    chunk: usize,
+) -> Result<(Vec<QrAccumulator>, usize), crate::session::SessionError> {
+    let mut accs: Vec<QrAccumulator> = designs.iter().map(|d| QrAccumulator::new(d.cols.len() + 3, chunk)).collect();
+    let mut cols: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; (d.cols.len() + 3) * BLOCK]).collect();
+    let mut n = 0usize;
+    src.for_each_block(&mut |states, g, a| {
+        for ((d, acc), cols) in designs.iter().zip(accs.iter_mut()).zip(cols.iter_mut()) {
+            let u = match d.sensor {
+                SensorKind::Gyro => g,
+                SensorKind::Accel => a,
+            };
+            d.cols.fill_block(&d.terms, states, u, cols);
+            acc.push_columns(cols, BLOCK, states.len());
+        }
+        n += states.len();
+    })?;
+    Ok((accs, n))
+}
+
+/// Residual statistics of one source for every sensor channel: autocovariance sums and the
+/// largest |residual|.
+fn residual_pass(
+    designs: &[SensorDesign<'_>],
+    solved: &[Solved],
+    src: &dyn Samples,
+    n: usize,
+) -> Result<(Vec<AutoCov>, Vec<f64>), crate::session::SessionError> {
+    let lags = newey_west_lags(n);
+    let mut acov: Vec<AutoCov> = (0..3 * designs.len()).map(|_| AutoCov::new(lags + 1)).collect();
+    let mut max = vec![0.0_f64; 3 * designs.len()];
+    let mut pred = vec![0.0; 3 * BLOCK];
+    let mut resid = vec![0.0; BLOCK];
+    // Per sensor: the design's columns once per block, then the fitted coefficients
+    // (channel, column, value) in term order.
+    let mut blocks: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; (d.cols.len() + 3) * BLOCK]).collect();
+    let coefs: Vec<Vec<(usize, usize, f64)>> = designs
+        .iter()
+        .zip(solved)
+        .map(|(d, sol)| {
+            d.terms
+                .iter()
+                .enumerate()
+                .filter(|&(ti, _)| sol.values[ti] != 0.0)
+                .map(|(ti, t)| (t.term.channel, d.cols.of_term[ti], sol.values[ti]))
+                .collect()
+        })
+        .collect();
+    src.for_each_block(&mut |states, g, a| {
+        let n = states.len();
+        for (di, ((d, cols), coefs)) in designs.iter().zip(blocks.iter_mut()).zip(&coefs).enumerate() {
+            let u = match d.sensor {
+                SensorKind::Gyro => g,
+                SensorKind::Accel => a,
+            };
+            d.cols.fill_block(&d.terms, states, u, cols);
+            // Per sample the same sum as term by term over a row: Σ v·x in term order.
+            pred.fill(0.0);
+            for &(ch, c, v) in coefs {
+                for (p, x) in pred[ch * BLOCK..ch * BLOCK + n].iter_mut().zip(&cols[c * BLOCK..c * BLOCK + n]) {
+                    *p += v * x;
+                }
+            }
+            for ch in 0..3 {
+                let r = &mut resid[..n];
+                for ((r, p), u) in r.iter_mut().zip(&pred[ch * BLOCK..ch * BLOCK + n]).zip(u) {
+                    *r = u[ch] - p;
+                }
+                let m = &mut max[3 * di + ch];
+                for r in r.iter() {
+                    *m = m.max(r.abs());
+                }
+                acov[3 * di + ch].extend(r);
+            }
+        }
+    })?;
+    for a in &mut acov {
+        a.finish();
+    }
+    Ok((acov, max))
+}
+
+/// The linear fit of `sensors` over `sources` (pass 1 per source in parallel, R factors
+/// merged in source order; solve; robust refit when asked, from `robust_runs`; pass 2 per
+/// source in parallel for the residual statistics).
+fn fit_core(
+    model: &Model,
+    sensors: &[SensorKind],
+    sources: &[&dyn Samples],
+    robust_runs: &[FitRun<'_>],
+    opts: &FitOptions,
+) -> Result<Vec<SensorFit>, SamplesError> {
+    use rayon::prelude::*;
+    let designs: Vec<SensorDesign<'_>> = sensors
+        .iter()
+        .map(|&sensor| {
+            let terms = model.terms(sensor);
+            let cols = Columns::new(&terms);
+            SensorDesign { sensor, terms, cols }
+        })
+        .collect();
+    let parts: Vec<(Vec<QrAccumulator>, usize)> =
+        sources.par_iter().map(|src| accumulate(&designs, *src, opts.chunk)).collect::<Result<_, _>>()?;
+    let counts: Vec<usize> = parts.iter().map(|p| p.1).collect();
+    let mut merged: Vec<QrAccumulator> =
+        designs.iter().map(|d| QrAccumulator::new(d.cols.len() + 3, opts.chunk)).collect();
+    for (mut accs, _) in parts {
+        for (m, a) in merged.iter_mut().zip(accs.iter_mut()) {
+            m.merge(a);
+        }
+    }
+    let mut solved = Vec::with_capacity(designs.len());
+    for (d, acc) in designs.iter().zip(merged.iter_mut()) {
+        let mut sol = solve(&d.terms, &d.cols, d.sensor, acc, opts)?;
+        if opts.robust {
+            robust_refit(
+                &d.terms,
+                &d.cols,
+                robust_runs,
+                d.sensor,
+                opts,
+                &sol.fitted_sets,
+                &sol.status,
+                &mut sol.values,
+                &mut sol.std_errors,
+                &mut sol.channels,
+            );
+        }
+        solved.push(sol);
+    }
+
+    // Second pass: largest residual and residual autocovariances per channel (skipped
+    // when only screening candidates by their residual).
+    if !opts.screening {
+        let stats: Vec<(Vec<AutoCov>, Vec<f64>)> = sources
+            .par_iter()
+            .zip(counts.par_iter())
+            .map(|(src, &n)| residual_pass(&designs, &solved, *src, n))
+            .collect::<Result<_, _>>()?;
+        for (di, sol) in solved.iter_mut().enumerate() {
+            let mut lrv = [LongRunVariance::default(), LongRunVariance::default(), LongRunVariance::default()];
+            for ((acov, max), &n) in stats.iter().zip(&counts) {
+                let lags = newey_west_lags(n);
+                for ch in 0..3 {
+                    lrv[ch].add(&acov[3 * di + ch], lags);
+                    if max[3 * di + ch] > sol.channels[ch].residual_max {
+                        sol.channels[ch].residual_max = max[3 * di + ch];
+                    }
+                }
+            }
+            for ch in 0..3 {
+                let c = &mut sol.channels[ch];
+                c.residual_lag1 = lrv[ch].lag1();
+                // With a known σ the covariance is already the Cramér–Rao bound σ²(ΦᵀΦ)⁻¹.
+                if opts.known_sigma.is_none() {
+                    let f = lrv[ch].inflation();
+                    c.coloured_inflation = f;
+                    rescale(c, &sol.fitted_sets[ch], &mut sol.std_errors, f);
+                }
+            }
+        }
+    }
+    Ok(designs.iter().zip(solved).map(|(d, sol)| finish(&d.terms, d.sensor, sol)).collect())
+}
+
+/// Fits one sensor of a model to in-memory runs.
+pub(crate) fn fit_sensor(
+    model: &Model,
+    sensor: SensorKind,
+    runs: &[FitRun<'_>],
+    opts: &FitOptions,
+) -> Result<SensorFit, EstimateError> {
+    let sources: Vec<&dyn Samples> = runs.iter().map(|r| r as &dyn Samples).collect();
+    fit_core(model, &[sensor], &sources, runs, opts).map(|mut v| v.remove(0)).map_err(SamplesError::in_memory)
+}
+
+/// Solves one sensor from its accumulated R factor: identifiability, coefficients,
+/// covariance (white-noise), per-channel residual RMS.
+fn solve(
+    terms: &[crate::model::TermRef<'_>],
+    cols: &Columns,
+    sensor: SensorKind,
+    acc: &mut QrAccumulator,
+    opts: &FitOptions,
+) -> Result<Solved, EstimateError> {
+    let p = cols.len();
+    let n = acc.rows();
+    let r = acc.r();
+    let norms = acc.column_norms();
+    let max_norm = norms[..p].iter().copied().fold(0.0, f64::max);
+
+    let mut values: Vec<f64> = terms
+        .iter()
+        .map(|t| match t.status {
+            TermStatus::Fixed(v) => v,
+            TermStatus::Fitted => t.term.nominal,
+        })
+        .collect();
+    let mut std_errors: Vec<Option<f64>> = vec![None; terms.len()];
+    let mut status: Vec<CoefStatus> = terms
+        .iter()
+        .map(|t| match t.status {
+            TermStatus::Fixed(_) => CoefStatus::Fixed,
+            TermStatus::Fitted => CoefStatus::Fitted,
+        })
+        .collect();
+    let mut channels = Vec::with_capacity(3);
+    let mut unidentifiable = Vec::new();
+    let mut correlated = Vec::new();
+    let mut fitted_sets: Vec<Vec<usize>> = Vec::with_capacity(3);
+
+    for ch in 0..3 {
+        let mut fitted: Vec<usize> =
+            (0..terms.len()).filter(|&ti| terms[ti].term.channel == ch && status[ti] == CoefStatus::Fitted).collect();
+        // Columns nobody excites cannot be fitted at all.
+        fitted.retain(|&ti| {
+            let c = cols.of_term[ti];
+            if norms[c] <= 1e-12 * max_norm.max(f64::MIN_POSITIVE) {
+                unidentifiable.push(identify::zero_column(&terms[ti], ch));
+                status[ti] = CoefStatus::Unidentifiable;
+                false
+            } else {
+                true
+            }
+        });
+        let (rs, cond) = loop {
+            let q = fitted.len();
+            let rs = reduce(&r, cols, terms, &values, &status, &fitted, ch, p);
+            if q == 0 {
+                break (rs, 1.0);
+            }
+            let scaled = DMatrix::from_fn(q, q, |i, j| rs[(i, j)] / norms[cols.of_term[fitted[j]]]);
+            let svd = scaled.svd(false, true);
+            let (mut smin, mut smax, mut imin) = (f64::INFINITY, 0.0_f64, 0);
+            for (i, &s) in svd.singular_values.iter().enumerate() {
+                if s < smin {
+                    smin = s;
+                    imin = i;
+                }
+                smax = smax.max(s);
+            }
+            if smin > opts.rcond * smax {
+                break (rs, smax / smin);
+            }
+            let Some(vt) = svd.v_t.as_ref() else {
+                break (rs, f64::INFINITY);
+            };
+            let combo: Vec<f64> = (0..q).map(|j| vt[(imin, j)]).collect();
+            let (report, drop_at) = identify::lost_combination(terms, &fitted, &combo, ch);
+            let ti = fitted.remove(drop_at);
+            status[ti] = CoefStatus::Unidentifiable;
+            values[ti] = terms[ti].term.nominal;
+            unidentifiable.push(report);
+        };
+        let q = fitted.len();
+        if n <= q as u64 {
+            return Err(EstimateError::TooFewSamples { sensor, axis: AXES[ch], n, q });
+        }
+        let known = opts.known_sigma.map(|k| k[3 * sensor.index() + ch]);
+        let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n, known);
+        for (a, &ti) in fitted.iter().enumerate() {
+            values[ti] = theta[a];
+            std_errors[ti] = Some(cov[a][a].sqrt());
+        }
+        for a in 0..q {
+            for b in a + 1..q {
+                let c = cov[a][b] / (cov[a][a] * cov[b][b]).sqrt();
+                if c.abs() > 0.95 {
+                    correlated.push(Correlation {
+                        a: terms[fitted[a]].term.name.clone(),
+                        b: terms[fitted[b]].term.name.clone(),
+                        correlation: c,
+                    });
+                }
+            }
+        }
+        fitted_sets.push(fitted.clone());
+        channels.push(ChannelFit {
+            axis: AXES[ch],
+            n,
+            n_params: q,
+            residual_rms: (rss / n as f64).sqrt(),
+            residual_max: 0.0,
+            sigma: sigma2.sqrt(),
+            condition_number: cond,
+            covariance_names: fitted.iter().map(|&ti| terms[ti].term.name.clone()).collect(),
+            covariance: cov,
+            downweighted: 0,
+            coloured_inflation: 1.0,
+            residual_lag1: 0.0,
+        });
+    }
+
+    Ok(Solved { values, std_errors, status, channels, unidentifiable, correlated, fitted_sets })
+}
+
+/// The sensor fit from its solution.
+fn finish(terms: &[crate::model::TermRef<'_>], sensor: SensorKind, sol: Solved) -> SensorFit {
+    let Solved { values, std_errors, status, channels, unidentifiable, correlated, .. } = sol;
+    let coefficients = terms
+        .iter()
+        .enumerate()
+        .map(|(ti, t)| Coefficient {
+            name: t.term.name.clone(),
+            effect: t.effect.id().to_string(),
+            channel: t.term.channel,
+            unit: t.term.unit.to_string(),
+            value: values[ti],
+            std_error: std_errors[ti],
+            status: status[ti],
+        })
+        .collect();
+    SensorFit { sensor, coefficients, channels, unidentifiable, correlated }
+}
+
+/// Multiplies a channel's covariance by `scale` and updates its standard errors.
+fn rescale(c: &mut ChannelFit, fitted: &[usize], std_errors: &mut [Option<f64>], scale: f64) {
+    for row in &mut c.covariance {
+        for v in row.iter_mut() {
+            *v *= scale;
+        }
+    }
+    for (a, &ti) in fitted.iter().enumerate() {
+        std_errors[ti] = Some(c.covariance[a][a].max(0.0).sqrt());
+    }
+}
+
+/// The channel's reduced problem `[R_s | z; 0 | ρ]` ((q+1) × (q+1)) from the accumulated R:
+/// QR of the fitted columns of R beside the output column minus the held coefficients'
+/// contribution.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn reduce(
+    r: &Mat<f64>,
+    cols: &Columns,
+    terms: &[crate::model::TermRef<'_>],
+    values: &[f64],
+    status: &[CoefStatus],
+    fitted: &[usize],
+    ch: usize,
+    p: usize,
+) -> Mat<f64> {
+    let rows = r.nrows();
+    let q = fitted.len();
+    let mut m = Mat::<f64>::zeros(rows, q + 1);
+    for (a, &ti) in fitted.iter().enumerate() {
+        let c = cols.of_term[ti];
+        for i in 0..rows {
+            m[(i, a)] = r[(i, c)];
+        }
+    }
+    for i in 0..rows {
+        m[(i, q)] = r[(i, p + ch)];
+    }
+    for (ti, t) in terms.iter().enumerate() {
+        if t.term.channel == ch && status[ti] != CoefStatus::Fitted && values[ti] != 0.0 {
+            let c = cols.of_term[ti];
+            for i in 0..rows {
+                m[(i, q)] -= values[ti] * r[(i, c)];
+            }
+        }
+    }
+    let qr = m.as_ref().qr();
+    let mut out = Mat::<f64>::zeros(q + 1, q + 1);
+    let rr = qr.thin_R();
+    for i in 0..rr.nrows().min(q + 1) {
+        for j in i..q + 1 {
+            out[(i, j)] = rr[(i, j)];
+        }
+    }
+    // Keep the diagonal of R_s positive so that the residual norm sits in out[(q, q)].
+    out[(q, q)] = out[(q, q)].abs();
+    out
+}
+
+/// Solves the reduced problem `[R_s | z; 0 | ρ]`: θ by back substitution, the covariance
+/// `σ² R_s⁻¹ R_s⁻ᵀ` with `σ² = ρ²/(n − q)`. Returns (θ, covariance, RSS, σ²).
+pub(crate) fn solve_reduced(
+    rs: &Mat<f64>,
+    q: usize,
+    n: u64,
+    known_sigma: Option<f64>,
+) -> (Vec<f64>, Vec<Vec<f64>>, f64, f64) {
+    let mut theta = vec![0.0; q];
+    for i in (0..q).rev() {
+        let mut acc = rs[(i, q)];
+        for j in i + 1..q {
+            acc -= rs[(i, j)] * theta[j];
+        }
+        theta[i] = acc / rs[(i, i)];
+    }
+    let rss = rs[(q, q)] * rs[(q, q)];
+    let sigma2 = rss / (n.saturating_sub(q as u64).max(1)) as f64;
+    let mut rinv = vec![vec![0.0; q]; q];
+    for col in 0..q {
+        for i in (0..=col).rev() {
+            let mut acc = if i == col { 1.0 } else { 0.0 };
+            for j in i + 1..=col {
+                acc -= rs[(i, j)] * rinv[j][col];
+            }
+            rinv[i][col] = acc / rs[(i, i)];
+        }
+    }
+    let mut cov = vec![vec![0.0; q]; q];
+    for i in 0..q {
+        for j in 0..q {
+            let mut acc = 0.0;
+            for k in i.max(j)..q {
+                acc += rinv[i][k] * rinv[j][k];
+            }
+            cov[i][j] = known_sigma.map_or(sigma2, |s| s * s) * acc;
+        }
+    }
+    (theta, cov, rss, sigma2)
+}
