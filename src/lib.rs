@@ -17,6 +17,7 @@ pub mod diagnose;
 pub mod estimate;
 pub mod frames;
 pub mod html;
+pub mod json;
 pub mod model;
 pub mod motion;
 pub mod noise;

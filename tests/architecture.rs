@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 /// Top-level modules of the library, lowest layer first; modules in one row are siblings
 /// and may not import each other.
 const LAYERS: &[&[&str]] = &[
-    &["units", "stats", "atomic", "html"],
+    &["units", "stats", "atomic", "html", "json"],
     &["frames"],
     &["session"],
     &["motion", "noise"],
@@ -127,4 +127,71 @@ fn the_scanner_sees_paths_and_skips_comments() {
     assert_eq!(crate_refs(code("let s = \"//\"; crate::stats::median(x)")), vec!["stats"]);
     assert!(crate_refs(code("/// see [`crate::app`]")).is_empty());
     assert!(crate_refs(code("mycrate::x")).is_empty());
+}
+
+/// The lines of a file outside its `#[cfg(test)]` module(s).
+fn without_tests(text: &str) -> Vec<&str> {
+    let lines: Vec<&str> = text.lines().collect();
+    let mut out = Vec::with_capacity(lines.len());
+    let mut i = 0;
+    while i < lines.len() {
+        let next_is_mod = lines.get(i + 1).is_some_and(|l| l.trim_start().starts_with("mod ") && l.contains('{'));
+        if lines[i].trim() == "#[cfg(test)]" && next_is_mod {
+            let mut depth = 0i64;
+            let mut j = i + 1;
+            while j < lines.len() {
+                depth += lines[j].matches('{').count() as i64 - lines[j].matches('}').count() as i64;
+                j += 1;
+                if depth == 0 {
+                    break;
+                }
+            }
+            i = j;
+            continue;
+        }
+        out.push(lines[i]);
+        i += 1;
+    }
+    out
+}
+
+/// Files a newcomer can hold in their head: at most ~700 lines of code outside their tests,
+/// no function over ~120 lines (brace-matched from its `fn` line).
+#[test]
+fn files_and_functions_stay_small() {
+    const FILE_LINES: usize = 700;
+    const FN_LINES: usize = 120;
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut too_big = Vec::new();
+    for f in &files {
+        let text = std::fs::read_to_string(f).expect("read");
+        let lines = without_tests(&text);
+        let rel = f.strip_prefix(&src).expect("under src").display().to_string();
+        let code = lines.iter().filter(|l| !l.trim().is_empty() && !l.trim_start().starts_with("//")).count();
+        if code > FILE_LINES {
+            too_big.push(format!("{rel}: {code} lines of code (limit {FILE_LINES})"));
+        }
+        for (i, l) in lines.iter().enumerate() {
+            let t = l.trim_start();
+            let t = t.strip_prefix("pub(crate) ").or_else(|| t.strip_prefix("pub(super) ")).unwrap_or(t);
+            let t = t.strip_prefix("pub ").unwrap_or(t);
+            let Some(rest) = t.strip_prefix("fn ") else { continue };
+            let name: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+            let (mut depth, mut started, mut end) = (0i64, false, i);
+            for (j, l) in lines.iter().enumerate().skip(i) {
+                depth += l.matches('{').count() as i64 - l.matches('}').count() as i64;
+                started |= l.contains('{');
+                end = j;
+                if (started && depth <= 0) || (!started && l.trim_end().ends_with(';')) {
+                    break;
+                }
+            }
+            if started && end + 1 - i > FN_LINES {
+                too_big.push(format!("{rel}:{}: fn {name} has {} lines (limit {FN_LINES})", i + 1, end + 1 - i));
+            }
+        }
+    }
+    assert!(too_big.is_empty(), "split by responsibility:\n{}", too_big.join("\n"));
 }

@@ -53,9 +53,9 @@ fn stand_settings_and_coefficients_are_recovered_from_mislabelled_runs() {
     for (st, plan) in f.stand.iter().zip(&cfg.runs) {
         let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = plan.motion else { unreachable!() };
         for (k, truth) in [cone_angle_deg, rate_deg_s, phase_deg].into_iter().enumerate() {
-            let z = (st.value[k] - truth).abs() / st.std_error[k];
+            let z = (st.value.get(k) - truth).abs() / st.std_error.get(k);
             worst_stand = worst_stand.max(z);
-            assert!(z < 4.0, "{} parameter {k}: {} ± {}, true {truth}", st.run, st.value[k], st.std_error[k]);
+            assert!(z < 4.0, "{} parameter {k}: {} ± {}, true {truth}", st.run, st.value.get(k), st.std_error.get(k));
         }
     }
     println!("stand settings: worst |error|/se = {worst_stand:.2}");
@@ -63,12 +63,12 @@ fn stand_settings_and_coefficients_are_recovered_from_mislabelled_runs() {
     println!(
         "{}: α {:.4} ± {:.4}°, ω_s {:.5} ± {:.5} °/s, φ {:.3} ± {:.3}°",
         first.run,
-        first.value[0],
-        first.std_error[0],
-        first.value[1],
-        first.std_error[1],
-        first.value[2],
-        first.std_error[2]
+        first.value.get(0),
+        first.std_error.get(0),
+        first.value.get(1),
+        first.std_error.get(1),
+        first.value.get(2),
+        first.std_error.get(2)
     );
 
     // Without stand estimation the mislabelling biases the coefficients far beyond their errors.

@@ -254,14 +254,120 @@ fn noise_factor(unit: &str) -> Option<f64> {
     })
 }
 
-fn nominal_of(name: &str) -> f64 {
-    // Diagonal scale terms (c_xx, k_yy, …) are nominally 1.
-    let key = name.rsplit('.').next().unwrap_or("");
-    let b = key.as_bytes();
-    if b.len() == 4 && (b[0] == b'c' || b[0] == b'k') && b[1] == b'_' && b[2] == b[3] {
-        1.0
+type Coefs<'a> = [&'a crate::estimate::Coefficient];
+
+/// (label, pass, detail) of one rule.
+type Outcome = (String, bool, String);
+
+/// Bounds on coefficients; deviations are from each coefficient's nominal value in the
+/// catalogue (1 on a scale diagonal, else 0).
+fn coefficient_rule(
+    coefs: &Coefs<'_>,
+    model: Option<&crate::model::Model>,
+    select: &str,
+    (min, max, max_abs_deviation): (Option<f64>, Option<f64>, Option<f64>),
+    label: String,
+) -> Outcome {
+    let picked: Vec<_> = coefs.iter().filter(|c| matches(select, &c.name)).collect();
+    let bad: Vec<String> = picked
+        .iter()
+        .filter_map(|c| {
+            let nominal = model.and_then(|m| m.nominal(&c.name)).unwrap_or(0.0);
+            let dev = (c.value - nominal).abs();
+            let out = min.is_some_and(|m| c.value < m)
+                || max.is_some_and(|m| c.value > m)
+                || max_abs_deviation.is_some_and(|m| dev > m);
+            out.then(|| format!("{} = {:.6e}", c.name, c.value))
+        })
+        .collect();
+    if picked.is_empty() {
+        (label, false, format!("no coefficient matches '{select}'"))
+    } else if bad.is_empty() {
+        (label, true, format!("{} coefficients within bounds", picked.len()))
     } else {
-        0.0
+        (label, false, format!("out of bounds: {}", bad.join(", ")))
+    }
+}
+
+fn std_error_rule(coefs: &Coefs<'_>, select: &str, max: f64, label: String) -> Outcome {
+    let picked: Vec<_> =
+        coefs.iter().filter(|c| matches(select, &c.name) && c.status != crate::estimate::CoefStatus::Fixed).collect();
+    let bad: Vec<String> = picked
+        .iter()
+        .filter_map(|c| match c.std_error {
+            Some(se) if se <= max => None,
+            Some(se) => Some(format!("{} ± {se:.3e}", c.name)),
+            None => Some(format!("{} unidentifiable", c.name)),
+        })
+        .collect();
+    if bad.is_empty() {
+        (label, true, format!("{} standard errors ≤ {max:e}", picked.len()))
+    } else {
+        (label, false, format!("too uncertain: {}", bad.join(", ")))
+    }
+}
+
+fn noise_rule(
+    profile: &Profile,
+    sensor: SensorKind,
+    term: &str,
+    max: f64,
+    unit: Option<&str>,
+    label: String,
+) -> Outcome {
+    let k = unit.and_then(noise_factor).unwrap_or(1.0);
+    let Some(n) = &profile.noise else {
+        return (label, false, "the profile has no noise characterisation (crosscal noise --store)".into());
+    };
+    let vals: Vec<(String, Option<f64>)> = n
+        .channels
+        .iter()
+        .filter(|c| c.sensor() == sensor)
+        .map(|c| {
+            let v = match term {
+                "white" => c.white_density,
+                "bias_instability" => c.bias_instability,
+                _ => c.random_walk,
+            };
+            (c.channel.clone(), v)
+        })
+        .collect();
+    let worst = vals.iter().filter_map(|v| v.1).fold(0.0, f64::max) / k;
+    let u = unit.unwrap_or("SI");
+    if vals.is_empty() {
+        (label, false, format!("no {sensor} channel in the noise characterisation"))
+    } else {
+        (label, worst <= max, format!("worst axis {worst:.4e} {u} (limit {max} {u})"))
+    }
+}
+
+fn residual_rule(ev: &Evidence<'_>, sensor: SensorKind, max_pct: f64, label: String) -> Outcome {
+    let Some(r) = ev.check else { return (label, false, "no session was checked".into()) };
+    let worst = r.summary.iter().filter(|a| a.sensor == sensor).filter_map(|a| a.after_pct).fold(0.0, f64::max);
+    (label, worst <= max_pct, format!("largest corrected error {worst:.3e} % (limit {max_pct} %)"))
+}
+
+fn reduction_rule(ev: &Evidence<'_>, sensor: SensorKind, min: f64, label: String) -> Outcome {
+    let Some(r) = ev.check else { return (label, false, "no session was checked".into()) };
+    let bad: Vec<String> = r
+        .summary
+        .iter()
+        .filter(|a| a.sensor == sensor)
+        .filter(|a| !a.noise_limited && a.reduction_sys.is_none_or(|v| v < min))
+        .map(|a| format!("{} {}: {:.3e}×", a.sensor, a.axis, a.reduction_sys.unwrap_or(0.0)))
+        .collect();
+    if bad.is_empty() {
+        (label, true, format!("every axis ≥ {min}× or at the noise floor"))
+    } else {
+        (label, false, format!("below {min}×: {}", bad.join(", ")))
+    }
+}
+
+fn adequate_rule(ev: &Evidence<'_>, label: String) -> Outcome {
+    match &ev.adequacy {
+        None => (label, false, "diagnose was not run".into()),
+        Some((true, _)) => (label, true, "no unexplained systematic residual".into()),
+        Some((false, why)) => (label, false, format!("unexplained systematic residual: {}", why.join("; "))),
     }
 }
 
@@ -269,133 +375,42 @@ fn nominal_of(name: &str) -> f64 {
 pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<RuleResult> {
     let coefs: Vec<&crate::estimate::Coefficient> =
         profile.gyro.coefficients.iter().chain(&profile.accel.coefficients).collect();
+    let model = profile.model().ok();
     rules
         .rules
         .iter()
         .map(|rule| {
-            let (label, pass, detail) = match rule {
-                Rule::Coefficient { select, min, max, max_abs_deviation, name } => {
-                    let label = name.clone().unwrap_or_else(|| format!("coefficient {select}"));
-                    let picked: Vec<_> = coefs.iter().filter(|c| matches(select, &c.name)).collect();
-                    let bad: Vec<String> = picked
-                        .iter()
-                        .filter_map(|c| {
-                            let dev = (c.value - nominal_of(&c.name)).abs();
-                            let out = min.is_some_and(|m| c.value < m)
-                                || max.is_some_and(|m| c.value > m)
-                                || max_abs_deviation.is_some_and(|m| dev > m);
-                            out.then(|| format!("{} = {:.6e}", c.name, c.value))
-                        })
-                        .collect();
-                    if picked.is_empty() {
-                        (label, false, format!("no coefficient matches '{select}'"))
-                    } else if bad.is_empty() {
-                        (label, true, format!("{} coefficients within bounds", picked.len()))
-                    } else {
-                        (label, false, format!("out of bounds: {}", bad.join(", ")))
-                    }
-                }
-                Rule::StdError { select, max, name } => {
-                    let label = name.clone().unwrap_or_else(|| format!("standard error {select}"));
-                    let picked: Vec<_> = coefs
-                        .iter()
-                        .filter(|c| matches(select, &c.name) && c.status != crate::estimate::CoefStatus::Fixed)
-                        .collect();
-                    let bad: Vec<String> = picked
-                        .iter()
-                        .filter_map(|c| match c.std_error {
-                            Some(se) if se <= *max => None,
-                            Some(se) => Some(format!("{} ± {se:.3e}", c.name)),
-                            None => Some(format!("{} unidentifiable", c.name)),
-                        })
-                        .collect();
-                    if bad.is_empty() {
-                        (label, true, format!("{} standard errors ≤ {max:e}", picked.len()))
-                    } else {
-                        (label, false, format!("too uncertain: {}", bad.join(", ")))
-                    }
-                }
-                Rule::Noise { sensor, term, max, unit, name } => {
-                    let label = name.clone().unwrap_or_else(|| format!("{sensor} {term} noise"));
-                    let k = unit.as_deref().and_then(noise_factor).unwrap_or(1.0);
-                    match &profile.noise {
-                        None => {
-                            (label, false, "the profile has no noise characterisation (crosscal noise --store)".into())
-                        }
-                        Some(n) => {
-                            let vals: Vec<(String, Option<f64>)> = n
-                                .channels
-                                .iter()
-                                .filter(|c| c.sensor() == *sensor)
-                                .map(|c| {
-                                    let v = match term.as_str() {
-                                        "white" => c.white_density,
-                                        "bias_instability" => c.bias_instability,
-                                        _ => c.random_walk,
-                                    };
-                                    (c.channel.clone(), v)
-                                })
-                                .collect();
-                            let worst = vals.iter().filter_map(|v| v.1).fold(0.0, f64::max) / k;
-                            let u = unit.as_deref().unwrap_or("SI");
-                            if vals.is_empty() {
-                                (label, false, format!("no {sensor} channel in the noise characterisation"))
-                            } else {
-                                (label, worst <= *max, format!("worst axis {worst:.4e} {u} (limit {max} {u})"))
-                            }
-                        }
-                    }
-                }
+            let (rule, pass, detail) = match rule {
+                Rule::Coefficient { select, min, max, max_abs_deviation, name } => coefficient_rule(
+                    &coefs,
+                    model.as_ref(),
+                    select,
+                    (*min, *max, *max_abs_deviation),
+                    name.clone().unwrap_or_else(|| format!("coefficient {select}")),
+                ),
+                Rule::StdError { select, max, name } => std_error_rule(
+                    &coefs,
+                    select,
+                    *max,
+                    name.clone().unwrap_or_else(|| format!("standard error {select}")),
+                ),
+                Rule::Noise { sensor, term, max, unit, name } => noise_rule(
+                    profile,
+                    *sensor,
+                    term,
+                    *max,
+                    unit.as_deref(),
+                    name.clone().unwrap_or_else(|| format!("{sensor} {term} noise")),
+                ),
                 Rule::Residual { sensor, max_pct, name } => {
-                    let label = name.clone().unwrap_or_else(|| format!("{sensor} residual"));
-                    match ev.check {
-                        None => (label, false, "no session was checked".into()),
-                        Some(r) => {
-                            let worst = r
-                                .summary
-                                .iter()
-                                .filter(|a| a.sensor == *sensor)
-                                .filter_map(|a| a.after_pct)
-                                .fold(0.0, f64::max);
-                            (
-                                label,
-                                worst <= *max_pct,
-                                format!("largest corrected error {worst:.3e} % (limit {max_pct} %)"),
-                            )
-                        }
-                    }
+                    residual_rule(ev, *sensor, *max_pct, name.clone().unwrap_or_else(|| format!("{sensor} residual")))
                 }
                 Rule::Reduction { sensor, min, name } => {
-                    let label = name.clone().unwrap_or_else(|| format!("{sensor} reduction"));
-                    match ev.check {
-                        None => (label, false, "no session was checked".into()),
-                        Some(r) => {
-                            let axes: Vec<_> = r.summary.iter().filter(|a| a.sensor == *sensor).collect();
-                            let bad: Vec<String> = axes
-                                .iter()
-                                .filter(|a| !a.noise_limited && a.reduction_sys.is_none_or(|v| v < *min))
-                                .map(|a| format!("{} {}: {:.3e}×", a.sensor, a.axis, a.reduction_sys.unwrap_or(0.0)))
-                                .collect();
-                            if bad.is_empty() {
-                                (label, true, format!("every axis ≥ {min}× or at the noise floor"))
-                            } else {
-                                (label, false, format!("below {min}×: {}", bad.join(", ")))
-                            }
-                        }
-                    }
+                    reduction_rule(ev, *sensor, *min, name.clone().unwrap_or_else(|| format!("{sensor} reduction")))
                 }
-                Rule::Adequate { name } => {
-                    let label = name.clone().unwrap_or_else(|| "model adequate".into());
-                    match &ev.adequacy {
-                        None => (label, false, "diagnose was not run".into()),
-                        Some((true, _)) => (label, true, "no unexplained systematic residual".into()),
-                        Some((false, why)) => {
-                            (label, false, format!("unexplained systematic residual: {}", why.join("; ")))
-                        }
-                    }
-                }
+                Rule::Adequate { name } => adequate_rule(ev, name.clone().unwrap_or_else(|| "model adequate".into())),
             };
-            RuleResult { rule: label, pass, detail }
+            RuleResult { rule, pass, detail }
         })
         .collect()
 }
@@ -413,9 +428,11 @@ mod tests {
         assert!(matches("*.b_*", "accel.b_x"));
         assert!(matches("accel.k_xx", "accel.k_xx"));
         assert!(!matches("accel.k_x", "accel.k_xx"));
-        assert!(nominal_of("gyro.c_yy") == 1.0);
-        assert!(nominal_of("gyro.c_xy") == 0.0);
-        assert!(nominal_of("gyro.e_xx") == 0.0);
+        let m = crate::model::Model::default_model();
+        assert_eq!(m.nominal("gyro.c_yy"), Some(1.0));
+        assert_eq!(m.nominal("gyro.c_xy"), Some(0.0));
+        assert_eq!(m.nominal("gyro.e_xx"), Some(0.0));
+        assert_eq!(m.nominal("gyro.nothing"), None);
     }
 
     #[test]

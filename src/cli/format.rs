@@ -168,7 +168,8 @@ pub fn stand(params: &[crosscal::estimate::StandParams]) -> String {
     let _ =
         writeln!(s, "  {:<20} {:>26} {:>28} {:>24}", "run", "cone angle α (deg)", "rate ω_s (deg/s)", "phase φ (deg)");
     for p in params {
-        let cell = |k: usize| format!("{:.5} ± {:.1e} [{}]", p.value[k], 2.0 * p.std_error[k], p.nominal[k]);
+        let cell =
+            |k: usize| format!("{:.5} ± {:.1e} [{}]", p.value.get(k), 2.0 * p.std_error.get(k), p.nominal.get(k));
         let _ = writeln!(s, "  {:<20} {:>26} {:>28} {:>24}", p.run, cell(0), cell(1), cell(2));
     }
     s

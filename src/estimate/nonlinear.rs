@@ -155,10 +155,115 @@ pub fn seen_tracks(model: &Model, fit: &Fit, sensor: SensorKind, runs: &[FitRun<
     tracks_for(model, &values, sensor, runs)
 }
 
+/// The fitted nonlinear parameters' definitions, in order: (effect id, definition).
+type Defs = Vec<(String, crate::model::ParamDef)>;
+
+/// Coarse start: each parameter scanned alone over ±{0.5 … 64}× its scale, so that the
+/// simplex starts in the right basin without hand tuning.
+fn coarse_start(obj: &Objective<'_, '_>, defs: &Defs, mut p0: Vec<f64>) -> Vec<f64> {
+    let mut j_best = obj.value(&p0);
+    for (i, (_, d)) in defs.iter().enumerate() {
+        let base = p0[i];
+        for m in [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0] {
+            for sign in [1.0, -1.0] {
+                if sign < 0.0 && d.min == 0.0 {
+                    continue;
+                }
+                let mut q = p0.clone();
+                q[i] = base + sign * m * d.scale;
+                let j = obj.value(&q);
+                if j < j_best {
+                    j_best = j;
+                    p0 = q;
+                }
+            }
+        }
+    }
+    p0
+}
+
+/// Nelder–Mead from `p0` (a simplex of one scale step per parameter); the best point, within
+/// bounds, and the objective back for the Hessian. A search that stops on its iteration
+/// budget is an error unless screening.
+fn simplex<'a, 'b>(
+    obj: Objective<'a, 'b>,
+    defs: &Defs,
+    p0: Vec<f64>,
+    screening: bool,
+) -> Result<(Vec<f64>, Option<Objective<'a, 'b>>), EstimateError> {
+    let mut simplex = vec![p0.clone()];
+    for (i, (_, d)) in defs.iter().enumerate() {
+        let mut v = p0.clone();
+        v[i] += d.scale;
+        simplex.push(v);
+    }
+    let solver = NelderMead::new(simplex)
+        // J is in χ² units: a spread of 1e-4 across the simplex is far below 1σ.
+        .with_sd_tolerance(1e-4)
+        .map_err(|e| EstimateError::NotConverged(e.to_string()))?;
+    let budget = if screening { 30 } else { 400 } * defs.len() as u64;
+    let res = Executor::new(obj, solver)
+        .configure(|s| s.max_iters(budget))
+        .run()
+        .map_err(|e| EstimateError::NotConverged(e.to_string()))?;
+    let state = res.state();
+    if !screening && matches!(state.get_termination_reason(), Some(TerminationReason::MaxItersReached)) {
+        return Err(EstimateError::NotConverged(format!(
+            "{} did not converge from the nominal start in {} iterations",
+            defs.iter().map(|d| d.1.name.as_str()).collect::<Vec<_>>().join(", "),
+            state.get_iter()
+        )));
+    }
+    let mut p_hat = state.get_best_param().cloned().unwrap_or(p0);
+    for (i, (_, d)) in defs.iter().enumerate() {
+        p_hat[i] = bounded(d, p_hat[i]);
+    }
+    Ok((p_hat, res.problem.problem))
+}
+
+/// Standard errors of the parameters from the numerical Hessian H of J at p̂ (central
+/// differences): cov(p) = 2 H⁻¹. Parameters at a bound (e.g. a zero dead zone) have none.
+fn hessian_std_errors(obj: &Objective<'_, '_>, defs: &Defs, p_hat: &[f64]) -> Vec<Option<f64>> {
+    let n = defs.len();
+    let mut ses = vec![None; n];
+    let h: Vec<f64> = defs.iter().zip(p_hat).map(|((_, d), v)| (d.scale * 1e-2).max(v.abs() * 1e-3)).collect();
+    let free: Vec<usize> =
+        (0..n).filter(|&i| p_hat[i] - h[i] >= defs[i].1.min && p_hat[i] + h[i] <= defs[i].1.max).collect();
+    if free.is_empty() {
+        return ses;
+    }
+    let j0 = obj.value(p_hat);
+    let m = free.len();
+    let mut hess = nalgebra::DMatrix::<f64>::zeros(m, m);
+    let shifted = |i: usize, si: f64, j: usize, sj: f64| {
+        let mut q = p_hat.to_vec();
+        q[i] += si * h[i];
+        q[j] += sj * h[j];
+        obj.value(&q)
+    };
+    for (a, &i) in free.iter().enumerate() {
+        hess[(a, a)] = (shifted(i, 1.0, i, 0.0) - 2.0 * j0 + shifted(i, -1.0, i, 0.0)) / (h[i] * h[i]);
+        for (b, &j) in free.iter().enumerate().take(a) {
+            let v = (shifted(i, 1.0, j, 1.0) - shifted(i, 1.0, j, -1.0) - shifted(i, -1.0, j, 1.0)
+                + shifted(i, -1.0, j, -1.0))
+                / (4.0 * h[i] * h[j]);
+            hess[(a, b)] = v;
+            hess[(b, a)] = v;
+        }
+    }
+    if let Some(inv) = hess.try_inverse() {
+        for (a, &i) in free.iter().enumerate() {
+            let v = 2.0 * inv[(a, a)];
+            ses[i] = (v > 0.0 && v.is_finite()).then(|| v.sqrt());
+        }
+    }
+    ses
+}
+
 /// Fits a model with nonlinear effects.
 pub(crate) fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
     let start: Vec<Vec<f64>> = model.nonlinear().iter().map(|e| e.values.clone()).collect();
-    let defs: Vec<(String, crate::model::ParamDef)> = model
+    let defs: Defs = model
         .nonlinear()
         .iter()
         .filter(|e| e.fitted)
@@ -179,89 +284,11 @@ pub(crate) fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Resu
             sensors.push((s, s2.max(f64::MIN_POSITIVE)));
         }
         let obj = Objective { model, runs, opts, sensors };
-        // Coarse start: each parameter scanned alone over ±{0.5 … 64}× its scale, so that the
-        // simplex starts in the right basin without hand tuning.
-        let mut p0 = p0;
-        let mut j_best = obj.value(&p0);
-        for (i, (_, d)) in defs.iter().enumerate() {
-            let base = p0[i];
-            for m in [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0] {
-                for sign in [1.0, -1.0] {
-                    if sign < 0.0 && d.min == 0.0 {
-                        continue;
-                    }
-                    let mut q = p0.clone();
-                    q[i] = base + sign * m * d.scale;
-                    let j = obj.value(&q);
-                    if j < j_best {
-                        j_best = j;
-                        p0 = q;
-                    }
-                }
-            }
-        }
-        let mut simplex = vec![p0.clone()];
-        for (i, (_, d)) in defs.iter().enumerate() {
-            let mut v = p0.clone();
-            v[i] += d.scale;
-            simplex.push(v);
-        }
-        let solver = NelderMead::new(simplex)
-            // J is in χ² units: a spread of 1e-4 across the simplex is far below 1σ.
-            .with_sd_tolerance(1e-4)
-            .map_err(|e| EstimateError::NotConverged(e.to_string()))?;
-        let budget = if opts.screening { 30 } else { 400 } * defs.len() as u64;
-        let res = Executor::new(obj, solver)
-            .configure(|s| s.max_iters(budget))
-            .run()
-            .map_err(|e| EstimateError::NotConverged(e.to_string()))?;
-        let state = res.state();
-        if !opts.screening && matches!(state.get_termination_reason(), Some(TerminationReason::MaxItersReached)) {
-            return Err(EstimateError::NotConverged(format!(
-                "{} did not converge from the nominal start in {} iterations",
-                defs.iter().map(|d| d.1.name.as_str()).collect::<Vec<_>>().join(", "),
-                state.get_iter()
-            )));
-        }
-        p_hat = state.get_best_param().cloned().unwrap_or(p0);
-        for (i, (_, d)) in defs.iter().enumerate() {
-            p_hat[i] = bounded(d, p_hat[i]);
-        }
-        // Numerical Hessian of J at p̂ (central differences); not needed for screening.
-        let obj = &res.problem.problem;
+        let p0 = coarse_start(&obj, &defs, p0);
+        let (best, obj) = simplex(obj, &defs, p0, opts.screening)?;
+        p_hat = best;
         if let Some(obj) = obj.as_ref().filter(|_| !opts.screening) {
-            let n = defs.len();
-            let h: Vec<f64> = defs.iter().zip(&p_hat).map(|((_, d), v)| (d.scale * 1e-2).max(v.abs() * 1e-3)).collect();
-            // Parameters at a bound (e.g. a zero dead zone) have no σ; the rest get one.
-            let free: Vec<usize> =
-                (0..n).filter(|&i| p_hat[i] - h[i] >= defs[i].1.min && p_hat[i] + h[i] <= defs[i].1.max).collect();
-            if !free.is_empty() {
-                let j0 = obj.value(&p_hat);
-                let m = free.len();
-                let mut hess = nalgebra::DMatrix::<f64>::zeros(m, m);
-                let shifted = |i: usize, si: f64, j: usize, sj: f64| {
-                    let mut q = p_hat.clone();
-                    q[i] += si * h[i];
-                    q[j] += sj * h[j];
-                    obj.value(&q)
-                };
-                for (a, &i) in free.iter().enumerate() {
-                    hess[(a, a)] = (shifted(i, 1.0, i, 0.0) - 2.0 * j0 + shifted(i, -1.0, i, 0.0)) / (h[i] * h[i]);
-                    for (b, &j) in free.iter().enumerate().take(a) {
-                        let v = (shifted(i, 1.0, j, 1.0) - shifted(i, 1.0, j, -1.0) - shifted(i, -1.0, j, 1.0)
-                            + shifted(i, -1.0, j, -1.0))
-                            / (4.0 * h[i] * h[j]);
-                        hess[(a, b)] = v;
-                        hess[(b, a)] = v;
-                    }
-                }
-                if let Some(inv) = hess.try_inverse() {
-                    for (a, &i) in free.iter().enumerate() {
-                        let v = 2.0 * inv[(a, a)];
-                        ses[i] = (v > 0.0 && v.is_finite()).then(|| v.sqrt());
-                    }
-                }
-            }
+            ses = hessian_std_errors(obj, &defs, &p_hat);
         }
     }
     let values = expand(model, &p_hat);

@@ -22,17 +22,49 @@ use crate::units::SensorKind;
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
+/// The setting of a conic run: cone angle, stand rate and phase (in the manifest's units).
+/// Stored in profiles as the array `[cone_angle_deg, rate_deg_s, phase_deg]`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(from = "[f64; 3]", into = "[f64; 3]")]
+pub struct ConeSetting {
+    /// Cone half-angle α, degrees.
+    pub cone_angle_deg: f64,
+    /// Stand rate ω_s, deg/s (signed).
+    pub rate_deg_s: f64,
+    /// Phase φ at t = 0, degrees.
+    pub phase_deg: f64,
+}
+
+impl From<[f64; 3]> for ConeSetting {
+    fn from(a: [f64; 3]) -> Self {
+        Self { cone_angle_deg: a[0], rate_deg_s: a[1], phase_deg: a[2] }
+    }
+}
+
+impl From<ConeSetting> for [f64; 3] {
+    fn from(c: ConeSetting) -> Self {
+        [c.cone_angle_deg, c.rate_deg_s, c.phase_deg]
+    }
+}
+
+impl ConeSetting {
+    /// The setting's three numbers by index (0 cone angle, 1 rate, 2 phase).
+    pub fn get(&self, k: usize) -> f64 {
+        <[f64; 3]>::from(*self)[k]
+    }
+}
+
 /// The estimated setting of one conic run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StandParams {
     /// Run name.
     pub run: String,
-    /// Nominal (labelled) cone angle, rate and phase, degrees and °/s.
-    pub nominal: [f64; 3],
-    /// Estimated cone angle α, rate ω_s and phase φ.
-    pub value: [f64; 3],
-    /// Their standard errors.
-    pub std_error: [f64; 3],
+    /// Nominal (labelled) setting.
+    pub nominal: ConeSetting,
+    /// Estimated setting.
+    pub value: ConeSetting,
+    /// Its standard errors.
+    pub std_error: ConeSetting,
 }
 
 /// Central-difference steps for α (deg), ω_s (deg/s), φ (deg).
@@ -93,154 +125,166 @@ impl<'m> Predictor<'m> {
     }
 }
 
-/// Fits the model with every conic run's α, ω_s and φ free. Fails with
-/// [`EstimateError::NotConverged`] rather than return a wrong answer.
-pub(crate) fn fit_with_stand(
-    model: &Model,
-    session: &Session,
-    deriv: &DerivativeConfig,
-    opts: &FitOptions,
-) -> Result<Fit, EstimateError> {
-    if !model.nonlinear().is_empty() {
-        return Err(EstimateError::NotConverged(
-            "stand-parameter estimation cannot be combined with nonlinear effects (time delay, dead zone) yet; fit them in two steps".into(),
-        ));
-    }
-    let g = session.manifest.g_m_s2;
-    let conic: Vec<usize> =
-        (0..session.runs.len()).filter(|&i| conic_of(&session.runs[i].spec.motion).is_some()).collect();
-    if conic.is_empty() {
-        return Err(EstimateError::NotConverged("stand parameters need conic runs; the session has none".into()));
-    }
-    let nominal: Vec<[f64; 3]> = conic.iter().filter_map(|&i| conic_of(&session.runs[i].spec.motion)).collect();
-    let m = 3 * conic.len();
-    let make_tracks = |s: &[[f64; 3]]| -> Vec<Track> {
+/// Settings at convergence with their tracks and fit.
+type Converged = (Vec<[f64; 3]>, Vec<Track>, Fit);
+
+/// The stand problem of a session: which runs are conic, and the tracks and fit at given
+/// settings `s` (one `[α, ω_s, φ]` per conic run, degrees and deg/s).
+struct StandProblem<'a> {
+    model: &'a Model,
+    session: &'a Session,
+    conic: Vec<usize>,
+    deriv: &'a DerivativeConfig,
+    opts: &'a FitOptions,
+}
+
+impl StandProblem<'_> {
+    fn tracks(&self, s: &[[f64; 3]]) -> Vec<Track> {
+        let g = self.session.manifest.g_m_s2;
         let mut k = 0;
-        session
+        self.session
             .runs
             .iter()
             .map(|r| match conic_of(&r.spec.motion) {
                 Some(_) => {
-                    let t = track_for(&motion(s[k]), &r.spec.mount, &r.rec, g, deriv);
+                    let t = track_for(&motion(s[k]), &r.spec.mount, &r.rec, g, self.deriv);
                     k += 1;
                     t
                 }
-                None => crate::motion::track(r, g, deriv),
+                None => crate::motion::track(r, g, self.deriv),
             })
             .collect()
-    };
-    let fit_at = |tracks: &[Track]| -> Result<Fit, EstimateError> {
-        let runs: Vec<FitRun<'_>> = crate::estimate::fit_runs(session, tracks);
-        fit(model, &runs, opts)
-    };
+    }
 
-    let mut s = nominal.clone();
-    let mut tracks = make_tracks(&s);
-    let mut f = fit_at(&tracks)?;
-    let mut sigma2 = [1.0; 6];
-    let mut converged = false;
-    for _ in 0..MAX_ITER {
-        // Channel weights from the current residual, held through the step's line search
-        // (the nominal fit's residual holds the mislabelling; later ones only the noise).
-        reweight(&f, &mut sigma2);
-        let mut j = cost(&f, &sigma2);
-        let (info, rhs, _) = linearise(model, session, &conic, &s, &tracks, &f, &sigma2, deriv, opts)?;
-        let Some(chol) = info.cholesky() else {
-            return Err(EstimateError::NotConverged(
-                "the stand parameters are not identifiable from these runs (their information matrix is singular)"
-                    .into(),
-            ));
-        };
-        let step = chol.solve(&rhs);
-        let mut lambda = 1.0;
-        let mut accepted = false;
-        for _ in 0..12 {
-            let trial: Vec<[f64; 3]> =
-                s.iter().enumerate().map(|(r, p)| std::array::from_fn(|i| p[i] + lambda * step[3 * r + i])).collect();
-            let tt = make_tracks(&trial);
-            if let Ok(ft) = fit_at(&tt) {
-                let jt = cost(&ft, &sigma2);
-                if jt <= j {
-                    s = trial;
-                    tracks = tt;
-                    f = ft;
-                    let gain = j - jt;
-                    j = jt;
-                    accepted = true;
-                    // Converged when the step is tiny against the parameters' own uncertainty.
-                    let inv = chol.inverse();
-                    let rel =
-                        (0..m).map(|i| (lambda * step[i]).abs() / inv[(i, i)].sqrt().max(1e-300)).fold(0.0, f64::max);
-                    if rel < 1e-3 || gain <= 1e-10 * j.max(1.0) {
-                        converged = true;
+    fn fit_at(&self, tracks: &[Track]) -> Result<Fit, EstimateError> {
+        let runs: Vec<FitRun<'_>> = crate::estimate::fit_runs(self.session, tracks);
+        fit(self.model, &runs, self.opts)
+    }
+
+    fn linearise(
+        &self,
+        s: &[[f64; 3]],
+        tracks: &[Track],
+        f: &Fit,
+        sigma2: &[f64; 6],
+    ) -> Result<Linearised, EstimateError> {
+        linearise(self.model, self.session, &self.conic, s, tracks, f, sigma2, self.deriv, self.opts)
+    }
+
+    /// Gauss–Newton from `s` with a halving line search; the settings, their tracks and fit
+    /// at convergence.
+    fn gauss_newton(&self, mut s: Vec<[f64; 3]>) -> Result<Converged, EstimateError> {
+        let m = 3 * self.conic.len();
+        let mut tracks = self.tracks(&s);
+        let mut f = self.fit_at(&tracks)?;
+        let mut sigma2 = [1.0; 6];
+        for _ in 0..MAX_ITER {
+            // Channel weights from the current residual, held through the step's line search
+            // (the nominal fit's residual holds the mislabelling; later ones only the noise).
+            reweight(&f, &mut sigma2);
+            let mut j = cost(&f, &sigma2);
+            let (info, rhs, _) = self.linearise(&s, &tracks, &f, &sigma2)?;
+            let Some(chol) = info.cholesky() else {
+                return Err(EstimateError::NotConverged(
+                    "the stand parameters are not identifiable from these runs (their information matrix is singular)"
+                        .into(),
+                ));
+            };
+            let step = chol.solve(&rhs);
+            let mut lambda = 1.0;
+            for _ in 0..12 {
+                let trial: Vec<[f64; 3]> = s
+                    .iter()
+                    .enumerate()
+                    .map(|(r, p)| std::array::from_fn(|i| p[i] + lambda * step[3 * r + i]))
+                    .collect();
+                let tt = self.tracks(&trial);
+                if let Ok(ft) = self.fit_at(&tt) {
+                    let jt = cost(&ft, &sigma2);
+                    if jt <= j {
+                        s = trial;
+                        tracks = tt;
+                        f = ft;
+                        let gain = j - jt;
+                        j = jt;
+                        // Converged when the step is tiny against the parameters' own uncertainty.
+                        let inv = chol.inverse();
+                        let rel = (0..m)
+                            .map(|i| (lambda * step[i]).abs() / inv[(i, i)].sqrt().max(1e-300))
+                            .fold(0.0, f64::max);
+                        if rel < 1e-3 || gain <= 1e-10 * j.max(1.0) {
+                            return Ok((s, tracks, f));
+                        }
+                        break;
                     }
-                    break;
+                }
+                lambda *= 0.5;
+                if lambda < 0.5f64.powi(11) {
+                    // No descent along the Gauss–Newton direction: at the minimum to rounding.
+                    return Ok((s, tracks, f));
                 }
             }
-            lambda *= 0.5;
         }
-        if !accepted {
-            // No descent along the Gauss–Newton direction: at the minimum to rounding.
-            converged = true;
-        }
-        if converged {
-            break;
-        }
-    }
-    if !converged {
-        return Err(EstimateError::NotConverged(format!(
+        Err(EstimateError::NotConverged(format!(
             "stand parameters did not converge in {MAX_ITER} Gauss–Newton steps; check the runs' labels (cone angle, rate, direction)"
-        )));
+        )))
     }
-    // A run whose residual stays far above the others' was not brought into line by its
-    // own settings: a wrong label or a local minimum. Refused, not reported.
-    reweight(&f, &mut sigma2);
-    let pred = Predictor::new(model, &f);
-    let runs = crate::estimate::fit_runs(session, &tracks);
-    let per_run: Vec<f64> = runs
-        .iter()
-        .map(|run| {
-            let mut acc = 0.0;
-            for k in 0..run.len() {
-                let p = pred.predict(&run.state(k));
-                let y = [run.gyro[k], run.accel[k]];
-                for c in 0..6 {
-                    acc += (y[c / 3][c % 3] - p[c]).powi(2) / sigma2[c];
+
+    /// Refuses what is not a stand slightly off its label: a run whose residual stays far
+    /// above the others' (a wrong label or a local minimum), or a setting implausibly far
+    /// from its label.
+    fn refuse_mislabelled(
+        &self,
+        s: &[[f64; 3]],
+        nominal: &[[f64; 3]],
+        tracks: &[Track],
+        f: &Fit,
+    ) -> Result<(), EstimateError> {
+        let mut sigma2 = [1.0; 6];
+        reweight(f, &mut sigma2);
+        let pred = Predictor::new(self.model, f);
+        let runs = crate::estimate::fit_runs(self.session, tracks);
+        let per_run: Vec<f64> = runs
+            .iter()
+            .map(|run| {
+                let mut acc = 0.0;
+                for k in 0..run.len() {
+                    let p = pred.predict(&run.state(k));
+                    let y = [run.gyro[k], run.accel[k]];
+                    for c in 0..6 {
+                        acc += (y[c / 3][c % 3] - p[c]).powi(2) / sigma2[c];
+                    }
                 }
-            }
-            acc / (6 * run.len().max(1)) as f64
-        })
-        .collect();
-    let mut sorted = per_run.clone();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
-    if let Some((i, v)) = per_run.iter().enumerate().find(|(_, v)| **v > 25.0 * median) {
-        return Err(EstimateError::NotConverged(format!(
-            "run '{}': its residual stays {:.0}× the other runs' (RMS) after estimating the stand settings; check the run's label (cone angle, rate and direction)",
-            session.runs[i].spec.name,
-            (v / median).sqrt()
-        )));
-    }
-    // A stand is off its label by a little; a large move means a wrong label (e.g. the
-    // direction) or a local minimum, and is refused rather than reported.
-    for (r, (&i, p)) in conic.iter().zip(&s).enumerate() {
-        let n = nominal[r];
-        let limit = [2.0, 0.05 * n[1].abs().max(1.0), 30.0];
-        if let Some(k) = (0..3).find(|&k| (p[k] - n[k]).abs() > limit[k] || !p[k].is_finite()) {
-            let what = ["cone angle", "rate", "phase"][k];
+                acc / (6 * run.len().max(1)) as f64
+            })
+            .collect();
+        let mut sorted = per_run.clone();
+        let median = crate::stats::median(&mut sorted).unwrap_or(0.0);
+        if let Some((i, v)) = per_run.iter().enumerate().find(|(_, v)| **v > 25.0 * median) {
             return Err(EstimateError::NotConverged(format!(
-                "run '{}': the estimated {what} {:.4} is implausibly far from its label {} (limit ±{}); check the run's label (cone angle, rate and direction)",
-                session.runs[i].spec.name, p[k], n[k], limit[k]
+                "run '{}': its residual stays {:.0}× the other runs' (RMS) after estimating the stand settings; check the run's label (cone angle, rate and direction)",
+                self.session.runs[i].spec.name,
+                (v / median).sqrt()
             )));
         }
+        for (r, (&i, p)) in self.conic.iter().zip(s).enumerate() {
+            let n = nominal[r];
+            let limit = [2.0, 0.05 * n[1].abs().max(1.0), 30.0];
+            if let Some(k) = (0..3).find(|&k| (p[k] - n[k]).abs() > limit[k] || !p[k].is_finite()) {
+                let what = ["cone angle", "rate", "phase"][k];
+                return Err(EstimateError::NotConverged(format!(
+                    "run '{}': the estimated {what} {:.4} is implausibly far from its label {} (limit ±{}); check the run's label (cone angle, rate and direction)",
+                    self.session.runs[i].spec.name, p[k], n[k], limit[k]
+                )));
+            }
+        }
+        Ok(())
     }
-    // Final linearisation at the optimum for the covariance, weighted by the final noise.
-    reweight(&f, &mut sigma2);
-    let (info, _, gains) = linearise(model, session, &conic, &s, &tracks, &f, &sigma2, deriv, opts)?;
-    let cov_s = info.clone().try_inverse().ok_or_else(|| {
-        EstimateError::NotConverged("the stand parameters' information matrix is singular at the optimum".into())
-    })?;
-    // Coefficient covariance: conditional + G cov(s) Gᵀ, on the σ scale of the fit.
+}
+
+/// Adds each channel's share of the stand settings' uncertainty to its coefficients'
+/// covariance: conditional + G cov(s) Gᵀ, on the σ scale of the fit.
+fn add_stand_covariance(f: &mut Fit, gains: &[Option<DMatrix<f64>>], cov_s: &DMatrix<f64>) {
     for sk in SensorKind::BOTH {
         let sf = match sk {
             SensorKind::Gyro => &mut f.gyro,
@@ -248,7 +292,7 @@ pub(crate) fn fit_with_stand(
         };
         for c in 0..3 {
             let Some(gm) = &gains[3 * sk.index() + c] else { continue };
-            let extra = gm * &cov_s * gm.transpose();
+            let extra = gm * cov_s * gm.transpose();
             let ch = &mut sf.channels[c];
             for a in 0..ch.covariance.len().min(extra.nrows()) {
                 for b in 0..ch.covariance.len().min(extra.ncols()) {
@@ -263,14 +307,47 @@ pub(crate) fn fit_with_stand(
             }
         }
     }
-    f.stand = conic
+}
+
+/// Fits the model with every conic run's α, ω_s and φ free. Fails with
+/// [`EstimateError::NotConverged`] rather than return a wrong answer.
+pub(crate) fn fit_with_stand(
+    model: &Model,
+    session: &Session,
+    deriv: &DerivativeConfig,
+    opts: &FitOptions,
+) -> Result<Fit, EstimateError> {
+    if !model.nonlinear().is_empty() {
+        return Err(EstimateError::Request(
+            "stand-parameter estimation cannot be combined with nonlinear effects (time delay, dead zone) yet; fit them in two steps".into(),
+        ));
+    }
+    let conic: Vec<usize> =
+        (0..session.runs.len()).filter(|&i| conic_of(&session.runs[i].spec.motion).is_some()).collect();
+    if conic.is_empty() {
+        return Err(EstimateError::Request("stand parameters need conic runs; the session has none".into()));
+    }
+    let nominal: Vec<[f64; 3]> = conic.iter().filter_map(|&i| conic_of(&session.runs[i].spec.motion)).collect();
+    let problem = StandProblem { model, session, conic, deriv, opts };
+    let (s, tracks, mut f) = problem.gauss_newton(nominal.clone())?;
+    problem.refuse_mislabelled(&s, &nominal, &tracks, &f)?;
+    // Final linearisation at the optimum for the covariance, weighted by the final noise.
+    let mut sigma2 = [1.0; 6];
+    reweight(&f, &mut sigma2);
+    let (info, _, gains) = problem.linearise(&s, &tracks, &f, &sigma2)?;
+    let cov_s = info.clone().try_inverse().ok_or_else(|| {
+        EstimateError::NotConverged("the stand parameters' information matrix is singular at the optimum".into())
+    })?;
+    add_stand_covariance(&mut f, &gains, &cov_s);
+    f.stand = problem
+        .conic
         .iter()
         .enumerate()
         .map(|(r, &i)| StandParams {
             run: session.runs[i].spec.name.clone(),
-            nominal: nominal[r],
-            value: s[r],
-            std_error: std::array::from_fn(|k| cov_s[(3 * r + k, 3 * r + k)].max(0.0).sqrt()),
+            nominal: nominal[r].into(),
+            value: s[r].into(),
+            std_error: ConeSetting::from(std::array::from_fn(|k| cov_s[(3 * r + k, 3 * r + k)].max(0.0).sqrt())),
         })
         .collect();
     Ok(f)

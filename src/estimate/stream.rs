@@ -93,21 +93,21 @@ impl<'a> StreamRun<'a> {
     }
 }
 
-impl Samples for StreamRun<'_> {
-    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), SessionError> {
-        let io = |source| SessionError::Io { path: self.path.clone(), source };
-        let g = self.manifest.g_m_s2;
-        let mount = &self.spec.mount;
+/// The reference state of a conic or static run at each time stamp, in sensor axes.
+struct Reference {
+    conic: Option<crate::motion::ConicAt>,
+    still: ([f64; 3], [f64; 3], [f64; 3]),
+    mount: crate::frames::Mount,
+}
+
+impl Reference {
+    fn of(spec: &RunSpec, g: f64) -> Self {
+        let mount = spec.mount.clone();
         let to_sensor = |k: Kinematics| {
             (mount.to_sensor(k.w_rad_s).xyz, mount.to_sensor(k.e_rad_s2).xyz, mount.to_sensor(k.a_m_s2).xyz)
         };
-        let conic = match self.spec.motion {
-            MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
-                Some(Conic::from_deg(cone_angle_deg, rate_deg_s, phase_deg).fixed(g))
-            }
-            _ => None,
-        };
-        let still = match self.spec.motion {
+        let conic = Conic::of(&spec.motion).map(|c| c.fixed(g));
+        let still = match spec.motion {
             MotionSpec::Static { up_stand, earth_rate_rad_s } => to_sensor(Kinematics {
                 w_rad_s: V3::new(earth_rate_rad_s),
                 e_rad_s2: V3::new([0.0; 3]),
@@ -115,82 +115,127 @@ impl Samples for StreamRun<'_> {
             }),
             _ => ([0.0; 3], [0.0; 3], [0.0; 3]),
         };
-        let mut t0 = f64::NAN;
-        let mut used = 0usize;
-        let mut states: Vec<State> = Vec::with_capacity(BLOCK);
-        let mut gyro: Vec<[f64; 3]> = Vec::with_capacity(BLOCK);
-        let mut accel: Vec<[f64; 3]> = Vec::with_capacity(BLOCK);
-        // One used row (temperature already chosen): its reference state, then `f` once a
-        // block is full (and for the last, partial block: `emit(None)`).
-        let mut emit = |row: Option<&Row>| {
-            if let Some(row) = row {
-                if used == 0 {
-                    t0 = row.t_s;
-                }
-                let (w, e, a) = match &conic {
-                    Some(c) => to_sensor(c.at(row.t_s)),
-                    None => still,
-                };
-                states.push(State { t_s: row.t_s - t0, w, e, a, temp_c: row.temp_c });
-                gyro.push(row.gyro);
-                accel.push(row.accel);
-                used += 1;
+        Self { conic, still, mount }
+    }
+
+    #[inline]
+    fn at(&self, t_s: f64) -> ([f64; 3], [f64; 3], [f64; 3]) {
+        match &self.conic {
+            Some(c) => {
+                let k = c.at(t_s);
+                (
+                    self.mount.to_sensor(k.w_rad_s).xyz,
+                    self.mount.to_sensor(k.e_rad_s2).xyz,
+                    self.mount.to_sensor(k.a_m_s2).xyz,
+                )
             }
-            if states.len() == BLOCK || (row.is_none() && !states.is_empty()) {
-                f(&states, &gyro, &accel);
-                states.clear();
-                gyro.clear();
-                accel.clear();
-            }
+            None => self.still,
+        }
+    }
+}
+
+/// Gathers used rows into blocks of [`BLOCK`] states and outputs for the estimator.
+struct Blocks<'f, 'g> {
+    reference: Reference,
+    f: &'f mut BlockFn<'g>,
+    t0: f64,
+    used: usize,
+    states: Vec<State>,
+    gyro: Vec<[f64; 3]>,
+    accel: Vec<[f64; 3]>,
+}
+
+impl Blocks<'_, '_> {
+    /// One used row (temperature already chosen); the block goes out when full.
+    fn push(&mut self, row: &Row) {
+        if self.used == 0 {
+            self.t0 = row.t_s;
+        }
+        let (w, e, a) = self.reference.at(row.t_s);
+        self.states.push(State { t_s: row.t_s - self.t0, w, e, a, temp_c: row.temp_c });
+        self.gyro.push(row.gyro);
+        self.accel.push(row.accel);
+        self.used += 1;
+        if self.states.len() == BLOCK {
+            self.flush();
+        }
+    }
+
+    /// The last, partial block.
+    fn flush(&mut self) {
+        if !self.states.is_empty() {
+            (self.f)(&self.states, &self.gyro, &self.accel);
+            self.states.clear();
+            self.gyro.clear();
+            self.accel.clear();
+        }
+    }
+}
+
+/// A row of the spill file: t, gyro, accel, temperature as little-endian f64.
+fn spill_record(row: &Row) -> [u8; 8 * SPILL_VALUES] {
+    let mut rec = [0u8; 8 * SPILL_VALUES];
+    let values = [row.t_s, row.gyro[0], row.gyro[1], row.gyro[2], row.accel[0], row.accel[1], row.accel[2], row.temp_c];
+    for (chunk, v) in rec.chunks_exact_mut(8).zip(values) {
+        chunk.copy_from_slice(&v.to_le_bytes());
+    }
+    rec
+}
+
+impl StreamRun<'_> {
+    fn io(&self, source: std::io::Error) -> SessionError {
+        SessionError::Io { path: self.path.clone(), source }
+    }
+
+    /// A later read: the rows from the spill, bit for bit as parsed.
+    fn read_spill(&self, file: std::fs::File, blocks: &mut Blocks<'_, '_>) -> Result<(), SessionError> {
+        use std::io::{Read, Seek};
+        let mut file = file;
+        file.seek(std::io::SeekFrom::Start(0)).map_err(|e| self.io(e))?;
+        let mut input = std::io::BufReader::with_capacity(1 << 18, file);
+        let mut rec = [0u8; 8 * SPILL_VALUES];
+        let value = |rec: &[u8; 8 * SPILL_VALUES], i: usize| {
+            let mut b = [0u8; 8];
+            b.copy_from_slice(&rec[8 * i..8 * i + 8]);
+            f64::from_le_bytes(b)
         };
         let mut row = Row::default();
-
-        // A later read: the rows from the spill, bit for bit as parsed.
-        if let Some(file) = self.spill.lock().ok().and_then(|s| s.as_ref().and_then(|f| f.try_clone().ok())) {
-            use std::io::{Read, Seek};
-            let mut file = file;
-            file.seek(std::io::SeekFrom::Start(0)).map_err(io)?;
-            let mut input = std::io::BufReader::with_capacity(1 << 18, file);
-            let mut rec = [0u8; 8 * SPILL_VALUES];
-            let value = |rec: &[u8; 8 * SPILL_VALUES], i: usize| {
-                let mut b = [0u8; 8];
-                b.copy_from_slice(&rec[8 * i..8 * i + 8]);
-                f64::from_le_bytes(b)
-            };
-            loop {
-                match input.read_exact(&mut rec) {
-                    Ok(()) => {}
-                    Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => break,
-                    Err(e) => return Err(io(e)),
-                }
-                row.t_s = value(&rec, 0);
-                row.gyro = [value(&rec, 1), value(&rec, 2), value(&rec, 3)];
-                row.accel = [value(&rec, 4), value(&rec, 5), value(&rec, 6)];
-                row.temp_c = value(&rec, 7);
-                emit(Some(&row));
+        loop {
+            match input.read_exact(&mut rec) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => break,
+                Err(e) => return Err(self.io(e)),
             }
-            emit(None);
-            return Ok(());
+            row.t_s = value(&rec, 0);
+            row.gyro = [value(&rec, 1), value(&rec, 2), value(&rec, 3)];
+            row.accel = [value(&rec, 4), value(&rec, 5), value(&rec, 6)];
+            row.temp_c = value(&rec, 7);
+            blocks.push(&row);
         }
+        blocks.flush();
+        Ok(())
+    }
 
-        let file = std::fs::File::open(&self.path).map_err(io)?;
-        let input = file;
-        let mut rdr = RowReader::new(&self.path, input, &self.manifest.units, g, ReadOptions::default())?;
+    /// A read of the text: the first checks the whole file as the in-memory reader does,
+    /// records what it saw and spills the used rows (if no temporary file can be written,
+    /// later reads parse the text again).
+    fn read_text(&self, blocks: &mut Blocks<'_, '_>) -> Result<(), SessionError> {
+        let file = std::fs::File::open(&self.path).map_err(|e| self.io(e))?;
+        let mut rdr =
+            RowReader::new(&self.path, file, &self.manifest.units, self.manifest.g_m_s2, ReadOptions::default())?;
         let has_temp = rdr.has_temp();
         let known = self.seen.lock().ok().and_then(|s| s.clone());
         if known.is_some() {
             rdr.stop_hashing();
         }
-        // The first read checks the whole file as the in-memory reader does.
         let mut scan = known.is_none().then(|| StreamScan::new(self.manifest.units.time.to_s()));
-        // The first read spills the used rows (if no temporary file can be written, later
-        // reads parse the text again).
         let mut spill = if known.is_none() {
             tempfile::tempfile().ok().map(|f| std::io::BufWriter::with_capacity(1 << 18, f))
         } else {
             None
         };
         let (start, end) = self.spec.rows.unwrap_or((0, usize::MAX));
+        let mut row = Row::default();
         let mut k = 0usize;
         while rdr.read_row(&mut row)? {
             if let Some(scan) = &mut scan {
@@ -203,30 +248,15 @@ impl Samples for StreamRun<'_> {
                     row.temp_c = self.spec.temperature_c.unwrap_or(f64::NAN);
                 }
                 if let Some(w) = &mut spill {
-                    use std::io::Write;
-                    let mut rec = [0u8; 8 * SPILL_VALUES];
-                    let values = [
-                        row.t_s,
-                        row.gyro[0],
-                        row.gyro[1],
-                        row.gyro[2],
-                        row.accel[0],
-                        row.accel[1],
-                        row.accel[2],
-                        row.temp_c,
-                    ];
-                    for (chunk, v) in rec.chunks_exact_mut(8).zip(values) {
-                        chunk.copy_from_slice(&v.to_le_bytes());
-                    }
-                    if w.write_all(&rec).is_err() {
+                    if std::io::Write::write_all(w, &spill_record(&row)).is_err() {
                         spill = None;
                     }
                 }
-                emit(Some(&row));
+                blocks.push(&row);
             }
             k += 1;
         }
-        emit(None);
+        blocks.flush();
         if k == 0 {
             return Err(rdr.no_samples());
         }
@@ -239,7 +269,7 @@ impl Samples for StreamRun<'_> {
                 return Err(gap.to_error(&self.path, rdr.t_column()));
             }
             if let Ok(mut seen) = self.seen.lock() {
-                *seen = Some(Seen { sha256: rdr.sha256(), samples: used, warnings });
+                *seen = Some(Seen { sha256: rdr.sha256(), samples: blocks.used, warnings });
             }
             if let Some(file) = spill.and_then(|w| w.into_inner().ok()) {
                 if let Ok(mut s) = self.spill.lock() {
@@ -248,6 +278,24 @@ impl Samples for StreamRun<'_> {
             }
         }
         Ok(())
+    }
+}
+
+impl Samples for StreamRun<'_> {
+    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), SessionError> {
+        let mut blocks = Blocks {
+            reference: Reference::of(self.spec, self.manifest.g_m_s2),
+            f,
+            t0: f64::NAN,
+            used: 0,
+            states: Vec::with_capacity(BLOCK),
+            gyro: Vec::with_capacity(BLOCK),
+            accel: Vec::with_capacity(BLOCK),
+        };
+        match self.spill.lock().ok().and_then(|s| s.as_ref().and_then(|f| f.try_clone().ok())) {
+            Some(file) => self.read_spill(file, &mut blocks),
+            None => self.read_text(&mut blocks),
+        }
     }
 }
 

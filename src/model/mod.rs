@@ -477,6 +477,12 @@ impl Model {
         Ok(())
     }
 
+    /// The catalogue's nominal value of a coefficient of this model (1 on a scale diagonal,
+    /// else 0), or `None` when the model has no such coefficient.
+    pub fn nominal(&self, name: &str) -> Option<f64> {
+        self.locate(name).map(|(ei, k)| self.effects[ei].terms()[k].nominal)
+    }
+
     fn locate(&self, name: &str) -> Option<(usize, usize)> {
         self.effects
             .iter()

@@ -302,6 +302,131 @@ fn csv_line(line: &[u8], rec: &mut csv::ByteRecord) -> Result<bool, csv::Error> 
     rdr.read_byte_record(rec)
 }
 
+/// The columns a recording's header maps: t, gyro, accel; temperature; reference columns.
+struct Columns {
+    idx: [usize; 7],
+    temp_idx: Option<usize>,
+    ref_idx: Option<[usize; 6]>,
+    eps_idx: Option<[usize; 3]>,
+}
+
+/// The header: the first line that is not blank or a comment (its line and column names).
+fn read_header<R: std::io::Read>(
+    lines: &mut Lines<R>,
+    rec: &mut csv::ByteRecord,
+    path: &Path,
+) -> Result<(u64, Vec<String>), SessionError> {
+    let io = |source| SessionError::Io { path: path.to_path_buf(), source };
+    let header_line;
+    let mut names: Vec<String> = Vec::new();
+    loop {
+        let Some((range, no)) = lines.next_line().map_err(io)? else {
+            if !lines.input.nonblank {
+                return Err(csv_err(
+                    Problem::Empty,
+                    path,
+                    1,
+                    "-",
+                    "the file is empty: expected a header line 't,gx,gy,gz,ax,ay,az[,temp]' and samples",
+                ));
+            }
+            return Err(csv_err(
+                Problem::Header,
+                path,
+                1,
+                "-",
+                "no header line found: expected 't,gx,gy,gz,ax,ay,az[,temp]'",
+            ));
+        };
+        let line = &lines.buf[range];
+        if line.first() == Some(&b'#') {
+            continue;
+        }
+        if !csv_line(line, rec).map_err(|e| csv_error(path, no, &e))? || blank_record(rec) {
+            continue;
+        }
+        header_line = no;
+        for f in rec.iter() {
+            names.push(String::from_utf8_lossy(f).trim().to_string());
+        }
+        break;
+    }
+    Ok((header_line, names))
+}
+
+/// Where the required and optional columns are (errors name the header's line).
+fn map_columns(names: &[String], opts: ReadOptions, path: &Path, header_line: u64) -> Result<Columns, SessionError> {
+    let find = |name: &str| names.iter().position(|n| n == name);
+    // A column read twice would be ambiguous: which one holds the data?
+    for name in REQUIRED.iter().chain(&["temp"]).chain(&REF_REQUIRED).chain(&REF_EPS) {
+        let at: Vec<usize> = names.iter().enumerate().filter(|(_, n)| n == name).map(|(i, _)| i + 1).collect();
+        if at.len() > 1 {
+            let cols: Vec<String> = at.iter().map(|c| c.to_string()).collect();
+            return Err(csv_err(
+                Problem::Header,
+                path,
+                header_line,
+                format!("{} ({name})", at[1]),
+                format!(
+                    "column '{name}' appears {} times in the header (columns {}): expected each column once",
+                    at.len(),
+                    cols.join(", ")
+                ),
+            ));
+        }
+    }
+    let mut idx = [0usize; 7];
+    for (k, name) in REQUIRED.iter().enumerate() {
+        idx[k] = find(name).ok_or_else(|| {
+                let first_is_number = names.first().is_some_and(|n| n.parse::<f64>().is_ok());
+                let why = if first_is_number {
+                    format!("the header line is missing (line {header_line} starts with a number); expected a first line 't,gx,gy,gz,ax,ay,az[,temp]'")
+                } else {
+                    format!(
+                        "required column '{name}' is absent: the header has [{}]; expected t,gx,gy,gz,ax,ay,az (any order)",
+                        names.join(",")
+                    )
+                };
+                csv_err(Problem::Header, path, header_line, "-", why)
+            })?;
+    }
+    let temp_idx = find("temp");
+    let mut ref_idx = None;
+    let mut eps_idx: Option<[usize; 3]> = None;
+    if opts.reference {
+        let mut r = [0usize; 6];
+        for (k, name) in REF_REQUIRED.iter().enumerate() {
+            r[k] = find(name).ok_or_else(|| {
+                    csv_err(Problem::Header,
+                        path,
+                        header_line,
+                        "-",
+                        format!(
+                            "motion kind 'reference' needs column '{name}': the header has [{}]; expected wx_ref,wy_ref,wz_ref,ax_ref,ay_ref,az_ref",
+                            names.join(",")
+                        ),
+                    )
+                })?;
+        }
+        ref_idx = Some(r);
+        let e: Vec<Option<usize>> = REF_EPS.iter().map(|n| find(n)).collect();
+        match (e[0], e[1], e[2]) {
+            (Some(a), Some(b), Some(c)) => eps_idx = Some([a, b, c]),
+            (None, None, None) => {}
+            _ => {
+                return Err(csv_err(
+                    Problem::Header,
+                    path,
+                    header_line,
+                    "-",
+                    "give all three of ex_ref,ey_ref,ez_ref or none of them",
+                ));
+            }
+        }
+    }
+    Ok(Columns { idx, temp_idx, ref_idx, eps_idx })
+}
+
 /// Streams the rows of a recording: one reused buffer, no allocation per row; every row
 /// is validated (numbers, finite values, strictly increasing time) with errors naming
 /// file, line and column.
@@ -336,95 +461,10 @@ impl<R: std::io::Read> RowReader<R> {
     /// reader buffers `input` itself.
     pub fn new(path: &Path, input: R, units: &Units, g_m_s2: f64, opts: ReadOptions) -> Result<Self, SessionError> {
         let path: PathBuf = path.to_path_buf();
-        let io = |source| SessionError::Io { path: path.clone(), source };
         let mut lines = Lines::new(Hashing { inner: input, hash: Sha256::new(), nonblank: false, skip: false });
         let mut rec = csv::ByteRecord::new();
-
-        // Header: the first line that is not blank or a comment.
-        let header_line;
-        let mut names: Vec<String> = Vec::new();
-        loop {
-            let Some((range, no)) = lines.next_line().map_err(io)? else {
-                if !lines.input.nonblank {
-                    return Err(csv_err(
-                        Problem::Empty,
-                        &path,
-                        1,
-                        "-",
-                        "the file is empty: expected a header line 't,gx,gy,gz,ax,ay,az[,temp]' and samples",
-                    ));
-                }
-                return Err(csv_err(
-                    Problem::Header,
-                    &path,
-                    1,
-                    "-",
-                    "no header line found: expected 't,gx,gy,gz,ax,ay,az[,temp]'",
-                ));
-            };
-            let line = &lines.buf[range];
-            if line.first() == Some(&b'#') {
-                continue;
-            }
-            if !csv_line(line, &mut rec).map_err(|e| csv_error(&path, no, &e))? || blank_record(&rec) {
-                continue;
-            }
-            header_line = no;
-            for f in rec.iter() {
-                names.push(String::from_utf8_lossy(f).trim().to_string());
-            }
-            break;
-        }
-        let find = |name: &str| names.iter().position(|n| n == name);
-        let mut idx = [0usize; 7];
-        for (k, name) in REQUIRED.iter().enumerate() {
-            idx[k] = find(name).ok_or_else(|| {
-                let first_is_number = names.first().is_some_and(|n| n.parse::<f64>().is_ok());
-                let why = if first_is_number {
-                    format!("the header line is missing (line {header_line} starts with a number); expected a first line 't,gx,gy,gz,ax,ay,az[,temp]'")
-                } else {
-                    format!(
-                        "required column '{name}' is absent: the header has [{}]; expected t,gx,gy,gz,ax,ay,az (any order)",
-                        names.join(",")
-                    )
-                };
-                csv_err(Problem::Header, &path, header_line, "-", why)
-            })?;
-        }
-        let temp_idx = find("temp");
-        let mut ref_idx = None;
-        let mut eps_idx: Option<[usize; 3]> = None;
-        if opts.reference {
-            let mut r = [0usize; 6];
-            for (k, name) in REF_REQUIRED.iter().enumerate() {
-                r[k] = find(name).ok_or_else(|| {
-                    csv_err(Problem::Header,
-                        &path,
-                        header_line,
-                        "-",
-                        format!(
-                            "motion kind 'reference' needs column '{name}': the header has [{}]; expected wx_ref,wy_ref,wz_ref,ax_ref,ay_ref,az_ref",
-                            names.join(",")
-                        ),
-                    )
-                })?;
-            }
-            ref_idx = Some(r);
-            let e: Vec<Option<usize>> = REF_EPS.iter().map(|n| find(n)).collect();
-            match (e[0], e[1], e[2]) {
-                (Some(a), Some(b), Some(c)) => eps_idx = Some([a, b, c]),
-                (None, None, None) => {}
-                _ => {
-                    return Err(csv_err(
-                        Problem::Header,
-                        &path,
-                        header_line,
-                        "-",
-                        "give all three of ex_ref,ey_ref,ez_ref or none of them",
-                    ));
-                }
-            }
-        }
+        let (header_line, names) = read_header(&mut lines, &mut rec, &path)?;
+        let Columns { idx, temp_idx, ref_idx, eps_idx } = map_columns(&names, opts, &path, header_line)?;
         let width = names.len();
         let mut slots = vec![SKIP; width];
         let used = idx.iter().chain(&temp_idx).chain(ref_idx.iter().flatten()).chain(eps_idx.iter().flatten());

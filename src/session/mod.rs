@@ -389,7 +389,9 @@ pub fn read_manifest(path: &Path) -> Result<Manifest, SessionError> {
 
 /// Parses manifest text (the path is used in messages only).
 pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError> {
-    let json: Value = serde_json::from_str(text).map_err(|e| SessionError::Json {
+    // A UTF-8 byte-order mark is accepted, as in recordings.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let json: Value = crate::json::parse_unique(text).map_err(|e| SessionError::Json {
         path: path.to_path_buf(),
         line: e.line(),
         column: e.column(),
@@ -501,10 +503,10 @@ fn vec3(v: &Value, key: &str) -> Option<[f64; 3]> {
     (x.len() == 3).then(|| [x[0], x[1], x[2]])
 }
 
-fn parse_run<F>(i: usize, r: &Value, bad_kind: &F) -> Result<RunSpec, SessionError>
-where
-    F: Fn(Problem, &str, String) -> SessionError,
-{
+/// A manifest error at the first place `needle` appears (best effort).
+type Bad<'a> = dyn Fn(Problem, &str, String) -> SessionError + 'a;
+
+fn parse_run(i: usize, r: &Value, bad_kind: &Bad<'_>) -> Result<RunSpec, SessionError> {
     let bad = |needle: &str, msg: String| bad_kind(Problem::Invalid, needle, msg);
     let name = r.get("name").and_then(Value::as_str).map(str::to_string).unwrap_or_else(|| format!("run{}", i + 1));
     let file = r
@@ -524,106 +526,12 @@ where
     })?;
     let kind = m.get("kind").and_then(Value::as_str).unwrap_or("");
     let motion = match kind {
-        "conic" => {
-            let need = |key: &str| {
-                num(m, key)
-                    .ok_or_else(|| bad(&name, format!("run '{name}': conic motion needs a finite number \"{key}\"")))
-            };
-            let cone_angle_deg = need("cone_angle_deg")?;
-            let rate_deg_s = need("rate_deg_s")?;
-            let phase_deg = num(m, "phase_deg").unwrap_or(0.0);
-            if !(0.0..=90.0).contains(&cone_angle_deg) {
-                return Err(bad(
-                    &name,
-                    format!("run '{name}': cone_angle_deg is {cone_angle_deg}: expected 0..90 degrees"),
-                ));
-            }
-            MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg }
-        }
+        "conic" => conic_motion(&name, m, &bad)?,
         "static" if m.get("up_stand").and_then(Value::as_str) == Some("unknown") => MotionSpec::StaticUnknown,
-        "static" => {
-            let up = m
-                .get("up_stand")
-                .and_then(Value::as_array)
-                .filter(|a| a.len() == 3)
-                .and_then(|a| {
-                    let v: Vec<f64> = a.iter().filter_map(Value::as_f64).collect();
-                    (v.len() == 3).then(|| [v[0], v[1], v[2]])
-                })
-                .ok_or_else(|| bad(&name, format!("run '{name}': static motion needs \"up_stand\": [x, y, z], the up unit vector in stand axes")))?;
-            let norm = (up[0] * up[0] + up[1] * up[1] + up[2] * up[2]).sqrt();
-            if (norm - 1.0).abs() > 1e-3 {
-                return Err(bad(&name, format!("run '{name}': up_stand has length {norm}: expected a unit vector")));
-            }
-            let up = [up[0] / norm, up[1] / norm, up[2] / norm];
-            let mut earth = [0.0; 3];
-            if m.get("earth_rate").and_then(Value::as_bool).unwrap_or(false) {
-                let lat = num(m, "latitude_deg")
-                    .ok_or_else(|| bad(&name, format!("run '{name}': earth_rate needs \"latitude_deg\"")))?
-                    .to_radians();
-                const OMEGA_E: f64 = 7.292_115e-5;
-                // Vertical component along up; horizontal along north when given.
-                for k in 0..3 {
-                    earth[k] = OMEGA_E * lat.sin() * up[k];
-                }
-                if let Some(n) = m.get("north_stand").and_then(Value::as_array) {
-                    let v: Vec<f64> = n.iter().filter_map(Value::as_f64).collect();
-                    if v.len() == 3 {
-                        for k in 0..3 {
-                            earth[k] += OMEGA_E * lat.cos() * v[k];
-                        }
-                    }
-                }
-            }
-            MotionSpec::Static { up_stand: up, earth_rate_rad_s: earth }
-        }
+        "static" => static_motion(&name, m, &bad)?,
         "reference" => MotionSpec::Reference,
-        "rotation" => {
-            let axis = vec3(m, "axis_stand").ok_or_else(|| {
-                bad(&name, format!("run '{name}': rotation needs \"axis_stand\": [x, y, z], the turn axis in stand axes"))
-            })?;
-            let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-            if (norm - 1.0).abs() > 1e-3 {
-                return Err(bad(&name, format!("run '{name}': axis_stand has length {norm}: expected a unit vector")));
-            }
-            let angle_deg = num(m, "angle_deg").ok_or_else(|| {
-                bad(&name, format!("run '{name}': rotation needs a finite \"angle_deg\" (the total turn, e.g. -360)"))
-            })?;
-            if angle_deg == 0.0 {
-                return Err(bad(&name, format!("run '{name}': angle_deg is 0: a rotation run must turn")));
-            }
-            MotionSpec::Rotation { axis_stand: [axis[0] / norm, axis[1] / norm, axis[2] / norm], angle_deg }
-        }
-        "multi_position" => {
-            let init_rest_s = num(m, "init_rest_s").unwrap_or(30.0);
-            let window = m.get("window").and_then(Value::as_u64).unwrap_or(101) as usize;
-            let threshold_multiplier = num(m, "threshold_multiplier");
-            let min_pose_samples = m.get("min_pose_samples").and_then(Value::as_u64).unwrap_or(100) as usize;
-            if init_rest_s <= 0.0 || window < 3 || min_pose_samples < 2 || threshold_multiplier.is_some_and(|t| t <= 0.0) {
-                return Err(bad(
-                    &name,
-                    format!("run '{name}': multi_position needs init_rest_s > 0, window >= 3, min_pose_samples >= 2 and threshold_multiplier > 0"),
-                ));
-            }
-            let poses = match m.get("poses") {
-                None => None,
-                Some(v) => {
-                    let list: Option<Vec<(usize, usize)>> = v.as_array().and_then(|a| {
-                        a.iter()
-                            .map(|p| {
-                                let p = p.as_array().filter(|p| p.len() == 2)?;
-                                let (s, e) = (p[0].as_u64()? as usize, p[1].as_u64()? as usize);
-                                (e > s).then_some((s, e))
-                            })
-                            .collect()
-                    });
-                    Some(list.ok_or_else(|| {
-                        bad(&name, format!("run '{name}': poses must be a list of [start, end] sample ranges with start < end"))
-                    })?)
-                }
-            };
-            MotionSpec::MultiPosition { init_rest_s, window: window | 1, threshold_multiplier, min_pose_samples, poses }
-        }
+        "rotation" => rotation_motion(&name, m, &bad)?,
+        "multi_position" => multi_position_motion(&name, m, &bad)?,
         other => {
             return Err(bad(
                 if other.is_empty() { &name } else { other },
@@ -631,48 +539,143 @@ where
             ))
         }
     };
-    let rows = match r.get("rows") {
-        None => None,
-        Some(v) => {
-            let pair = v.as_array().filter(|a| a.len() == 2).and_then(|a| Some((a[0].as_u64()?, a[1].as_u64()?)));
-            match pair {
-                Some((s, e)) if e > s => Some((s as usize, e as usize)),
-                _ => {
-                    return Err(bad(
-                        &name,
-                        format!(
-                            "run '{name}': rows must be [start, end] with 0 <= start < end (data rows, end exclusive)"
-                        ),
-                    ))
-                }
-            }
-        }
-    };
-    let mount = match r.get("mount") {
-        None => Mount::identity(),
-        Some(v) => {
-            let names: Option<Vec<&str>> = v.as_array().map(|a| a.iter().filter_map(Value::as_str).collect());
-            let names = names.ok_or_else(|| {
-                bad_kind(
-                    Problem::Mount,
-                    &name,
-                    format!("run '{name}': mount must be a list like [\"+x\", \"+y\", \"+z\"]"),
-                )
-            })?;
-            Mount::parse(&names).map_err(|e| {
-                bad_kind(Problem::Mount, names.first().copied().unwrap_or(&name), format!("run '{name}': {e}"))
-            })?
-        }
-    };
     Ok(RunSpec {
+        rows: run_rows(&name, r, &bad)?,
+        mount: run_mount(&name, r, bad_kind)?,
         name,
         file,
         motion,
-        mount,
         temperature_c: num(r, "temperature_c"),
         note: r.get("note").and_then(Value::as_str).map(str::to_string),
-        rows,
     })
+}
+
+/// A manifest error of the invalid-value kind at `needle`.
+type BadValue<'a> = dyn Fn(&str, String) -> SessionError + 'a;
+
+fn conic_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSpec, SessionError> {
+    let need = |key: &str| {
+        num(m, key).ok_or_else(|| bad(name, format!("run '{name}': conic motion needs a finite number \"{key}\"")))
+    };
+    let cone_angle_deg = need("cone_angle_deg")?;
+    let rate_deg_s = need("rate_deg_s")?;
+    let phase_deg = num(m, "phase_deg").unwrap_or(0.0);
+    if !(0.0..=90.0).contains(&cone_angle_deg) {
+        return Err(bad(name, format!("run '{name}': cone_angle_deg is {cone_angle_deg}: expected 0..90 degrees")));
+    }
+    Ok(MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg })
+}
+
+fn static_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSpec, SessionError> {
+    let up = m
+        .get("up_stand")
+        .and_then(Value::as_array)
+        .filter(|a| a.len() == 3)
+        .and_then(|a| {
+            let v: Vec<f64> = a.iter().filter_map(Value::as_f64).collect();
+            (v.len() == 3).then(|| [v[0], v[1], v[2]])
+        })
+        .ok_or_else(|| {
+            bad(
+                name,
+                format!("run '{name}': static motion needs \"up_stand\": [x, y, z], the up unit vector in stand axes"),
+            )
+        })?;
+    let norm = (up[0] * up[0] + up[1] * up[1] + up[2] * up[2]).sqrt();
+    if (norm - 1.0).abs() > 1e-3 {
+        return Err(bad(name, format!("run '{name}': up_stand has length {norm}: expected a unit vector")));
+    }
+    let up = [up[0] / norm, up[1] / norm, up[2] / norm];
+    let mut earth = [0.0; 3];
+    if m.get("earth_rate").and_then(Value::as_bool).unwrap_or(false) {
+        let lat = num(m, "latitude_deg")
+            .ok_or_else(|| bad(name, format!("run '{name}': earth_rate needs \"latitude_deg\"")))?
+            .to_radians();
+        const OMEGA_E: f64 = 7.292_115e-5;
+        // Vertical component along up; horizontal along north when given.
+        for k in 0..3 {
+            earth[k] = OMEGA_E * lat.sin() * up[k];
+        }
+        if let Some(n) = m.get("north_stand").and_then(Value::as_array) {
+            let v: Vec<f64> = n.iter().filter_map(Value::as_f64).collect();
+            if v.len() == 3 {
+                for k in 0..3 {
+                    earth[k] += OMEGA_E * lat.cos() * v[k];
+                }
+            }
+        }
+    }
+    Ok(MotionSpec::Static { up_stand: up, earth_rate_rad_s: earth })
+}
+
+fn rotation_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSpec, SessionError> {
+    let axis = vec3(m, "axis_stand").ok_or_else(|| {
+        bad(name, format!("run '{name}': rotation needs \"axis_stand\": [x, y, z], the turn axis in stand axes"))
+    })?;
+    let norm = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+    if (norm - 1.0).abs() > 1e-3 {
+        return Err(bad(name, format!("run '{name}': axis_stand has length {norm}: expected a unit vector")));
+    }
+    let angle_deg = num(m, "angle_deg").ok_or_else(|| {
+        bad(name, format!("run '{name}': rotation needs a finite \"angle_deg\" (the total turn, e.g. -360)"))
+    })?;
+    if angle_deg == 0.0 {
+        return Err(bad(name, format!("run '{name}': angle_deg is 0: a rotation run must turn")));
+    }
+    Ok(MotionSpec::Rotation { axis_stand: [axis[0] / norm, axis[1] / norm, axis[2] / norm], angle_deg })
+}
+
+fn multi_position_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSpec, SessionError> {
+    let init_rest_s = num(m, "init_rest_s").unwrap_or(30.0);
+    let window = m.get("window").and_then(Value::as_u64).unwrap_or(101) as usize;
+    let threshold_multiplier = num(m, "threshold_multiplier");
+    let min_pose_samples = m.get("min_pose_samples").and_then(Value::as_u64).unwrap_or(100) as usize;
+    if init_rest_s <= 0.0 || window < 3 || min_pose_samples < 2 || threshold_multiplier.is_some_and(|t| t <= 0.0) {
+        return Err(bad(
+            name,
+            format!("run '{name}': multi_position needs init_rest_s > 0, window >= 3, min_pose_samples >= 2 and threshold_multiplier > 0"),
+        ));
+    }
+    let poses = match m.get("poses") {
+        None => None,
+        Some(v) => {
+            let list: Option<Vec<(usize, usize)>> = v.as_array().and_then(|a| {
+                a.iter()
+                    .map(|p| {
+                        let p = p.as_array().filter(|p| p.len() == 2)?;
+                        let (s, e) = (p[0].as_u64()? as usize, p[1].as_u64()? as usize);
+                        (e > s).then_some((s, e))
+                    })
+                    .collect()
+            });
+            Some(list.ok_or_else(|| {
+                bad(name, format!("run '{name}': poses must be a list of [start, end] sample ranges with start < end"))
+            })?)
+        }
+    };
+    Ok(MotionSpec::MultiPosition { init_rest_s, window: window | 1, threshold_multiplier, min_pose_samples, poses })
+}
+
+fn run_rows(name: &str, r: &Value, bad: &BadValue<'_>) -> Result<Option<(usize, usize)>, SessionError> {
+    let Some(v) = r.get("rows") else { return Ok(None) };
+    let pair = v.as_array().filter(|a| a.len() == 2).and_then(|a| Some((a[0].as_u64()?, a[1].as_u64()?)));
+    match pair {
+        Some((s, e)) if e > s => Ok(Some((s as usize, e as usize))),
+        _ => Err(bad(
+            name,
+            format!("run '{name}': rows must be [start, end] with 0 <= start < end (data rows, end exclusive)"),
+        )),
+    }
+}
+
+fn run_mount(name: &str, r: &Value, bad_kind: &Bad<'_>) -> Result<Mount, SessionError> {
+    let Some(v) = r.get("mount") else { return Ok(Mount::identity()) };
+    let names: Option<Vec<&str>> = v.as_array().map(|a| a.iter().filter_map(Value::as_str).collect());
+    let names = names.ok_or_else(|| {
+        bad_kind(Problem::Mount, name, format!("run '{name}': mount must be a list like [\"+x\", \"+y\", \"+z\"]"))
+    })?;
+    Mount::parse(&names)
+        .map_err(|e| bad_kind(Problem::Mount, names.first().copied().unwrap_or(name), format!("run '{name}': {e}")))
 }
 
 #[cfg(test)]

@@ -1,0 +1,190 @@
+//! The inverse of a unit's forward model: per sensor the bias, the scale/coupling matrix and
+//! its inverse, the angular-acceleration matrix and the further effect terms, and the
+//! nonlinear effects with their parameters.
+
+use super::{mv, solve, CorrectError};
+use crate::model::{Effect, Model, Role, State};
+use crate::profile::{CorrectionSettings, Profile};
+use crate::units::SensorKind;
+use nalgebra::Matrix3;
+use std::sync::Arc;
+
+#[derive(Debug, Clone)]
+struct OtherTerm {
+    effect: Arc<dyn Effect>,
+    index: usize,
+    channel: usize,
+    value: f64,
+}
+
+/// The inverse of one sensor's model.
+#[derive(Debug, Clone)]
+pub struct SensorInverse {
+    /// Bias b (SI).
+    pub bias: [f64; 3],
+    /// Scale/coupling matrix A (row-major).
+    pub scale: Matrix3<f64>,
+    /// A⁻¹.
+    pub scale_inv: Matrix3<f64>,
+    /// Angular-acceleration matrix E (gyro; zero for the accelerometer), s.
+    pub eps: Matrix3<f64>,
+    others: Vec<OtherTerm>,
+}
+
+impl SensorInverse {
+    fn build(model: &Model, sensor: SensorKind) -> Result<Self, CorrectError> {
+        let mut bias = [0.0; 3];
+        let mut scale = Matrix3::zeros();
+        let mut eps = Matrix3::zeros();
+        let mut others = Vec::new();
+        for e in model.effects() {
+            if e.sensor() != sensor {
+                continue;
+            }
+            for t in model.terms(sensor).iter().filter(|t| std::ptr::addr_eq(t.effect, e.as_ref())) {
+                let value = match t.status {
+                    crate::model::TermStatus::Fixed(v) => v,
+                    crate::model::TermStatus::Fitted => t.term.nominal,
+                };
+                let i = t.term.channel;
+                match t.term.role {
+                    Role::Bias => bias[i] += value,
+                    Role::Scale(j) => scale[(i, j)] += value,
+                    Role::Epsilon(j) => eps[(i, j)] += value,
+                    Role::Other => {
+                        if value != 0.0 {
+                            others.push(OtherTerm { effect: Arc::clone(e), index: t.index, channel: i, value })
+                        }
+                    }
+                }
+            }
+        }
+        let scale_inv = scale.try_inverse().ok_or(CorrectError::Singular(sensor))?;
+        Ok(Self { bias, scale, scale_inv, eps, others })
+    }
+
+    /// Contribution of the non-linear-block terms at a state.
+    #[inline]
+    pub(super) fn other(&self, s: &State) -> [f64; 3] {
+        let mut g = [0.0; 3];
+        for o in &self.others {
+            g[o.channel] += o.value * o.effect.regressor(o.index, s);
+        }
+        g
+    }
+
+    /// True when the model has terms beyond b, A and E.
+    pub fn has_other_terms(&self) -> bool {
+        !self.others.is_empty()
+    }
+}
+
+/// A nonlinear effect of the calibration with its parameter values.
+#[derive(Debug, Clone)]
+pub struct NonlinearPart {
+    /// The effect.
+    pub effect: Arc<dyn crate::model::NonlinearEffect>,
+    /// Its parameters.
+    pub params: Vec<f64>,
+}
+
+/// Everything needed to correct a unit.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// Gyro inverse.
+    pub gyro: SensorInverse,
+    /// Accelerometer inverse.
+    pub accel: SensorInverse,
+    /// Derivative settings.
+    pub settings: CorrectionSettings,
+    /// Nonlinear effects (time delay, dead zone).
+    pub nonlinear: Vec<NonlinearPart>,
+    /// Noise standard deviation per channel (gyro, accel), SI: the dead-band flag threshold.
+    pub noise: [[f64; 3]; 2],
+}
+
+impl Calibration {
+    /// From a model whose coefficients are all fixed at their calibrated values.
+    pub fn from_model(model: &Model, settings: CorrectionSettings) -> Result<Self, CorrectError> {
+        Ok(Self {
+            gyro: SensorInverse::build(model, SensorKind::Gyro)?,
+            accel: SensorInverse::build(model, SensorKind::Accel)?,
+            settings,
+            nonlinear: model
+                .nonlinear()
+                .iter()
+                .map(|e| NonlinearPart { effect: Arc::clone(&e.effect), params: e.values.clone() })
+                .collect(),
+            noise: [[0.0; 3]; 2],
+        })
+    }
+
+    /// From a profile (its channel σ set the dead-band flag thresholds).
+    pub fn from_profile(p: &Profile) -> Result<Self, CorrectError> {
+        let model = p.model()?;
+        let mut c = Self::from_model(&model, p.correction)?;
+        for (si, sf) in [&p.gyro, &p.accel].iter().enumerate() {
+            for (i, ch) in sf.channels.iter().enumerate().take(3) {
+                c.noise[si][i] = ch.sigma;
+            }
+        }
+        Ok(c)
+    }
+
+    /// Inverts one sample exactly, given the true angular acceleration ε (rad/s²): the
+    /// fixed point x = A⁻¹(u − b − E ε − g(x)) iterated from the linear solution, then the
+    /// nonlinear inverses. Returns (ω, a, flags) or None if it does not converge in 100
+    /// passes (coefficients too large for the effects to be a perturbation).
+    pub fn invert_state(
+        &self,
+        gyro: [f64; 3],
+        accel: [f64; 3],
+        e: [f64; 3],
+        t_s: f64,
+        temp_c: f64,
+    ) -> Option<([f64; 3], [f64; 3], u8)> {
+        let (g, a) = (&self.gyro, &self.accel);
+        let ee = mv(&g.eps, e);
+        let mut w = solve(&g.scale_inv, gyro, g.bias, ee, [0.0; 3]);
+        let mut acc = solve(&a.scale_inv, accel, a.bias, [0.0; 3], [0.0; 3]);
+        for _ in 0..100 {
+            // The effects' regressors see the input as the sensor saw it (before the inverses
+            // of the nonlinear effects), exactly as in the forward model.
+            let s = State { t_s, w, e, a: acc, temp_c };
+            let og = g.other(&s);
+            let oa = a.other(&s);
+            let wn = solve(&g.scale_inv, gyro, g.bias, ee, og);
+            let an = solve(&a.scale_inv, accel, a.bias, oa, [0.0; 3]);
+            let change = (0..3).map(|i| (wn[i] - w[i]).abs().max((an[i] - acc[i]).abs())).fold(0.0, f64::max);
+            let size = (0..3).map(|i| wn[i].abs().max(an[i].abs())).fold(f64::MIN_POSITIVE, f64::max);
+            w = wn;
+            acc = an;
+            if change <= 1e-15 * size {
+                let flags = self.invert_nonlinear(&mut w, &mut acc);
+                return Some((w, acc, flags));
+            }
+        }
+        None
+    }
+
+    /// The first effect that needs a temperature, if any.
+    pub fn needs_temperature(&self) -> Option<&'static str> {
+        self.gyro.others.iter().chain(&self.accel.others).find(|o| o.effect.needs_temperature()).map(|o| o.effect.id())
+    }
+
+    /// Total lag of the sensor's stamps behind the truth, s.
+    pub fn lag_s(&self) -> f64 {
+        self.nonlinear.iter().map(|n| n.effect.lag_s(&n.params)).sum()
+    }
+
+    /// Applies the nonlinear inverses to one sample; returns the flag bits (gyro 0-2, accel 3-5).
+    #[inline]
+    pub(super) fn invert_nonlinear(&self, w: &mut [f64; 3], a: &mut [f64; 3]) -> u8 {
+        let mut flags = 0;
+        for n in &self.nonlinear {
+            flags |= n.effect.invert_sample(&n.params, SensorKind::Gyro, w, &self.noise[0]);
+            flags |= n.effect.invert_sample(&n.params, SensorKind::Accel, a, &self.noise[1]) << 3;
+        }
+        flags
+    }
+}
