@@ -21,7 +21,7 @@ pub mod protocol;
 pub mod report;
 
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
-use crate::model::{catalog, forward, nonlinear_catalog, Model};
+use crate::model::{catalog, forward, Model};
 use crate::session::MotionSpec;
 use crate::stats::{chi2_upper, systematic, Systematic};
 use crate::units::{SensorKind, AXES};
@@ -397,9 +397,8 @@ pub fn diagnose(
     let mut first_round: Option<Vec<Candidate>> = None;
     let mut picture = channels.clone();
     while steps.len() < MAX_STEPS && picture.iter().any(|c| c.systematic) {
-        let mut options: Vec<(&'static str, &'static str)> =
+        let options: Vec<(&'static str, &'static str)> =
             catalog().iter().filter(|e| !e.needs_temperature() || has_temp).map(|e| (e.id(), e.explain())).collect();
-        options.extend(nonlinear_catalog().iter().map(|e| (e.id(), e.explain())));
         // Candidates are scored with the nonlinear parameters found so far held (a linear
         // refit each); the chosen one is then refitted jointly with everything.
         let mut held = current.clone();
@@ -410,9 +409,7 @@ pub fn diagnose(
         let mut scored = Vec::new();
         let screening = FitOptions { screening: true, ..*opts };
         for (id, explain) in options {
-            let present = current.effects().iter().any(|m| m.id() == id)
-                || current.nonlinear().iter().any(|m| m.effect.id() == id);
-            if present {
+            if current.has(id) {
                 continue;
             }
             let mut m = held.clone();

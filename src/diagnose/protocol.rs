@@ -85,7 +85,8 @@ pub fn diagnose_protocol(session: &Session, model: &Model) -> Result<ProtocolDia
     let base = refit(model, &runs, &opts)?;
     let mut candidates = Vec::new();
     for e in catalog() {
-        if model.effects().iter().any(|m| m.id() == e.id()) || !pose_identifiable(e.as_ref(), false) {
+        let (crate::model::CatalogEffect::Linear(e), false) = (&e, model.has(e.id())) else { continue };
+        if !pose_identifiable(e.as_ref(), false) {
             continue;
         }
         let mut m = model.clone();

@@ -1,7 +1,7 @@
 //! Identifiability: naming the coefficients a set of runs cannot determine, and the run
 //! that would.
 
-use crate::model::TermRef;
+use crate::model::{Key, TermRef};
 use crate::units::AXES;
 use serde::{Deserialize, Serialize};
 
@@ -35,20 +35,24 @@ pub struct Correlation {
 
 /// A regressor that is zero in every run.
 pub fn zero_column(t: &TermRef<'_>, ch: usize) -> Unidentifiable {
-    let key = t.term.key.as_str();
-    let (reason, remedy) = if let Some(axis) = key.strip_prefix("e_") {
+    let (reason, remedy) = if let Key::AngAccel(j) = t.term.key {
+        let axis = AXES[usize::from(j)];
         (
             format!("the angular acceleration about the sensor's {axis} axis (ε_{axis}) is zero in every run"),
-            if axis == "z" {
+            if axis == 'z' {
                 "ε_z ≡ 0 in stand axes for conic motion: add runs with the unit re-mounted so that its z axis lies along a horizontal stand axis, e.g. mount [\"+y\", \"+z\", \"+x\"]".to_string()
             } else {
                 format!("add conic runs with the sensor's {axis} axis off the stand's z axis (e.g. the nominal mount)")
             },
         )
     } else {
+        let what = match t.term.key {
+            Key::Own(..) => format!("the regressor of {}", t.term.name),
+            k => format!("its regressor {k}"),
+        };
         (
-            format!("its regressor {key} is zero in every run"),
-            format!("add a run that excites {key}: a re-mount, another cone angle or a static pose"),
+            format!("{what} is zero in every run"),
+            "add a run that excites it: a re-mount, another cone angle or a static pose".to_string(),
         )
     };
     Unidentifiable {
@@ -76,10 +80,10 @@ pub fn lost_combination(terms: &[TermRef<'_>], fitted: &[usize], combo: &[f64], 
             pa.cmp(&pb).then(combo[a].abs().total_cmp(&combo[b].abs()))
         })
         .unwrap_or(0);
-    let keys: Vec<&str> = members.iter().map(|&a| terms[fitted[a]].term.key.as_str()).collect();
+    let keys: Vec<Key> = members.iter().map(|&a| terms[fitted[a]].term.key).collect();
     let names: Vec<String> = members.iter().map(|&a| terms[fitted[a]].term.name.clone()).collect();
-    let has = |prefix: &str| keys.iter().any(|k| k.starts_with(prefix));
-    let (reason, remedy) = if has("1") && keys.len() > 1 {
+    let has = |f: fn(&Key) -> bool| keys.iter().any(f);
+    let (reason, remedy) = if has(|k| *k == Key::One) && keys.len() > 1 {
         (
             format!(
                 "{} are constant together within every run (a bias against an input component that does not vary)",
@@ -87,7 +91,7 @@ pub fn lost_combination(terms: &[TermRef<'_>], fitted: &[usize], combo: &[f64], 
             ),
             "add a run at another rate, the opposite direction or another cone angle, or re-mount the unit".to_string(),
         )
-    } else if has("e_") && has("w_") {
+    } else if has(|k| matches!(k, Key::AngAccel(_))) && has(|k| matches!(k, Key::Rate(_))) {
         (
             format!(
                 "{}: within a conic run ε is a fixed multiple of ω (ε_x = ω_s·ω_y, ε_y = −ω_s·ω_x)",

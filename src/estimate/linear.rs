@@ -59,14 +59,14 @@ pub(crate) struct Columns {
 
 impl Columns {
     pub(crate) fn new(terms: &[crate::model::TermRef<'_>]) -> Self {
-        let mut keys: Vec<&str> = Vec::new();
+        let mut keys: Vec<crate::model::Key> = Vec::new();
         let mut source = Vec::new();
         let mut of_term = Vec::with_capacity(terms.len());
         for (ti, t) in terms.iter().enumerate() {
             match keys.iter().position(|k| *k == t.term.key) {
                 Some(c) => of_term.push(c),
                 None => {
-                    keys.push(&t.term.key);
+                    keys.push(t.term.key);
                     source.push(ti);
                     of_term.push(keys.len() - 1);
                 }

@@ -1,7 +1,7 @@
 //! Angular-acceleration sensitivity of the gyro: the matrix C_ε in `u = … + C_ε ε`
 //! (the paper's c_xz, c_yx, c_zy of eq. 3 are its entries e_xz, e_yx, e_zy), in seconds.
 
-use super::{matrix_name, Effect, Role, SensorKind, State, Term};
+use super::{matrix_name, Effect, Inputs, Key, Role, SensorKind, State, Term, AXES};
 
 /// Full 3×3 angular-acceleration sensitivity C_ε (names `gyro.e_ij`, unit s).
 #[derive(Debug, Clone)]
@@ -18,7 +18,8 @@ impl AngularAcceleration {
                 terms.push(Term {
                     name: matrix_name(SensorKind::Gyro, "e", i, j),
                     channel: i,
-                    key: format!("e_{}", super::AXES[j]),
+                    key: Key::AngAccel(j as u8),
+                    label: format!("e_{}", AXES[j]),
                     unit: "s",
                     nominal: 0.0,
                     drop_priority: 3,
@@ -43,6 +44,10 @@ impl Effect for AngularAcceleration {
 
     fn sensor(&self) -> SensorKind {
         SensorKind::Gyro
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs { ang_accel: true, ..Inputs::NONE }
     }
 
     fn explain(&self) -> &'static str {

@@ -1,6 +1,6 @@
 //! Gyro anisoelasticity: rate output proportional to products of specific-force components.
 
-use super::{Effect, Role, SensorKind, State, Term, AXES};
+use super::{Effect, Inputs, Key, Role, SensorKind, State, Term, AXES};
 
 /// The six unique products a_j a_k.
 const PAIRS: [(usize, usize); 6] = [(0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (2, 0)];
@@ -20,7 +20,8 @@ impl Anisoelastic {
                 terms.push(Term {
                     name: format!("gyro.n_{}_{}{}", AXES[i], AXES[j], AXES[k]),
                     channel: i,
-                    key: format!("a_{}a_{}", AXES[j], AXES[k]),
+                    key: Key::Own("gyro-anisoelastic", (3 * j + k) as u8),
+                    label: format!("a_{}a_{}", AXES[j], AXES[k]),
                     unit: "rad/s per (m/s^2)^2",
                     nominal: 0.0,
                     drop_priority: 4,
@@ -45,6 +46,10 @@ impl Effect for Anisoelastic {
 
     fn sensor(&self) -> SensorKind {
         SensorKind::Gyro
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs::FORCE
     }
 
     fn explain(&self) -> &'static str {

@@ -1,6 +1,6 @@
 //! Bias: a constant offset on each output channel.
 
-use super::{Effect, Role, SensorKind, State, Term, AXES};
+use super::{Effect, Inputs, Key, Role, SensorKind, State, Term, AXES};
 
 /// Constant zero offset per axis (u_i += b_i).
 #[derive(Debug, Clone)]
@@ -20,7 +20,8 @@ impl Bias {
             .map(|i| Term {
                 name: format!("{}.b_{}", sensor.as_str(), AXES[i]),
                 channel: i,
-                key: "1".into(),
+                key: Key::One,
+                label: "1".into(),
                 unit,
                 nominal: 0.0,
                 drop_priority: 2,
@@ -41,6 +42,10 @@ impl Effect for Bias {
 
     fn sensor(&self) -> SensorKind {
         self.sensor
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs::NONE
     }
 
     fn explain(&self) -> &'static str {

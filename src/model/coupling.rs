@@ -1,7 +1,7 @@
 //! Scale factor and cross-axis coupling: the 3×3 matrix C_ω (gyro, paper eq. 3) or K
 //! (accelerometer, paper eq. 4) in `u = M x`, row-major, diagonal = scale factors.
 
-use super::{matrix_name, Effect, Role, SensorKind, State, Term};
+use super::{input_letter, matrix_name, Effect, Inputs, Key, Role, SensorKind, State, Term, AXES};
 
 /// Full 3×3 scale/coupling matrix acting on the sensor's own true input.
 #[derive(Debug, Clone)]
@@ -13,9 +13,9 @@ pub struct ScaleCoupling {
 impl ScaleCoupling {
     /// C_ω for the gyro (names `gyro.c_ij`), K for the accelerometer (`accel.k_ij`).
     pub fn new(sensor: SensorKind) -> Self {
-        let (letter, input) = match sensor {
-            SensorKind::Gyro => ("c", "w"),
-            SensorKind::Accel => ("k", "a"),
+        let letter = match sensor {
+            SensorKind::Gyro => "c",
+            SensorKind::Accel => "k",
         };
         let mut terms = Vec::with_capacity(9);
         for i in 0..3 {
@@ -23,7 +23,11 @@ impl ScaleCoupling {
                 terms.push(Term {
                     name: matrix_name(sensor, letter, i, j),
                     channel: i,
-                    key: format!("{input}_{}", super::AXES[j]),
+                    key: match sensor {
+                        SensorKind::Gyro => Key::Rate(j as u8),
+                        SensorKind::Accel => Key::Force(j as u8),
+                    },
+                    label: format!("{}_{}", input_letter(sensor), AXES[j]),
                     unit: "1",
                     nominal: if i == j { 1.0 } else { 0.0 },
                     drop_priority: if i == j { 0 } else { 1 },
@@ -45,6 +49,10 @@ impl Effect for ScaleCoupling {
 
     fn sensor(&self) -> SensorKind {
         self.sensor
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs::own(self.sensor)
     }
 
     fn explain(&self) -> &'static str {

@@ -1,6 +1,6 @@
 //! Cubic scale nonlinearity (catalogue effect).
 
-use super::{input_letter, own_input, per_axis_terms, Effect, SensorKind, State, Term};
+use super::{input_letter, own_input, per_axis_terms, Effect, Inputs, SensorKind, State, Term, AXES};
 
 /// Cubic scale nonlinearity, one coefficient per axis (see `explain`).
 #[derive(Debug, Clone)]
@@ -10,13 +10,22 @@ pub struct Cubic {
 }
 
 impl Cubic {
+    /// The effect's id on a sensor.
+    fn id_of(sensor: SensorKind) -> &'static str {
+        match sensor {
+            SensorKind::Gyro => "gyro-cubic",
+            SensorKind::Accel => "accel-cubic",
+        }
+    }
+
     /// The effect on the given sensor.
     pub fn new(sensor: SensorKind) -> Self {
-        let inp = input_letter(sensor);
         let terms = per_axis_terms(
             sensor,
             "k3",
-            |i| format!("{inp}_{}^3", super::AXES[i]),
+            Self::id_of(sensor),
+            false,
+            |i| format!("{}_{}^3", input_letter(sensor), AXES[i]),
             match sensor {
                 SensorKind::Gyro => "1/(rad/s)^2",
                 SensorKind::Accel => "1/(m/s^2)^2",
@@ -28,14 +37,15 @@ impl Cubic {
 
 impl Effect for Cubic {
     fn id(&self) -> &'static str {
-        match self.sensor {
-            SensorKind::Gyro => "gyro-cubic",
-            SensorKind::Accel => "accel-cubic",
-        }
+        Self::id_of(self.sensor)
     }
 
     fn sensor(&self) -> SensorKind {
         self.sensor
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs::own(self.sensor)
     }
 
     fn explain(&self) -> &'static str {

@@ -1,7 +1,7 @@
 //! Dead zone: no output until the input on an axis exceeds a threshold.
 
 use super::nonlinear::{NonlinearEffect, ParamDef};
-use super::{output_unit, SensorKind, AXES};
+use super::{output_unit, Inputs, SensorKind, AXES};
 use crate::motion::Track;
 
 /// The sensor sees x_i − clamp(x_i, −d_i, d_i) on its own axis i (d_i ≥ 0).
@@ -27,6 +27,10 @@ impl NonlinearEffect for DeadZone {
 
     fn sensor(&self) -> Option<SensorKind> {
         Some(self.sensor)
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs::own(self.sensor)
     }
 
     fn explain(&self) -> &'static str {

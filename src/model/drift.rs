@@ -1,6 +1,6 @@
 //! Bias drift with time (catalogue effect).
 
-use super::{per_axis_terms, Effect, SensorKind, State, Term};
+use super::{per_axis_terms, Effect, Inputs, SensorKind, State, Term};
 
 /// Bias drift with time, one coefficient per axis (see `explain`).
 #[derive(Debug, Clone)]
@@ -10,11 +10,21 @@ pub struct Drift {
 }
 
 impl Drift {
+    /// The effect's id on a sensor.
+    fn id_of(sensor: SensorKind) -> &'static str {
+        match sensor {
+            SensorKind::Gyro => "gyro-drift",
+            SensorKind::Accel => "accel-drift",
+        }
+    }
+
     /// The effect on the given sensor.
     pub fn new(sensor: SensorKind) -> Self {
         let terms = per_axis_terms(
             sensor,
             "d",
+            Self::id_of(sensor),
+            true,
             |_| "t".to_string(),
             match sensor {
                 SensorKind::Gyro => "rad/s^2",
@@ -27,14 +37,15 @@ impl Drift {
 
 impl Effect for Drift {
     fn id(&self) -> &'static str {
-        match self.sensor {
-            SensorKind::Gyro => "gyro-drift",
-            SensorKind::Accel => "accel-drift",
-        }
+        Self::id_of(self.sensor)
     }
 
     fn sensor(&self) -> SensorKind {
         self.sensor
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs { time: true, ..Inputs::NONE }
     }
 
     fn explain(&self) -> &'static str {

@@ -1,6 +1,6 @@
 //! Gyro g-sensitivity: rate output caused by specific force.
 
-use super::{matrix_name, Effect, Role, SensorKind, State, Term};
+use super::{matrix_name, Effect, Inputs, Key, Role, SensorKind, State, Term, AXES};
 
 /// u_i += Σ_j g_ij a_j (gyro), a full 3×3 matrix in rad/s per m/s².
 #[derive(Debug, Clone)]
@@ -17,7 +17,8 @@ impl GSensitivity {
                 terms.push(Term {
                     name: matrix_name(SensorKind::Gyro, "g", i, j),
                     channel: i,
-                    key: format!("a_{}", super::AXES[j]),
+                    key: Key::Force(j as u8),
+                    label: format!("a_{}", AXES[j]),
                     unit: "rad/s per m/s^2",
                     nominal: 0.0,
                     drop_priority: 4,
@@ -42,6 +43,10 @@ impl Effect for GSensitivity {
 
     fn sensor(&self) -> SensorKind {
         SensorKind::Gyro
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs::FORCE
     }
 
     fn explain(&self) -> &'static str {

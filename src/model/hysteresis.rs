@@ -1,6 +1,6 @@
 //! Hysteresis (catalogue effect).
 
-use super::{input_letter, output_unit, per_axis_terms, Effect, SensorKind, State, Term};
+use super::{input_letter, output_unit, per_axis_terms, Effect, Inputs, SensorKind, Side, State, Term, AXES};
 
 /// Hysteresis, one coefficient per axis (see `explain`).
 #[derive(Debug, Clone)]
@@ -10,24 +10,46 @@ pub struct Hysteresis {
 }
 
 impl Hysteresis {
+    /// The effect's id on a sensor.
+    fn id_of(sensor: SensorKind) -> &'static str {
+        match sensor {
+            SensorKind::Gyro => "gyro-hysteresis",
+            SensorKind::Accel => "accel-hysteresis",
+        }
+    }
+
     /// The effect on the given sensor.
     pub fn new(sensor: SensorKind) -> Self {
-        let inp = input_letter(sensor);
-        let terms = per_axis_terms(sensor, "h", |i| format!("sgn(d{inp}_{})", super::AXES[i]), output_unit(sensor));
+        let terms = per_axis_terms(
+            sensor,
+            "h",
+            Self::id_of(sensor),
+            false,
+            |i| format!("sgn(d{}_{}/dt)", input_letter(sensor), AXES[i]),
+            output_unit(sensor),
+        );
         Self { sensor, terms }
     }
 }
 
 impl Effect for Hysteresis {
     fn id(&self) -> &'static str {
-        match self.sensor {
-            SensorKind::Gyro => "gyro-hysteresis",
-            SensorKind::Accel => "accel-hysteresis",
-        }
+        Self::id_of(self.sensor)
     }
 
     fn sensor(&self) -> SensorKind {
         self.sensor
+    }
+
+    fn inputs(&self) -> Inputs {
+        match self.sensor {
+            SensorKind::Gyro => Inputs { ang_accel: true, ..Inputs::NONE },
+            SensorKind::Accel => Inputs { rate: true, force: true, ..Inputs::NONE },
+        }
+    }
+
+    fn side(&self) -> Side {
+        Side::Input
     }
 
     fn explain(&self) -> &'static str {

@@ -1,7 +1,7 @@
 //! Accelerometer lever arm (size effect): each accelerometer sits at a distance r_i from
 //! the rotation centre, so it also senses ε × r_i + ω × (ω × r_i).
 
-use super::{Effect, Role, SensorKind, State, Term, AXES};
+use super::{Effect, Inputs, Key, Role, SensorKind, Side, State, Term, AXES};
 
 /// u_i += [ε × r_i + ω × (ω × r_i)]_i with r_i (metres) the position of accelerometer i;
 /// linear in r: the regressor of r_ij is (ε × e_j)_i + ω_i ω_j − δ_ij |ω|².
@@ -19,7 +19,8 @@ impl LeverArm {
                 terms.push(Term {
                     name: format!("accel.r_{}{}", AXES[i], AXES[j]),
                     channel: i,
-                    key: format!("lever_{}{}", AXES[i], AXES[j]),
+                    key: Key::Own("accel-lever-arm", (3 * i + j) as u8),
+                    label: format!("(e x e_{j} + w x (w x e_{j}))_{i}", i = AXES[i], j = AXES[j]),
                     unit: "m",
                     nominal: 0.0,
                     drop_priority: 4,
@@ -44,6 +45,14 @@ impl Effect for LeverArm {
 
     fn sensor(&self) -> SensorKind {
         SensorKind::Accel
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs { rate: true, ang_accel: true, ..Inputs::NONE }
+    }
+
+    fn side(&self) -> Side {
+        Side::Input
     }
 
     fn explain(&self) -> &'static str {

@@ -93,8 +93,10 @@ pub struct Term {
     pub name: String,
     /// Output channel it acts on, 0..3.
     pub channel: usize,
-    /// Identifier of its regressor (terms with equal keys share a design column), e.g. `w_y`.
-    pub key: String,
+    /// Its regressor (terms with equal keys share a design column).
+    pub key: Key,
+    /// The regressor in words, for users (`w_x^2`, `(T-20)`, …).
+    pub label: String,
     /// Unit of the coefficient (SI; "raw" sessions put the recorded unit in place of SI).
     pub unit: &'static str,
     /// Value assumed when the coefficient is not fitted (1 for diagonal scales, else 0).
@@ -103,6 +105,89 @@ pub struct Term {
     pub drop_priority: u8,
     /// How it enters the correction.
     pub role: Role,
+}
+
+/// What a coefficient multiplies: a component of the true state, the constant, or a
+/// function of the state that only one effect defines. Terms with equal keys share one
+/// column of the design.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Key {
+    /// The constant 1 (a bias).
+    One,
+    /// Component `j` of the true angular rate ω.
+    Rate(u8),
+    /// Component `j` of the true angular acceleration ε.
+    AngAccel(u8),
+    /// Component `j` of the true specific force a.
+    Force(u8),
+    /// A regressor of the named effect's own; the code tells its regressors apart (equal
+    /// codes are equal functions of the state, shared by the channels that use them).
+    Own(&'static str, u8),
+}
+
+impl fmt::Display for Key {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            Self::One => f.write_str("1"),
+            Self::Rate(j) => write!(f, "w_{}", AXES[usize::from(j)]),
+            Self::AngAccel(j) => write!(f, "e_{}", AXES[usize::from(j)]),
+            Self::Force(j) => write!(f, "a_{}", AXES[usize::from(j)]),
+            Self::Own(id, code) => write!(f, "{id}#{code}"),
+        }
+    }
+}
+
+/// The quantities an effect's regressors read from the true state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Inputs {
+    /// Angular rate ω.
+    pub rate: bool,
+    /// Angular acceleration ε (or a rate of change of the state).
+    pub ang_accel: bool,
+    /// Specific force a.
+    pub force: bool,
+    /// Time.
+    pub time: bool,
+    /// Temperature.
+    pub temperature: bool,
+}
+
+impl Inputs {
+    /// Nothing: a constant.
+    pub const NONE: Self = Self { rate: false, ang_accel: false, force: false, time: false, temperature: false };
+    /// The angular rate alone.
+    pub const RATE: Self = Self { rate: true, ..Self::NONE };
+    /// The specific force alone.
+    pub const FORCE: Self = Self { force: true, ..Self::NONE };
+
+    /// The sensor's own input: ω for the gyro, a for the accelerometer.
+    pub fn own(sensor: SensorKind) -> Self {
+        match sensor {
+            SensorKind::Gyro => Self::RATE,
+            SensorKind::Accel => Self::FORCE,
+        }
+    }
+
+    /// Also reads `other`.
+    pub const fn and(self, other: Self) -> Self {
+        Self {
+            rate: self.rate || other.rate,
+            ang_accel: self.ang_accel || other.ang_accel,
+            force: self.force || other.force,
+            time: self.time || other.time,
+            temperature: self.temperature || other.temperature,
+        }
+    }
+}
+
+/// Where an effect acts: on the sensor's physical input, before the scale/coupling matrix
+/// (`u = K (x + Δ) + b`), or on its output, after it (`u = K x + b + g`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Side {
+    /// Added to the output.
+    Output,
+    /// Changes the input the sensing element sees.
+    Input,
 }
 
 /// A physical effect: a set of coefficients with their regressors.
@@ -124,9 +209,15 @@ pub trait Effect: Send + Sync + fmt::Debug {
             *o = self.regressor(k, s);
         }
     }
+    /// The quantities the regressors read.
+    fn inputs(&self) -> Inputs;
+    /// Where the effect acts (output side unless it says otherwise).
+    fn side(&self) -> Side {
+        Side::Output
+    }
     /// Whether the regressors need a temperature (a `temp` column or `temperature_c`).
     fn needs_temperature(&self) -> bool {
-        false
+        self.inputs().temperature
     }
 }
 
@@ -158,18 +249,23 @@ pub fn output_unit(sensor: SensorKind) -> &'static str {
     }
 }
 
-/// One term per output channel i, named `<sensor>.<letter>_<axis>`, acting through `key(i)`.
+/// One term per output channel i, named `<sensor>.<letter>_<axis>`, with a regressor of
+/// effect `id` (described by `label(i)`): its own per channel (code i), or with `shared`
+/// one for all three (code 0).
 pub fn per_axis_terms(
     sensor: SensorKind,
     letter: &str,
-    key: impl Fn(usize) -> String,
+    id: &'static str,
+    shared: bool,
+    label: impl Fn(usize) -> String,
     unit: &'static str,
 ) -> Vec<Term> {
     (0..3)
         .map(|i| Term {
             name: format!("{}.{letter}_{}", sensor.as_str(), AXES[i]),
             channel: i,
-            key: key(i),
+            key: Key::Own(id, if shared { 0 } else { i as u8 }),
+            label: label(i),
             unit,
             nominal: 0.0,
             drop_priority: 4,
@@ -178,8 +274,104 @@ pub fn per_axis_terms(
         .collect()
 }
 
-/// Every effect crosscal knows, in catalogue order.
-pub fn catalog() -> Vec<Arc<dyn Effect>> {
+/// A catalogue effect, linear in its coefficients or with nonlinear parameters: the one
+/// list callers go through.
+#[derive(Debug, Clone)]
+pub enum CatalogEffect {
+    /// Coefficients that multiply regressors of the true state.
+    Linear(Arc<dyn Effect>),
+    /// Parameters that change the motion as the sensor sees it.
+    Nonlinear(Arc<dyn NonlinearEffect>),
+}
+
+impl CatalogEffect {
+    /// Identifier (command line, profiles).
+    pub fn id(&self) -> &'static str {
+        match self {
+            Self::Linear(e) => e.id(),
+            Self::Nonlinear(e) => e.id(),
+        }
+    }
+
+    /// The sensor it acts on (None: both).
+    pub fn sensor(&self) -> Option<SensorKind> {
+        match self {
+            Self::Linear(e) => Some(e.sensor()),
+            Self::Nonlinear(e) => e.sensor(),
+        }
+    }
+
+    /// A paragraph explaining the physics.
+    pub fn explain(&self) -> &'static str {
+        match self {
+            Self::Linear(e) => e.explain(),
+            Self::Nonlinear(e) => e.explain(),
+        }
+    }
+
+    /// The quantities of the true state it reads.
+    pub fn inputs(&self) -> Inputs {
+        match self {
+            Self::Linear(e) => e.inputs(),
+            Self::Nonlinear(e) => e.inputs(),
+        }
+    }
+
+    /// Where it acts.
+    pub fn side(&self) -> Side {
+        match self {
+            Self::Linear(e) => e.side(),
+            Self::Nonlinear(e) => e.side(),
+        }
+    }
+
+    /// Whether it needs a temperature.
+    pub fn needs_temperature(&self) -> bool {
+        self.inputs().temperature
+    }
+
+    /// Its coefficients (or nonlinear parameters), for users.
+    pub fn coefficients(&self) -> Vec<CoefficientInfo> {
+        match self {
+            Self::Linear(e) => e
+                .terms()
+                .iter()
+                .map(|t| CoefficientInfo {
+                    name: t.name.clone(),
+                    unit: t.unit.to_string(),
+                    regressor: Some(t.label.clone()),
+                    nominal: t.nominal,
+                })
+                .collect(),
+            Self::Nonlinear(e) => e
+                .params()
+                .into_iter()
+                .map(|p| CoefficientInfo {
+                    name: p.name,
+                    unit: p.unit.to_string(),
+                    regressor: None,
+                    nominal: p.nominal,
+                })
+                .collect(),
+        }
+    }
+}
+
+/// A coefficient or parameter of a catalogue effect, as `crosscal effects` lists it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CoefficientInfo {
+    /// Name, e.g. `gyro.c_xy`.
+    pub name: String,
+    /// SI unit.
+    pub unit: String,
+    /// What it multiplies, in words (linear effects).
+    pub regressor: Option<String>,
+    /// Value when absent or not fitted.
+    pub nominal: f64,
+}
+
+/// Every linear effect, in catalogue order.
+fn linear_catalog() -> Vec<Arc<dyn Effect>> {
     vec![
         Arc::new(Bias::new(SensorKind::Gyro)),
         Arc::new(ScaleCoupling::new(SensorKind::Gyro)),
@@ -206,24 +398,33 @@ pub fn catalog() -> Vec<Arc<dyn Effect>> {
     ]
 }
 
-/// Every effect with nonlinear parameters crosscal knows.
-pub fn nonlinear_catalog() -> Vec<Arc<dyn NonlinearEffect>> {
+/// Every effect with nonlinear parameters.
+fn nonlinear_catalog() -> Vec<Arc<dyn NonlinearEffect>> {
     vec![Arc::new(TimeDelay), Arc::new(DeadZone::new(SensorKind::Gyro)), Arc::new(DeadZone::new(SensorKind::Accel))]
 }
 
-/// Finds a nonlinear catalogue effect by id.
-pub fn find_nonlinear(id: &str) -> Option<Arc<dyn NonlinearEffect>> {
-    nonlinear_catalog().into_iter().find(|e| e.id() == id)
+/// Every effect crosscal knows, linear ones first, in catalogue order.
+pub fn catalog() -> Vec<CatalogEffect> {
+    linear_catalog()
+        .into_iter()
+        .map(CatalogEffect::Linear)
+        .chain(nonlinear_catalog().into_iter().map(CatalogEffect::Nonlinear))
+        .collect()
+}
+
+/// Finds a catalogue effect by id.
+pub fn find(id: &str) -> Option<CatalogEffect> {
+    catalog().into_iter().find(|e| e.id() == id)
+}
+
+/// Finds a linear catalogue effect by id.
+fn find_effect(id: &str) -> Option<Arc<dyn Effect>> {
+    linear_catalog().into_iter().find(|e| e.id() == id)
 }
 
 /// Ids of every catalogue effect, linear and nonlinear.
 pub fn all_effect_ids() -> Vec<&'static str> {
-    catalog().iter().map(|e| e.id()).chain(nonlinear_catalog().iter().map(|e| e.id())).collect()
-}
-
-/// Finds a catalogue effect by id.
-pub fn find_effect(id: &str) -> Option<Arc<dyn Effect>> {
-    catalog().into_iter().find(|e| e.id() == id)
+    catalog().iter().map(CatalogEffect::id).collect()
 }
 
 /// Whether a coefficient is estimated or held at a value.
@@ -380,6 +581,17 @@ impl Model {
         Self { name: name.to_string(), effects, status, nonlinear: Vec::new() }
     }
 
+    /// A model named `name` of the catalogue effects `ids`, in that order, every
+    /// coefficient fitted (as a profile records its model).
+    pub fn named(name: &str, ids: &[String]) -> Result<Self, ModelError> {
+        let mut m = Self::from_effects(name, Vec::new());
+        for id in ids {
+            m.add_effect(id)?;
+        }
+        m.name = name.to_string();
+        Ok(m)
+    }
+
     /// The nonlinear effects.
     pub fn nonlinear(&self) -> &[NonlinearEntry] {
         &self.nonlinear
@@ -446,19 +658,19 @@ impl Model {
 
     /// Adds a catalogue effect (no-op when already present).
     pub fn add_effect(&mut self, id: &str) -> Result<(), ModelError> {
-        if self.effects.iter().any(|e| e.id() == id) || self.nonlinear.iter().any(|e| e.effect.id() == id) {
+        if self.has(id) {
             return Ok(());
         }
-        if let Some(e) = find_nonlinear(id) {
-            let values = e.params().iter().map(|p| p.nominal).collect();
-            self.nonlinear.push(NonlinearEntry { effect: e, values, fitted: true });
-            self.name = format!("{}+{id}", self.name);
-            return Ok(());
+        match find(id).ok_or_else(|| ModelError::UnknownEffect(id.to_string(), all_effect_ids().join(", ")))? {
+            CatalogEffect::Nonlinear(e) => {
+                let values = e.params().iter().map(|p| p.nominal).collect();
+                self.nonlinear.push(NonlinearEntry { effect: e, values, fitted: true });
+            }
+            CatalogEffect::Linear(e) => {
+                self.status.push(vec![TermStatus::Fitted; e.terms().len()]);
+                self.effects.push(e);
+            }
         }
-        let e =
-            find_effect(id).ok_or_else(|| ModelError::UnknownEffect(id.to_string(), all_effect_ids().join(", ")))?;
-        self.status.push(vec![TermStatus::Fitted; e.terms().len()]);
-        self.effects.push(e);
         self.name = format!("{}+{id}", self.name);
         Ok(())
     }
@@ -490,7 +702,17 @@ impl Model {
             .find_map(|(ei, e)| e.terms().iter().position(|t| t.name == name).map(|k| (ei, k)))
     }
 
-    /// The effects in the model.
+    /// Whether the model has the effect (linear or nonlinear).
+    pub fn has(&self, id: &str) -> bool {
+        self.effects.iter().any(|e| e.id() == id) || self.nonlinear.iter().any(|e| e.effect.id() == id)
+    }
+
+    /// Ids of every effect in the model, linear ones first, in the order they were added.
+    pub fn effect_ids(&self) -> Vec<&'static str> {
+        self.effects.iter().map(|e| e.id()).chain(self.nonlinear.iter().map(|e| e.effect.id())).collect()
+    }
+
+    /// The linear effects in the model.
     pub fn effects(&self) -> &[Arc<dyn Effect>] {
         &self.effects
     }
@@ -560,8 +782,7 @@ mod tests {
 
     #[test]
     fn names_are_unique_across_catalogue() {
-        let mut names: Vec<String> =
-            catalog().iter().flat_map(|e| e.terms().iter().map(|t| t.name.clone()).collect::<Vec<_>>()).collect();
+        let mut names: Vec<String> = catalog().iter().flat_map(|e| e.coefficients()).map(|c| c.name).collect();
         let n = names.len();
         names.sort();
         names.dedup();

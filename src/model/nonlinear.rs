@@ -3,7 +3,7 @@
 //! model is then fitted on the transformed motion (variable projection, see
 //! [`crate::estimate::nonlinear`]).
 
-use super::SensorKind;
+use super::{Inputs, SensorKind, Side};
 use crate::motion::Track;
 use std::fmt;
 
@@ -32,6 +32,12 @@ pub trait NonlinearEffect: Send + Sync + fmt::Debug {
     fn sensor(&self) -> Option<SensorKind>;
     /// A paragraph explaining the physics.
     fn explain(&self) -> &'static str;
+    /// The quantities of the true state it changes or reads.
+    fn inputs(&self) -> Inputs;
+    /// Where it acts: nonlinear effects change the motion as the sensor sees it (input side).
+    fn side(&self) -> Side {
+        Side::Input
+    }
     /// Its parameters.
     fn params(&self) -> Vec<ParamDef>;
     /// The true motion as the sensor sees it, for parameter values `p`.

@@ -1,6 +1,6 @@
 //! Quadratic scale nonlinearity (catalogue effect).
 
-use super::{input_letter, own_input, per_axis_terms, Effect, SensorKind, State, Term};
+use super::{input_letter, own_input, per_axis_terms, Effect, Inputs, SensorKind, State, Term, AXES};
 
 /// Quadratic scale nonlinearity, one coefficient per axis (see `explain`).
 #[derive(Debug, Clone)]
@@ -10,13 +10,22 @@ pub struct Quadratic {
 }
 
 impl Quadratic {
+    /// The effect's id on a sensor.
+    fn id_of(sensor: SensorKind) -> &'static str {
+        match sensor {
+            SensorKind::Gyro => "gyro-quadratic",
+            SensorKind::Accel => "accel-quadratic",
+        }
+    }
+
     /// The effect on the given sensor.
     pub fn new(sensor: SensorKind) -> Self {
-        let inp = input_letter(sensor);
         let terms = per_axis_terms(
             sensor,
             "q",
-            |i| format!("{inp}_{}^2", super::AXES[i]),
+            Self::id_of(sensor),
+            false,
+            |i| format!("{}_{}^2", input_letter(sensor), AXES[i]),
             match sensor {
                 SensorKind::Gyro => "1/(rad/s)",
                 SensorKind::Accel => "1/(m/s^2)",
@@ -28,14 +37,15 @@ impl Quadratic {
 
 impl Effect for Quadratic {
     fn id(&self) -> &'static str {
-        match self.sensor {
-            SensorKind::Gyro => "gyro-quadratic",
-            SensorKind::Accel => "accel-quadratic",
-        }
+        Self::id_of(self.sensor)
     }
 
     fn sensor(&self) -> SensorKind {
         self.sensor
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs::own(self.sensor)
     }
 
     fn explain(&self) -> &'static str {

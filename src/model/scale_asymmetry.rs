@@ -1,6 +1,6 @@
 //! Scale asymmetry (catalogue effect).
 
-use super::{input_letter, own_input, per_axis_terms, Effect, SensorKind, State, Term};
+use super::{input_letter, own_input, per_axis_terms, Effect, Inputs, SensorKind, State, Term, AXES};
 
 /// Scale asymmetry, one coefficient per axis (see `explain`).
 #[derive(Debug, Clone)]
@@ -10,24 +10,39 @@ pub struct ScaleAsymmetry {
 }
 
 impl ScaleAsymmetry {
+    /// The effect's id on a sensor.
+    fn id_of(sensor: SensorKind) -> &'static str {
+        match sensor {
+            SensorKind::Gyro => "gyro-scale-asymmetry",
+            SensorKind::Accel => "accel-scale-asymmetry",
+        }
+    }
+
     /// The effect on the given sensor.
     pub fn new(sensor: SensorKind) -> Self {
-        let inp = input_letter(sensor);
-        let terms = per_axis_terms(sensor, "sa", |i| format!("|{inp}_{}|", super::AXES[i]), "1");
+        let terms = per_axis_terms(
+            sensor,
+            "sa",
+            Self::id_of(sensor),
+            false,
+            |i| format!("|{}_{}|", input_letter(sensor), AXES[i]),
+            "1",
+        );
         Self { sensor, terms }
     }
 }
 
 impl Effect for ScaleAsymmetry {
     fn id(&self) -> &'static str {
-        match self.sensor {
-            SensorKind::Gyro => "gyro-scale-asymmetry",
-            SensorKind::Accel => "accel-scale-asymmetry",
-        }
+        Self::id_of(self.sensor)
     }
 
     fn sensor(&self) -> SensorKind {
         self.sensor
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs::own(self.sensor)
     }
 
     fn explain(&self) -> &'static str {

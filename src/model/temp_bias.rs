@@ -1,6 +1,6 @@
 //! Temperature-dependent bias (catalogue effect).
 
-use super::{per_axis_terms, Effect, SensorKind, State, Term, T_REF_C};
+use super::{per_axis_terms, Effect, Inputs, SensorKind, State, Term, T_REF_C};
 
 /// Temperature-dependent bias, one coefficient per axis (see `explain`).
 #[derive(Debug, Clone)]
@@ -10,12 +10,22 @@ pub struct TempBias {
 }
 
 impl TempBias {
+    /// The effect's id on a sensor.
+    fn id_of(sensor: SensorKind) -> &'static str {
+        match sensor {
+            SensorKind::Gyro => "gyro-temp-bias",
+            SensorKind::Accel => "accel-temp-bias",
+        }
+    }
+
     /// The effect on the given sensor.
     pub fn new(sensor: SensorKind) -> Self {
         let terms = per_axis_terms(
             sensor,
             "tb",
-            |_| "T".to_string(),
+            Self::id_of(sensor),
+            true,
+            |_| "(T-20)".to_string(),
             match sensor {
                 SensorKind::Gyro => "rad/s/degC",
                 SensorKind::Accel => "m/s^2/degC",
@@ -27,14 +37,15 @@ impl TempBias {
 
 impl Effect for TempBias {
     fn id(&self) -> &'static str {
-        match self.sensor {
-            SensorKind::Gyro => "gyro-temp-bias",
-            SensorKind::Accel => "accel-temp-bias",
-        }
+        Self::id_of(self.sensor)
     }
 
     fn sensor(&self) -> SensorKind {
         self.sensor
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs { temperature: true, ..Inputs::NONE }
     }
 
     fn explain(&self) -> &'static str {
@@ -52,9 +63,5 @@ impl Effect for TempBias {
         } else {
             f64::NAN
         }
-    }
-
-    fn needs_temperature(&self) -> bool {
-        true
     }
 }

@@ -1,6 +1,6 @@
 //! Temperature-dependent scale factor (catalogue effect).
 
-use super::{input_letter, own_input, per_axis_terms, Effect, SensorKind, State, Term, T_REF_C};
+use super::{input_letter, own_input, per_axis_terms, Effect, Inputs, SensorKind, State, Term, AXES, T_REF_C};
 
 /// Temperature-dependent scale factor, one coefficient per axis (see `explain`).
 #[derive(Debug, Clone)]
@@ -10,24 +10,39 @@ pub struct TempScale {
 }
 
 impl TempScale {
+    /// The effect's id on a sensor.
+    fn id_of(sensor: SensorKind) -> &'static str {
+        match sensor {
+            SensorKind::Gyro => "gyro-temp-scale",
+            SensorKind::Accel => "accel-temp-scale",
+        }
+    }
+
     /// The effect on the given sensor.
     pub fn new(sensor: SensorKind) -> Self {
-        let inp = input_letter(sensor);
-        let terms = per_axis_terms(sensor, "ts", |i| format!("T*{inp}_{}", super::AXES[i]), "1/degC");
+        let terms = per_axis_terms(
+            sensor,
+            "ts",
+            Self::id_of(sensor),
+            false,
+            |i| format!("(T-20)*{}_{}", input_letter(sensor), AXES[i]),
+            "1/degC",
+        );
         Self { sensor, terms }
     }
 }
 
 impl Effect for TempScale {
     fn id(&self) -> &'static str {
-        match self.sensor {
-            SensorKind::Gyro => "gyro-temp-scale",
-            SensorKind::Accel => "accel-temp-scale",
-        }
+        Self::id_of(self.sensor)
     }
 
     fn sensor(&self) -> SensorKind {
         self.sensor
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs::own(self.sensor).and(Inputs { temperature: true, ..Inputs::NONE })
     }
 
     fn explain(&self) -> &'static str {
@@ -46,9 +61,5 @@ impl Effect for TempScale {
         } else {
             f64::NAN
         }
-    }
-
-    fn needs_temperature(&self) -> bool {
-        true
     }
 }

@@ -1,7 +1,7 @@
 //! Time delay between the sensor's clock and the stand's.
 
 use super::nonlinear::{interpolate, NonlinearEffect, ParamDef};
-use super::SensorKind;
+use super::{Inputs, SensorKind};
 use crate::motion::Track;
 
 /// The outputs stamped t show the motion at t − τ (τ > 0: the sensor lags the stand).
@@ -15,6 +15,10 @@ impl NonlinearEffect for TimeDelay {
 
     fn sensor(&self) -> Option<SensorKind> {
         None
+    }
+
+    fn inputs(&self) -> Inputs {
+        Inputs { rate: true, ang_accel: true, force: true, ..Inputs::NONE }
     }
 
     fn explain(&self) -> &'static str {

@@ -8,7 +8,7 @@
 
 pub mod interop;
 use crate::estimate::{CoefStatus, Fit, SensorFit};
-use crate::model::{find_effect, Model, ModelError};
+use crate::model::{Model, ModelError};
 use crate::session::{RunUsed, Session};
 use crate::units::SensorKind;
 use crate::units::Units;
@@ -272,32 +272,18 @@ impl Profile {
     }
 
     fn rebuild(&self, fix_all: bool) -> Result<Model, ModelError> {
-        let mut effects = Vec::with_capacity(self.effects.len());
-        let mut nonlinear = Vec::new();
-        for id in &self.effects {
-            match (find_effect(id), crate::model::find_nonlinear(id)) {
-                (Some(e), _) => effects.push(e),
-                (None, Some(_)) => nonlinear.push(id.as_str()),
-                (None, None) => {
-                    return Err(ModelError::UnknownEffect(id.clone(), crate::model::all_effect_ids().join(", ")))
-                }
-            }
-        }
-        let mut m = Model::from_effects(&self.model, effects);
+        let mut m = Model::named(&self.model, &self.effects)?;
         for c in self.gyro.coefficients.iter().chain(&self.accel.coefficients) {
             if fix_all || c.status == crate::estimate::CoefStatus::Fixed {
                 m.fix(&c.name, c.value)?;
             }
         }
-        if !fix_all {
-            for id in nonlinear {
-                m.add_effect(id)?;
+        if fix_all {
+            let ids: Vec<&'static str> = m.nonlinear().iter().map(|e| e.effect.id()).collect();
+            for id in ids {
+                let values = self.nonlinear.iter().filter(|p| p.effect == id).map(|p| p.value).collect();
+                m.fix_nonlinear(id, values)?;
             }
-            return Ok(m);
-        }
-        for id in nonlinear {
-            let values = self.nonlinear.iter().filter(|p| p.effect == id).map(|p| p.value).collect();
-            m.fix_nonlinear(id, values)?;
         }
         Ok(m)
     }

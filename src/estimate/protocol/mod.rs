@@ -39,16 +39,18 @@ pub const MULTI_POSITION_EFFECTS: [&str; 5] =
     ["gyro-bias", "gyro-scale-coupling", "gyro-g-sensitivity", "accel-bias", "accel-scale-coupling"];
 
 /// True when every regressor of the effect is a constant or a function of the specific
-/// force alone (`1`, `a_x`, `a_x^2`, `|a_x|`, `a_xa_y`, …), or (with `linear_rate`) a rate
-/// entering linearly (`w_x`): what static poses (and, for linear rate terms, turns) identify.
+/// force alone, or (with `linear_rate`) a rate entering linearly: what static poses (and,
+/// for linear rate terms, turns) identify.
 pub fn pose_identifiable(effect: &dyn crate::model::Effect, linear_rate: bool) -> bool {
-    !effect.needs_temperature()
-        && effect.terms().iter().all(|t| {
-            let k = t.key.as_str();
-            k == "1"
-                || (k.starts_with("a_") || k.starts_with("|a_")) && !k.contains('w')
-                || linear_rate && matches!(k, "w_x" | "w_y" | "w_z")
-        })
+    use crate::model::Key;
+    let inputs = effect.inputs();
+    let force_only = !inputs.rate && !inputs.ang_accel && !inputs.time && !inputs.temperature;
+    effect.terms().iter().all(|t| match t.key {
+        Key::One | Key::Force(_) => true,
+        Key::Rate(_) => linear_rate,
+        Key::AngAccel(_) => false,
+        Key::Own(..) => force_only,
+    })
 }
 
 /// True when the protocol fit of this kind of session can fit the model.
