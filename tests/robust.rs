@@ -25,10 +25,10 @@ fn huber_fit_shrugs_off_spikes_that_wreck_least_squares() {
             n += 1;
         }
     }
-    let found = s.runs.iter().flat_map(|r| {
-        let f = crosscal::session::sanity::scan(&r.rec.gyro, &r.rec.accel);
-        crosscal::session::sanity::describe(&f, &r.rec.t_s, &r.spec.name)
-    });
+    let found = s
+        .runs
+        .iter()
+        .flat_map(|r| crosscal::session::sanity::scan_record(&r.rec.t_s, &r.rec.gyro, &r.rec.accel, &r.spec.name));
     assert!(found.filter(|w| w.contains("spike")).count() >= 18, "spikes not reported");
 
     let m = Model::default_model();

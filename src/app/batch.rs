@@ -8,8 +8,9 @@
 //! `resume`, a unit whose store already holds a profile fitted on exactly the same files
 //! (same SHA-256) is not fitted again.
 //!
-//! Outliers: for every coefficient, the robust z-score (x − median)/(1.4826·MAD) over the
-//! units that were fitted; |z| > 5 flags the unit even when it passes the fixed rules.
+//! Outliers: for every coefficient, the robust z-score (x − median)/σ over the units that
+//! were fitted, σ the small-sample-corrected 1.4826·MAD floored by the units' own standard
+//! errors; |z| > 5 flags the unit even when it passes the fixed rules.
 
 use crate::check::rules::{evaluate, Evidence, RuleResult, Rules};
 use crate::estimate::{FitData, FitRequest, ModelChoice};
@@ -69,6 +70,9 @@ pub struct UnitResult {
     pub reused: bool,
     /// Fitted coefficient values by name.
     pub coefficients: Vec<(String, f64)>,
+    /// Their standard errors, in the same order (None when held).
+    #[serde(default)]
+    pub std_errors: Vec<Option<f64>>,
     /// Coefficients where the unit is a batch outlier, with their robust z.
     pub outliers: Vec<(String, f64)>,
 }
@@ -118,6 +122,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
         profile: None,
         reused: false,
         coefficients: Vec::new(),
+        std_errors: Vec::new(),
         outliers: Vec::new(),
     };
     let manifest = dir.join("session.json");
@@ -159,6 +164,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
         .chain(&profile.accel.coefficients)
         .map(|c| (c.name.clone(), c.value))
         .collect();
+    r.std_errors = profile.gyro.coefficients.iter().chain(&profile.accel.coefficients).map(|c| c.std_error).collect();
     let diagnose = opts.rules.rules.iter().any(|x| matches!(x, crate::check::rules::Rule::Adequate { .. }));
     let acc = match super::accept::acceptance(&profile, &session, diagnose) {
         Ok(a) => a,
@@ -174,16 +180,26 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
     r
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
+/// Consistency factor of the MAD for small samples (Croux & Rousseeuw 1992, Table 1 for
+/// n ≤ 9, n/(n − 0.8) beyond): without it the MAD of a lot of 5–9 units is biased low and
+/// honest units look like outliers.
+fn mad_small_sample(n: usize) -> f64 {
+    const TABLE: [f64; 8] = [1.196, 1.495, 1.363, 1.206, 1.200, 1.140, 1.129, 1.107];
+    match n {
+        0 | 1 => 1.0,
+        2..=9 => TABLE[n - 2],
+        _ => n as f64 / (n as f64 - 0.8),
     }
+}
+
+/// The robust spread of one coefficient over the lot: the small-sample-corrected
+/// 1.4826·MAD, but never below the median of the units' own standard errors (units cannot
+/// agree more closely than their estimates allow).
+fn lot_spread(vals: &[f64], std_errors: &[f64]) -> Option<(f64, f64)> {
+    let med = crate::stats::median(&mut vals.to_vec())?;
+    let mad_sigma = mad_small_sample(vals.len()) * crate::stats::robust_sigma(vals, med)?;
+    let floor = crate::stats::median(&mut std_errors.to_vec()).unwrap_or(0.0);
+    Some((med, mad_sigma.max(floor)))
 }
 
 /// Fits, stores and judges every unit (in parallel), then flags batch outliers.
@@ -214,14 +230,20 @@ pub fn run(
     }
     let mut spread = Vec::with_capacity(names.len());
     for name in &names {
-        let mut vals: Vec<f64> =
-            units.iter().filter_map(|u| u.coefficients.iter().find(|c| &c.0 == name).map(|c| c.1)).collect();
+        let mut vals = Vec::new();
+        let mut ses = Vec::new();
+        for u in &units {
+            if let Some(i) = u.coefficients.iter().position(|c| &c.0 == name) {
+                vals.push(u.coefficients[i].1);
+                if let Some(Some(se)) = u.std_errors.get(i) {
+                    ses.push(*se);
+                }
+            }
+        }
         if vals.len() < 5 {
             continue;
         }
-        let med = median(&mut vals);
-        let mut dev: Vec<f64> = vals.iter().map(|v| (v - med).abs()).collect();
-        let sigma = 1.4826 * median(&mut dev);
+        let Some((med, sigma)) = lot_spread(&vals, &ses) else { continue };
         spread.push((name.clone(), med, sigma));
         if sigma > 0.0 {
             for u in &mut units {
@@ -237,32 +259,27 @@ pub fn run(
     Ok(BatchReport { units, spread })
 }
 
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
-
-/// The batch as CSV: one row per unit.
+/// The batch as CSV: one row per unit (quoted by the csv crate where a field needs it).
 pub fn to_csv(r: &BatchReport) -> String {
-    let mut s = String::from("unit,serial,verdict,reasons,outliers,profile\n");
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let mut rows: Vec<[String; 6]> =
+        vec![["unit".into(), "serial".into(), "verdict".into(), "reasons".into(), "outliers".into(), "profile".into()]];
     for u in &r.units {
         let outl: Vec<String> = u.outliers.iter().map(|(n, z)| format!("{n} (z = {z:+.1})")).collect();
-        let row = [
+        rows.push([
             u.dir.display().to_string(),
             u.serial.clone().unwrap_or_default(),
             format!("{:?}", u.verdict).to_lowercase(),
             u.reasons.join("; "),
             outl.join("; "),
             u.profile.as_ref().map(|p| p.display().to_string()).unwrap_or_default(),
-        ];
-        let cells: Vec<String> = row.iter().map(|c| csv_field(c)).collect();
-        s.push_str(&cells.join(","));
-        s.push('\n');
+        ]);
     }
-    s
+    for row in &rows {
+        // Writing to memory cannot fail.
+        let _ = w.write_record(row);
+    }
+    w.into_inner().map(|b| String::from_utf8_lossy(&b).into_owned()).unwrap_or_default()
 }
 
 /// The batch as a self-contained HTML page: verdict table, then each coefficient's

@@ -311,8 +311,7 @@ pub fn channel_reports(res: &[RunResiduals], motions: &RunMotions<'_>) -> Vec<Ch
         let resolution = RESOLUTION * (out_ss / n.max(1) as f64).sqrt();
         let sys_rms = (sys_ss / n.max(1) as f64).sqrt();
         let significant = dof > 0 && chi > chi2_upper(dof, SIGNIFICANCE_Z) && sys_rms > resolution;
-        let mid = diffs.len() / 2;
-        let mad = if diffs.is_empty() { 0.0 } else { *diffs.select_nth_unstable_by(mid, f64::total_cmp).1 };
+        let mad = crate::stats::median(&mut diffs).unwrap_or(0.0);
         // For white noise, |Δr| has median 0.6745·√2·σ.
         let noise_floor = mad / (0.674_489_75 * std::f64::consts::SQRT_2);
         out.push(ChannelReport {

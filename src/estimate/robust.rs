@@ -10,7 +10,7 @@ use crate::units::SensorKind;
 const HUBER_K: f64 = 1.345;
 
 /// Iteratively reweighted least squares with Huber weights `w = min(1, k·s/|r|)`, the
-/// scale s = 1.4826·median|r| re-estimated each pass. Starts from the ordinary fit, keeps
+/// scale s = 1.4826·median|r| ([`crate::stats::MAD_TO_SIGMA`]) re-estimated each pass. Starts from the ordinary fit, keeps
 /// its identifiability decisions, stops when no coefficient moves by more than 1e-10 of
 /// its standard error (at most 30 passes). Standard errors are those of the final weighted
 /// problem.
@@ -46,9 +46,7 @@ pub(crate) fn robust_refit(
         for ch in 0..3 {
             abs_r.clear();
             abs_r.extend(resid.iter().map(|r| r[ch].abs()));
-            let mid = abs_r.len() / 2;
-            let med = if abs_r.is_empty() { 0.0 } else { *abs_r.select_nth_unstable_by(mid, f64::total_cmp).1 };
-            scale[ch] = 1.4826 * med;
+            scale[ch] = crate::stats::MAD_TO_SIGMA * crate::stats::median(&mut abs_r).unwrap_or(0.0);
         }
         let mut accs: Vec<QrAccumulator> = (0..3).map(|_| QrAccumulator::new(p + 3, opts.chunk)).collect();
         let mut down = [0u64; 3];

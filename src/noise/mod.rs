@@ -335,7 +335,7 @@ pub fn read_channels(
             col.push(if *c < 3 { row.gyro[*c] } else { row.accel[*c - 3] });
         }
     }
-    let tau0_s = if steps.is_empty() { f64::NAN } else { crate::session::sanity::median(&mut steps) };
+    let tau0_s = crate::stats::median(&mut steps).unwrap_or(f64::NAN);
     let mut warnings = Vec::new();
     let mean = (last - first) / (n.max(2) - 1) as f64;
     if n > 2 && (mean / tau0_s - 1.0).abs() > 0.01 {

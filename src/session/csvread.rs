@@ -112,10 +112,8 @@ pub fn read_recording(path: &Path, units: &Units, g_m_s2: f64, opts: ReadOptions
     let io = |source| SessionError::Io { path: path.to_path_buf(), source };
     let file = std::fs::File::open(path).map_err(io)?;
     let size = file.metadata().map_err(io)?.len() as usize;
-    // Streamed (the reader buffers it): never held whole; a gap error re-reads it to name
-    // the line.
-    let reopen = || std::fs::File::open(path).ok().map(std::io::BufReader::new);
-    read_stream(path, file, size / 64, units, g_m_s2, opts, reopen)
+    // Streamed (the reader buffers it): never held whole.
+    read_stream(path, file, size / 64, units, g_m_s2, opts)
 }
 
 /// One CSV row converted to SI (stand-frame reference columns when requested).
@@ -676,18 +674,19 @@ pub fn parse_recording(
     g_m_s2: f64,
     opts: ReadOptions,
 ) -> Result<Recording, SessionError> {
-    read_stream(path, bytes, bytes.len() / 64, units, g_m_s2, opts, || Some(bytes))
+    read_stream(path, bytes, bytes.len() / 64, units, g_m_s2, opts)
 }
 
-/// Reads a recording from a stream; `reopen` gives the bytes again to locate a gap's line.
-fn read_stream<R: std::io::Read, S: std::io::Read>(
+/// Reads a recording from a stream, checked as it is read (gaps, saturation, spikes: the
+/// same [`super::sanity::StreamScan`] as the streamed readers, so that every reader says
+/// the same of the same file).
+fn read_stream<R: std::io::Read>(
     path: &Path,
     input: R,
     cap: usize,
     units: &Units,
     g_m_s2: f64,
     opts: ReadOptions,
-    reopen: impl Fn() -> Option<S>,
 ) -> Result<Recording, SessionError> {
     let mut rows = RowReader::new(path, input, units, g_m_s2, opts)?;
     let mut out = Recording {
@@ -699,8 +698,12 @@ fn read_stream<R: std::io::Read, S: std::io::Read>(
     };
     let mut refc =
         opts.reference.then(|| ReferenceColumns { e_rad_s2: rows.has_eps().then(Vec::new), ..Default::default() });
+    let mut scan = super::sanity::StreamScan::new(units.time.to_s());
     let mut row = Row::default();
     while rows.read_row(&mut row)? {
+        if let Some(gap) = scan.push(rows.line(), row.t_s, row.gyro, row.accel).filter(|_| opts.strict) {
+            return Err(gap.to_error(path, rows.t_column()));
+        }
         out.t_s.push(row.t_s);
         out.gyro.push(row.gyro);
         out.accel.push(row.accel);
@@ -715,83 +718,17 @@ fn read_stream<R: std::io::Read, S: std::io::Read>(
             }
         }
     }
-    let header_line = rows.header_line();
     if out.t_s.is_empty() {
         return Err(rows.no_samples());
     }
     out.reference = refc;
     out.sha256 = rows.sha256();
-    let kt = units.time.to_s();
-    let gaps = find_gaps(&out.t_s, kt);
-    if opts.strict {
-        if let Some((k, first)) = gaps.first() {
-            let line = reopen().and_then(|r| line_of_sample(r, *k)).unwrap_or(header_line);
-            return Err(csv_err(
-                Problem::Gap,
-                path,
-                line,
-                format!("{} (t)", rows.t_column()),
-                format!("{first}; expected a gap of at most 5 sample periods (strict mode; without --strict gaps are warnings)"),
-            ));
-        }
+    let (gaps, warnings) = scan.finish(&path.display().to_string());
+    if let Some(gap) = gaps.first().filter(|_| opts.strict) {
+        return Err(gap.to_error(path, rows.t_column()));
     }
-    out.warnings = gaps.into_iter().map(|(_, w)| format!("{}: {w}", path.display())).collect();
-    let findings = super::sanity::scan(&out.gyro, &out.accel);
-    out.warnings.extend(super::sanity::describe(&findings, &out.t_s, &path.display().to_string()));
+    out.warnings = warnings;
     Ok(out)
-}
-
-/// 1-based line of the k-th sample (0-based), by re-reading the bytes (used on errors only).
-fn line_of_sample(input: impl std::io::Read, k: usize) -> Option<u64> {
-    let mut rdr = csv::ReaderBuilder::new().has_headers(false).comment(Some(b'#')).flexible(true).from_reader(input);
-    let mut rec = csv::ByteRecord::new();
-    let mut seen = 0usize;
-    let mut header = true;
-    while rdr.read_byte_record(&mut rec).ok()? {
-        if blank_record(&rec) {
-            continue;
-        }
-        if header {
-            header = false;
-            continue;
-        }
-        if seen == k {
-            return rec.position().map(|p| p.line());
-        }
-        seen += 1;
-    }
-    None
-}
-
-/// Gaps larger than 5 median sample periods: (index of the sample after the gap, message).
-fn find_gaps(t: &[f64], kt: f64) -> Vec<(usize, String)> {
-    if t.len() < 3 {
-        return Vec::new();
-    }
-    let mut dts: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    let mid = dts.len() / 2;
-    let median = *dts.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let mut warnings = Vec::new();
-    for (i, w) in t.windows(2).enumerate() {
-        let dt = w[1] - w[0];
-        if dt > 5.0 * median {
-            warnings.push((
-                i + 1,
-                format!(
-                    "gap in t of {} before sample {} (t = {}): {:.1} median sample periods",
-                    dt / kt,
-                    i + 2,
-                    w[1] / kt,
-                    dt / median
-                ),
-            ));
-            if warnings.len() >= 20 {
-                warnings.push((i + 1, "further gaps not listed".to_string()));
-                break;
-            }
-        }
-    }
-    warnings
 }
 
 /// A csv crate error on line `line` (parsed on its own).

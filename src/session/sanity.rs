@@ -1,8 +1,9 @@
-//! Signal sanity: saturation (flat tops at the channel's extreme) and spikes (isolated
-//! samples far from their neighbours), reported with their sample positions.
+//! Signal sanity, checked as the samples are read (one scanner, [`StreamScan`], for every
+//! reader): gaps in t, saturation (flat tops at the channel's extreme) and spikes (isolated
+//! samples far from their neighbours), reported with their sample positions and times.
 
-/// Channel names in recording order.
-const CHANNELS: [&str; 6] = ["gx", "gy", "gz", "ax", "ay", "az"];
+use crate::stats::{median, MAD_TO_SIGMA};
+use crate::units::CHANNELS;
 
 /// Consecutive samples at the channel's extreme that count as a flat top.
 pub const SATURATION_RUN: usize = 5;
@@ -34,101 +35,8 @@ pub enum Finding {
     },
 }
 
-/// Scans the six sensor channels of a recording.
-pub fn scan(gyro: &[[f64; 3]], accel: &[[f64; 3]]) -> Vec<Finding> {
-    let mut out = Vec::new();
-    let mut buf = Vec::with_capacity(gyro.len());
-    for (c, name) in CHANNELS.iter().enumerate() {
-        buf.clear();
-        let src = if c < 3 { gyro } else { accel };
-        buf.extend(src.iter().map(|v| v[c % 3]));
-        if let Some(f) = saturation(&buf, name) {
-            out.push(f);
-        }
-        if let Some(f) = spikes(&buf, name) {
-            out.push(f);
-        }
-    }
-    out
-}
-
-fn saturation(x: &[f64], channel: &'static str) -> Option<Finding> {
-    let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-    if x.len() < SATURATION_RUN || hi <= lo {
-        return None;
-    }
-    for target in [hi, lo] {
-        let (mut samples, mut first, mut run) = (0usize, None, 0usize);
-        for (k, &v) in x.iter().enumerate() {
-            #[allow(clippy::float_cmp)]
-            let at = v == target;
-            if at {
-                run += 1;
-                if run == SATURATION_RUN {
-                    samples += SATURATION_RUN;
-                    first.get_or_insert(k + 1 - SATURATION_RUN);
-                } else if run > SATURATION_RUN {
-                    samples += 1;
-                }
-            } else {
-                run = 0;
-            }
-        }
-        if let Some(first) = first {
-            return Some(Finding::Saturation { channel, value: target, samples, first });
-        }
-    }
-    None
-}
-
-/// Median (upper middle for an even count) by selection, reordering `v`; 0 when empty.
-pub fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f64::total_cmp).1
-}
-
-fn spikes(x: &[f64], channel: &'static str) -> Option<Finding> {
-    let n = x.len();
-    if n < 7 {
-        return None;
-    }
-    // Second differences: O(dt² x'') on smooth motion, −2A at a spike of height A.
-    let d2: Vec<f64> = (1..n - 1).map(|k| x[k - 1] - 2.0 * x[k] + x[k + 1]).collect();
-    let mut tmp = d2.clone();
-    let centre = median(&mut tmp);
-    let mut abs: Vec<f64> = d2.iter().map(|v| (v - centre).abs()).collect();
-    let scale = 1.4826 * median(&mut abs);
-    let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-    let floor = 1e-6 * (hi - lo).max(f64::MIN_POSITIVE);
-    let limit = (SPIKE_Z * scale).max(floor);
-    // A spike at k shows as the largest |d2| at k (twice its neighbours'): report local maxima.
-    let mut at = Vec::new();
-    for j in 0..d2.len() {
-        let v = (d2[j] - centre).abs();
-        if v > limit {
-            let left = if j > 0 { (d2[j - 1] - centre).abs() } else { 0.0 };
-            let right = if j + 1 < d2.len() { (d2[j + 1] - centre).abs() } else { 0.0 };
-            if v >= left && v >= right {
-                at.push(j + 1);
-            }
-        }
-    }
-    if at.is_empty() {
-        return None;
-    }
-    Some(Finding::Spikes { channel, count: at.len(), at: at.into_iter().take(10).collect() })
-}
-
-/// Human-readable lines for findings, naming sample numbers and times (`t_s` the record's
-/// stamps).
-pub fn describe(findings: &[Finding], t_s: &[f64], file: &str) -> Vec<String> {
-    describe_with(findings, &|k| t_s.get(k).copied().unwrap_or(f64::NAN), file)
-}
-
-/// [`describe`] with the time of sample k (0-based) from `time_of`.
+/// Human-readable lines for findings, naming sample numbers and the time of sample k
+/// (0-based) from `time_of`.
 fn describe_with(findings: &[Finding], time_of: &dyn Fn(usize) -> f64, file: &str) -> Vec<String> {
     findings
         .iter()
@@ -267,11 +175,11 @@ impl SpikeWatch {
 
     fn set_reference(&mut self, range: f64) {
         let mut tmp = self.held.clone();
-        self.centre = median(&mut tmp);
+        self.centre = median(&mut tmp).unwrap_or(0.0);
         for v in tmp.iter_mut() {
             *v = (*v - self.centre).abs();
         }
-        self.scale = Some(1.4826 * median(&mut tmp));
+        self.scale = Some(MAD_TO_SIGMA * median(&mut tmp).unwrap_or(0.0));
         for d2 in std::mem::take(&mut self.held) {
             self.judge(d2, range);
         }
@@ -493,7 +401,7 @@ impl StreamScan {
 
     fn set_step(&mut self) {
         let mut v: Vec<f64> = self.steps.iter().map(|s| s.2).collect();
-        let m = median(&mut v);
+        let m = median(&mut v).unwrap_or(0.0);
         self.median_step = Some(m);
         for (k, line, step, t) in std::mem::take(&mut self.steps) {
             self.judge_step(k, line, step, t, m);
@@ -557,6 +465,16 @@ impl StreamScan {
     }
 }
 
+/// The findings of a [`StreamScan`] over a record in memory (SI stamps), each prefixed
+/// with `file`.
+pub fn scan_record(t_s: &[f64], gyro: &[[f64; 3]], accel: &[[f64; 3]], file: &str) -> Vec<String> {
+    let mut scan = StreamScan::new(1.0);
+    for (k, ((&t, g), a)) in t_s.iter().zip(gyro).zip(accel).enumerate() {
+        scan.push(k as u64 + 2, t, *g, *a);
+    }
+    scan.finish(file).1
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -577,29 +495,6 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn clean_signals_raise_nothing() {
-        for noise in [false, true] {
-            let g = sine(3000, noise);
-            assert!(scan(&g, &g).is_empty(), "{:?}", scan(&g, &g));
-        }
-    }
-
-    #[test]
-    fn finds_clipping_and_spikes() {
-        let mut g = sine(3000, true);
-        for v in g.iter_mut() {
-            v[0] = v[0].min(0.9);
-        }
-        g[1234][1] += 5.0;
-        let f = scan(&g, &sine(3000, true));
-        assert!(f.iter().any(|f| matches!(f, Finding::Saturation { channel: "gx", .. })), "{f:?}");
-        assert!(
-            f.iter().any(|f| matches!(f, Finding::Spikes { channel: "gy", at, .. } if at.contains(&1234))),
-            "{f:?}"
-        );
-    }
-
     fn stream(g: &[[f64; 3]], a: &[[f64; 3]], t: &[f64]) -> (Vec<StreamGap>, Vec<String>) {
         let mut s = StreamScan::new(1.0);
         for k in 0..t.len() {
@@ -609,7 +504,17 @@ mod tests {
     }
 
     #[test]
-    fn the_stream_scan_says_what_the_whole_record_scan_says_on_short_records() {
+    fn clean_signals_raise_nothing() {
+        let t: Vec<f64> = (0..3000).map(|k| k as f64 * 0.01).collect();
+        for noise in [false, true] {
+            let g = sine(3000, noise);
+            let (gaps, warnings) = stream(&g, &g, &t);
+            assert!(gaps.is_empty() && warnings.is_empty(), "{warnings:?}");
+        }
+    }
+
+    #[test]
+    fn finds_clipping_and_spikes_at_the_ends_of_short_records() {
         let mut g = sine(3000, true);
         for v in g.iter_mut() {
             v[0] = v[0].min(0.9);
@@ -620,11 +525,15 @@ mod tests {
         g[2998][1] += 3.0;
         let a = sine(3000, true);
         let t: Vec<f64> = (0..3000).map(|k| k as f64 * 0.01).collect();
-        let whole = describe(&scan(&g, &a), &t, "f.csv");
-        assert!(whole.len() >= 2, "{whole:?}");
         let (gaps, warnings) = stream(&g, &a, &t);
         assert!(gaps.is_empty());
-        assert_eq!(warnings, whole);
+        let all = warnings.join("\n");
+        assert!(all.contains("channel gx looks saturated"), "{all}");
+        assert!(
+            all.contains("channel gy has 3 spike(s)")
+                && all.contains("at samples 4 (t = 0.03 s), 1235 (t = 12.34 s), 2999 (t = 29.98 s)"),
+            "{all}"
+        );
     }
 
     #[test]
