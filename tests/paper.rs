@@ -116,7 +116,7 @@ fn ignoring_epsilon_leaves_the_known_error() {
     let cfg = SimConfig::paper();
     let session = cfg.generate();
     let (_, _, mut cal) = fit_and_calibrate(&session, &Model::default_model());
-    cal.gyro.eps = nalgebra::Matrix3::zeros();
+    cal.gyro.eps = crosscal::frames::Coupling::new(nalgebra::Matrix3::zeros());
     let r = check_session(&session, &cal, Mode::Offline, Thresholds::default()).unwrap();
     let run = r.runs.iter().find(|r| r.run == "cone+10").unwrap();
     let z = &run.axes[2];

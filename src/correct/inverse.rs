@@ -3,6 +3,7 @@
 //! nonlinear effects with their parameters.
 
 use super::{mv, solve, CorrectError};
+use crate::frames::{Coupling, Output, Sensor};
 use crate::model::{Effect, Model, Role, State};
 use crate::profile::{CorrectionSettings, Profile};
 use crate::units::SensorKind;
@@ -22,12 +23,13 @@ struct OtherTerm {
 pub struct SensorInverse {
     /// Bias b (SI).
     pub bias: [f64; 3],
-    /// Scale/coupling matrix A (row-major).
-    pub scale: Matrix3<f64>,
-    /// A⁻¹.
-    pub scale_inv: Matrix3<f64>,
-    /// Angular-acceleration matrix E (gyro; zero for the accelerometer), s.
-    pub eps: Matrix3<f64>,
+    /// Scale/coupling matrix A of the forward model: true input (sensor axes) → output.
+    pub scale: Coupling<Sensor, Output>,
+    /// A⁻¹: output → true input.
+    pub scale_inv: Coupling<Output, Sensor>,
+    /// Angular-acceleration matrix E of the forward model (gyro; zero for the
+    /// accelerometer), s: true ε → output.
+    pub eps: Coupling<Sensor, Output>,
     others: Vec<OtherTerm>,
 }
 
@@ -59,8 +61,9 @@ impl SensorInverse {
                 }
             }
         }
+        let scale = Coupling::new(scale);
         let scale_inv = scale.try_inverse().ok_or(CorrectError::Singular(sensor))?;
-        Ok(Self { bias, scale, scale_inv, eps, others })
+        Ok(Self { bias, scale, scale_inv, eps: Coupling::new(eps), others })
     }
 
     /// Contribution of the non-linear-block terms at a state.
@@ -144,17 +147,17 @@ impl Calibration {
         temp_c: f64,
     ) -> Option<([f64; 3], [f64; 3], u8)> {
         let (g, a) = (&self.gyro, &self.accel);
-        let ee = mv(&g.eps, e);
-        let mut w = solve(&g.scale_inv, gyro, g.bias, ee, [0.0; 3]);
-        let mut acc = solve(&a.scale_inv, accel, a.bias, [0.0; 3], [0.0; 3]);
+        let ee = mv(g.eps.matrix(), e);
+        let mut w = solve(g.scale_inv.matrix(), gyro, g.bias, ee, [0.0; 3]);
+        let mut acc = solve(a.scale_inv.matrix(), accel, a.bias, [0.0; 3], [0.0; 3]);
         for _ in 0..100 {
             // The effects' regressors see the input as the sensor saw it (before the inverses
             // of the nonlinear effects), exactly as in the forward model.
             let s = State { t_s, w, e, a: acc, temp_c };
             let og = g.other(&s);
             let oa = a.other(&s);
-            let wn = solve(&g.scale_inv, gyro, g.bias, ee, og);
-            let an = solve(&a.scale_inv, accel, a.bias, oa, [0.0; 3]);
+            let wn = solve(g.scale_inv.matrix(), gyro, g.bias, ee, og);
+            let an = solve(a.scale_inv.matrix(), accel, a.bias, oa, [0.0; 3]);
             let change = (0..3).map(|i| (wn[i] - w[i]).abs().max((an[i] - acc[i]).abs())).fold(0.0, f64::max);
             let size = (0..3).map(|i| wn[i].abs().max(an[i].abs())).fold(f64::MIN_POSITIVE, f64::max);
             w = wn;

@@ -18,8 +18,8 @@ pub fn correct_offline(
     let g = &cal.gyro;
     let a = &cal.accel;
     const Z: [f64; 3] = [0.0; 3];
-    let mut w: Vec<[f64; 3]> = gyro.iter().map(|u| solve(&g.scale_inv, *u, g.bias, Z, Z)).collect();
-    let mut acc: Vec<[f64; 3]> = accel.iter().map(|u| solve(&a.scale_inv, *u, a.bias, Z, Z)).collect();
+    let mut w: Vec<[f64; 3]> = gyro.iter().map(|u| solve(g.scale_inv.matrix(), *u, g.bias, Z, Z)).collect();
+    let mut acc: Vec<[f64; 3]> = accel.iter().map(|u| solve(a.scale_inv.matrix(), *u, a.bias, Z, Z)).collect();
     // With nonlinear effects, `seen` keeps the linear inverse's output (the input as the sensor
     // saw it), which is what the other effects' regressors take, as in the forward model;
     // `w`, `acc` hold the true input after the nonlinear inverses.
@@ -33,7 +33,7 @@ pub fn correct_offline(
             set_flags(&mut flags, n, k, f);
         }
     }
-    let needs_eps = g.eps.iter().any(|v| *v != 0.0) || g.has_other_terms() || a.has_other_terms() || nonlinear;
+    let needs_eps = g.eps.matrix().iter().any(|v| *v != 0.0) || g.has_other_terms() || a.has_other_terms() || nonlinear;
     let deriv =
         DerivativeConfig { half_window: cal.settings.derivative_half_window, degree: cal.settings.derivative_degree };
     let mut e = vec![[0.0; 3]; n];
@@ -47,11 +47,11 @@ pub fn correct_offline(
         for k in 0..n {
             let (sw, sa) = if nonlinear { seen[k] } else { (w[k], acc[k]) };
             let s = State { t_s: t_s[k] - t0, w: sw, e: e[k], a: sa, temp_c: temp_c.map_or(f64::NAN, |t| t[k]) };
-            let ee = mv(&g.eps, e[k]);
+            let ee = mv(g.eps.matrix(), e[k]);
             let og = g.other(&s);
             let oa = a.other(&s);
-            let mut wn = solve(&g.scale_inv, gyro[k], g.bias, ee, og);
-            let mut an = solve(&a.scale_inv, accel[k], a.bias, oa, Z);
+            let mut wn = solve(g.scale_inv.matrix(), gyro[k], g.bias, ee, og);
+            let mut an = solve(a.scale_inv.matrix(), accel[k], a.bias, oa, Z);
             if nonlinear {
                 seen[k] = (wn, an);
                 let f = cal.invert_nonlinear(&mut wn, &mut an);

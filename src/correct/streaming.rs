@@ -82,9 +82,9 @@ impl GyroStep {
             return;
         }
         if h[0] != self.h[0] {
-            let m = (s.scale + s.eps * h[0]).try_inverse().unwrap_or(s.scale_inv);
+            let m = (s.scale.matrix() + s.eps.matrix() * h[0]).try_inverse().unwrap_or(*s.scale_inv.matrix());
             self.m = Cols::of(&m);
-            self.d = Cols::of(&(m * s.eps));
+            self.d = Cols::of(&(m * s.eps.matrix()));
             self.neg_mb = Cols::neg_apply(&m, s.bias);
         }
         let times = |k: f64| Cols(self.d.0.map(|c| c.map(|x| x * k)));
@@ -171,8 +171,8 @@ impl Streaming {
         let window = cal.settings.streaming_window.max(2);
         let degree = cal.settings.streaming_degree;
         let step = GyroStep::new(&cal.gyro);
-        let accel_inv = Cols::of(&cal.accel.scale_inv);
-        let accel_neg_ab = Cols::neg_apply(&cal.accel.scale_inv, cal.accel.bias);
+        let accel_inv = Cols::of(cal.accel.scale_inv.matrix());
+        let accel_neg_ab = Cols::neg_apply(cal.accel.scale_inv.matrix(), cal.accel.bias);
         Self {
             cal,
             window,

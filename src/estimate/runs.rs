@@ -40,9 +40,9 @@ impl FitRun<'_> {
         let tr = self.track;
         State {
             t_s: tr.t_s[k] - tr.t_s[0],
-            w: tr.w_rad_s[k],
-            e: tr.e_rad_s2[k],
-            a: tr.a_m_s2[k],
+            w: tr.w_rad_s[k].xyz,
+            e: tr.e_rad_s2[k].xyz,
+            a: tr.a_m_s2[k].xyz,
             temp_c: self.temp_c.map(|t| t[k]).or(self.temp_const_c).unwrap_or(f64::NAN),
         }
     }

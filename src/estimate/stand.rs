@@ -418,9 +418,9 @@ fn linearise(
                 for (j, (hi, lo)) in pt.iter().enumerate() {
                     let at = |tr: &Track| crate::model::State {
                         t_s: st.t_s,
-                        w: tr.w_rad_s[k],
-                        e: tr.e_rad_s2[k],
-                        a: tr.a_m_s2[k],
+                        w: tr.w_rad_s[k].xyz,
+                        e: tr.e_rad_s2[k].xyz,
+                        a: tr.a_m_s2[k].xyz,
                         temp_c: st.temp_c,
                     };
                     let (ph, pl) = (pred.predict(&at(hi)), pred.predict(&at(lo)));

@@ -14,20 +14,21 @@ use nalgebra::{Matrix3, Vector3};
 use std::marker::PhantomData;
 
 /// Marker: the stand's axes (the frame the motion kinematics are defined in).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Stand;
-/// Marker: the sensor block's axes (the frame of its outputs).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Marker: a true physical quantity (rate, angular acceleration, specific force) in the
+/// sensor block's axes: what the stand's motion is in sensor axes, and what a correction
+/// estimates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Sensor;
-/// Marker: a true physical quantity (rate, specific force) in the sensor frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Truth;
-/// Marker: what the sensor outputs (before correction) in the sensor frame.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Marker: what the sensor outputs (before correction), in the sensor block's axes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Output;
 
-/// A 3-vector tagged with the frame (or quantity) it lives in.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A 3-vector tagged with the frame (or quantity) it lives in. Indexing gives its
+/// components; [`V3::xyz`] the plain array.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(transparent)]
 pub struct V3<F> {
     /// Components along the frame's x, y, z axes.
     pub xyz: [f64; 3],
@@ -38,6 +39,33 @@ impl<F> V3<F> {
     /// Tags raw components with frame `F`.
     pub const fn new(xyz: [f64; 3]) -> Self {
         Self { xyz, _frame: PhantomData }
+    }
+
+    /// The components scaled by `k`, in the same frame.
+    pub fn scaled(self, k: f64) -> Self {
+        Self::new(self.xyz.map(|x| x * k))
+    }
+}
+
+impl<F> From<[f64; 3]> for V3<F> {
+    fn from(xyz: [f64; 3]) -> Self {
+        Self::new(xyz)
+    }
+}
+
+impl<F> std::ops::Index<usize> for V3<F> {
+    type Output = f64;
+
+    #[inline]
+    fn index(&self, i: usize) -> &f64 {
+        &self.xyz[i]
+    }
+}
+
+impl<F> std::ops::IndexMut<usize> for V3<F> {
+    #[inline]
+    fn index_mut(&mut self, i: usize) -> &mut f64 {
+        &mut self.xyz[i]
     }
 }
 
@@ -79,9 +107,9 @@ mod tests {
 
     #[test]
     fn inverse_round_trip() {
-        let c: Coupling<Truth, Output> = Coupling::new(Matrix3::new(1.0, 0.01, 0.0, 0.0, 1.0, 0.01, 0.01, 0.0, 1.0));
+        let c: Coupling<Sensor, Output> = Coupling::new(Matrix3::new(1.0, 0.01, 0.0, 0.0, 1.0, 0.01, 0.01, 0.0, 1.0));
         let inv = c.try_inverse().unwrap();
-        let x = V3::<Truth>::new([0.3, -1.2, 2.5]);
+        let x = V3::<Sensor>::new([0.3, -1.2, 2.5]);
         let back = inv.apply(c.apply(x));
         for i in 0..3 {
             assert!((back.xyz[i] - x.xyz[i]).abs() < 1e-15);

@@ -57,10 +57,13 @@ pub trait NonlinearEffect: Send + Sync + fmt::Debug {
 
 /// Value at time `t` of a sampled series by Catmull–Rom cubic interpolation on the
 /// (possibly non-uniform) time stamps, clamped at the ends.
-pub fn interpolate(t_s: &[f64], x: &[[f64; 3]], t: f64, hint: &mut usize) -> [f64; 3] {
+pub fn interpolate<T>(t_s: &[f64], x: &[T], t: f64, hint: &mut usize) -> T
+where
+    T: Copy + std::ops::Index<usize, Output = f64> + From<[f64; 3]>,
+{
     let n = t_s.len();
     if n == 0 {
-        return [0.0; 3];
+        return T::from([0.0; 3]);
     }
     if n == 1 || t <= t_s[0] {
         return x[0];
@@ -94,5 +97,5 @@ pub fn interpolate(t_s: &[f64], x: &[[f64; 3]], t: f64, hint: &mut usize) -> [f6
     for c in 0..3 {
         out[c] = h00 * x[i][c] + h10 * slope(i, c) + h01 * x[i + 1][c] + h11 * slope(i + 1, c);
     }
-    out
+    T::from(out)
 }

@@ -128,8 +128,11 @@ impl SlopeWeights {
 }
 
 /// Non-causal derivative of a whole record of 3-vectors (centred windows, shifted inward
-/// at the ends). `out` must have the same length as `x` and `t`.
-pub fn derivative_offline(t: &[f64], x: &[[f64; 3]], cfg: &DerivativeConfig, out: &mut [[f64; 3]]) {
+/// at the ends), in the frame of `x`. `out` must have the same length as `x` and `t`.
+pub fn derivative_offline<T>(t: &[f64], x: &[T], cfg: &DerivativeConfig, out: &mut [T])
+where
+    T: Copy + std::ops::Index<usize, Output = f64> + From<[f64; 3]>,
+{
     let n = t.len().min(x.len()).min(out.len());
     if n == 0 {
         return;
@@ -147,7 +150,7 @@ pub fn derivative_offline(t: &[f64], x: &[[f64; 3]], cfg: &DerivativeConfig, out
             s[1] += wj * xj[1];
             s[2] += wj * xj[2];
         }
-        out[i] = s;
+        out[i] = T::from(s);
     }
 }
 

@@ -10,7 +10,7 @@
 
 pub mod derivative;
 
-use crate::frames::{Mount, Stand, V3};
+use crate::frames::{Mount, Sensor, Stand, V3};
 pub use derivative::{derivative_offline, DerivativeConfig, SlopeWeights};
 
 use crate::session::{MotionSpec, Run};
@@ -116,12 +116,12 @@ impl ConicAt {
 pub struct Track {
     /// Time stamps, s.
     pub t_s: Vec<f64>,
-    /// Angular rate, rad/s, sensor frame.
-    pub w_rad_s: Vec<[f64; 3]>,
-    /// Angular acceleration, rad/s², sensor frame.
-    pub e_rad_s2: Vec<[f64; 3]>,
-    /// Specific force, m/s², sensor frame.
-    pub a_m_s2: Vec<[f64; 3]>,
+    /// Angular rate, rad/s.
+    pub w_rad_s: Vec<V3<Sensor>>,
+    /// Angular acceleration, rad/s².
+    pub e_rad_s2: Vec<V3<Sensor>>,
+    /// Specific force, m/s².
+    pub a_m_s2: Vec<V3<Sensor>>,
     /// How ε was obtained (exact, given, or which derivative).
     pub epsilon_source: String,
 }
@@ -148,9 +148,9 @@ pub fn track_for(
         epsilon_source: String::new(),
     };
     let push = |tr: &mut Track, k: Kinematics| {
-        tr.w_rad_s.push(mount.to_sensor(k.w_rad_s).xyz);
-        tr.e_rad_s2.push(mount.to_sensor(k.e_rad_s2).xyz);
-        tr.a_m_s2.push(mount.to_sensor(k.a_m_s2).xyz);
+        tr.w_rad_s.push(mount.to_sensor(k.w_rad_s));
+        tr.e_rad_s2.push(mount.to_sensor(k.e_rad_s2));
+        tr.a_m_s2.push(mount.to_sensor(k.a_m_s2));
     };
     match motion {
         MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
@@ -189,13 +189,13 @@ pub fn track_for(
                 return tr;
             };
             let derived;
-            let e: &[[f64; 3]] = match &r.e_rad_s2 {
+            let e: &[V3<Stand>] = match &r.e_rad_s2 {
                 Some(e) => {
                     tr.epsilon_source = "given (ex_ref, ey_ref, ez_ref columns)".into();
                     e
                 }
                 None => {
-                    let mut out = vec![[0.0; 3]; n];
+                    let mut out = vec![V3::new([0.0; 3]); n];
                     derivative_offline(&rec.t_s, &r.w_rad_s, deriv, &mut out);
                     derived = out;
                     tr.epsilon_source = format!("derived from the reference rate: {}", deriv.describe());
@@ -203,14 +203,7 @@ pub fn track_for(
                 }
             };
             for k in 0..n {
-                push(
-                    &mut tr,
-                    Kinematics {
-                        w_rad_s: V3::new(r.w_rad_s[k]),
-                        e_rad_s2: V3::new(e[k]),
-                        a_m_s2: V3::new(r.a_m_s2[k]),
-                    },
-                );
+                push(&mut tr, Kinematics { w_rad_s: r.w_rad_s[k], e_rad_s2: e[k], a_m_s2: r.a_m_s2[k] });
             }
         }
     }

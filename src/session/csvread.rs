@@ -1,19 +1,20 @@
 //! Reading one recording CSV into SI arrays, without a `String` per field.
 
 use super::error::{Problem, SessionError};
+use crate::frames::{Stand, V3};
 use crate::units::{AccelUnit, GyroUnit, Units};
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
-/// Stand-supplied reference columns (kind `reference`), converted to SI, stand frame.
+/// Stand-supplied reference columns (kind `reference`), converted to SI, in stand axes.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ReferenceColumns {
     /// True angular rate, rad/s.
-    pub w_rad_s: Vec<[f64; 3]>,
+    pub w_rad_s: Vec<V3<Stand>>,
     /// True specific force, m/s².
-    pub a_m_s2: Vec<[f64; 3]>,
+    pub a_m_s2: Vec<V3<Stand>>,
     /// True angular acceleration, rad/s², when the CSV has `ex_ref..ez_ref`.
-    pub e_rad_s2: Option<Vec<[f64; 3]>>,
+    pub e_rad_s2: Option<Vec<V3<Stand>>>,
 }
 
 impl ReferenceColumns {
@@ -711,10 +712,10 @@ fn read_stream<R: std::io::Read>(
             v.push(row.temp_c);
         }
         if let Some(r) = refc.as_mut() {
-            r.w_rad_s.push(row.w_ref);
-            r.a_m_s2.push(row.a_ref);
+            r.w_rad_s.push(V3::new(row.w_ref));
+            r.a_m_s2.push(V3::new(row.a_ref));
             if let Some(ev) = r.e_rad_s2.as_mut() {
-                ev.push(row.e_ref);
+                ev.push(V3::new(row.e_ref));
             }
         }
     }

@@ -242,9 +242,9 @@ impl SimConfig {
             for k in 0..n {
                 let state = |tr: &crate::motion::Track| State {
                     t_s: tr.t_s[k] - tr.t_s[0],
-                    w: tr.w_rad_s[k],
-                    e: tr.e_rad_s2[k],
-                    a: tr.a_m_s2[k],
+                    w: tr.w_rad_s[k].xyz,
+                    e: tr.e_rad_s2[k].xyz,
+                    a: tr.a_m_s2[k].xyz,
                     temp_c: rec.temp_c.as_ref().map_or(f64::NAN, |t| t[k]),
                 };
                 let ug = forward(&gterms, &gvals, &state(&tg));

@@ -226,9 +226,9 @@ pub fn fit_protocol(
 fn state_track(w: [f64; 3], a: [f64; 3]) -> Track {
     Track {
         t_s: vec![0.0],
-        w_rad_s: vec![w],
-        e_rad_s2: vec![[0.0; 3]],
-        a_m_s2: vec![a],
+        w_rad_s: vec![V3::new(w)],
+        e_rad_s2: vec![V3::new([0.0; 3])],
+        a_m_s2: vec![V3::new(a)],
         epsilon_source: "zero (protocol: rest at both ends)".into(),
     }
 }
