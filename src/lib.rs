@@ -1,10 +1,12 @@
 //! crosscal: cross-coupling calibration of three-axis gyroscopes and accelerometers on a
-//! rotating (conic-motion) stand.
+//! rotating (conic-motion) stand, in hand-held protocols and from production lots.
 //!
-//! Data flows one way: [`session`] (manifest + CSV) → [`motion`] (true ω, ε, a in sensor
-//! axes) → [`model`] (effect regressors) → [`estimate`] (least squares, uncertainty,
-//! identifiability) → [`profile`] (versioned JSON per unit) → [`correct`] (shared offline
-//! and streaming correction) → [`check`] (errors before/after, reduction factors).
+//! Layers, lowest first (a module imports only from layers below it; `ARCHITECTURE.md` is
+//! the map): leaf maths and helpers ([`units`], [`stats`], [`json`], [`html`], [`atomic`])
+//! → [`frames`] → [`session`] (manifests, recordings, importers) → [`motion`] (true ω, ε,
+//! a) and [`noise`] → [`model`] (the effects catalogue) → [`estimate`] (the one fit entry
+//! point) and [`simulate`] → [`profile`] → [`correct`] → [`check`], [`plan`] →
+//! [`diagnose`] → [`app`] (the use cases the command line and batch share).
 //!
 //! Conventions: sensor frame, SI units inside (rad/s, rad/s², m/s², s); forward models
 //! `u = f(true)`; matrices row-major (`C[i][j]` is the weight of input j in output i).

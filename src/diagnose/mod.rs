@@ -247,7 +247,7 @@ pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotio
     for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
         let terms = model.terms(sensor);
         let values = values_of(f, model, sensor);
-        let seen = crate::estimate::nonlinear::seen_tracks(model, f, sensor, runs);
+        let seen = crate::estimate::seen_tracks(model, f, sensor, runs);
         let moved: Vec<FitRun<'_>> = match &seen {
             Some(tracks) => runs.iter().zip(tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect(),
             None => runs.to_vec(),

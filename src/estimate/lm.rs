@@ -137,8 +137,7 @@ impl<F: Fn(&[f64]) -> Vec<f64>> CostFunction for LeastSquares<F> {
     }
 }
 
-/// Result of [`minimise`]: the parameters, the residuals there, the Jacobian there and the
-/// number of iterations.
+/// Result of [`minimise`]: the parameters, the residuals there and the Jacobian there.
 #[derive(Debug, Clone)]
 pub struct LmResult {
     /// Parameters at the minimum.
@@ -147,8 +146,6 @@ pub struct LmResult {
     pub residuals: Vec<f64>,
     /// Jacobian of the residuals at the minimum (rows = residuals).
     pub jacobian: Vec<Vec<f64>>,
-    /// Iterations used.
-    pub iterations: u64,
 }
 
 impl LmResult {
@@ -185,7 +182,7 @@ where
     let param = state.get_best_param().or(state.get_param()).cloned().ok_or_else(|| Error::msg("no result"))?;
     let residuals = op.apply(&param)?;
     let jacobian = op.jacobian(&param)?;
-    Ok(LmResult { param, residuals, jacobian, iterations: state.get_iter() })
+    Ok(LmResult { param, residuals, jacobian })
 }
 
 /// Central-difference Jacobian of `f` at `p`, with steps `h_k = rel · max(|p_k|, scale_k)`.

@@ -2,11 +2,11 @@
 //! session in memory or prepared runs; a model; settings) and picks the way to fit it:
 //!
 //! * **streamed** — conic and static runs with a linear model are read row by row from their
-//!   files in fixed memory ([`stream`]);
-//! * **in memory** — the linear estimator over whole runs ([`linear`]), with the robust
-//!   refit ([`robust`]) and nonlinear parameters by variable projection ([`nonlinear`]);
+//!   files in fixed memory (`stream`);
+//! * **in memory** — the linear estimator over whole runs (`linear`), with the robust
+//!   refit (`robust`) and nonlinear parameters by variable projection (`nonlinear`);
 //! * **stand settings** — each conic run's cone angle, rate and phase fitted with the
-//!   coefficients ([`stand`]);
+//!   coefficients (`stand`);
 //! * **protocol** — Ferraris and multi-position sessions ([`protocol`]).
 //!
 //! Each output channel of each sensor is its own linear problem `y = Φ θ + noise` (the
@@ -23,22 +23,22 @@
 
 pub mod identify;
 mod linear;
-pub mod lm;
-pub mod nonlinear;
+mod lm;
+mod nonlinear;
 pub mod protocol;
 mod request;
 mod result;
 mod robust;
 mod runs;
-pub mod stand;
-pub mod stream;
+mod stand;
+mod stream;
 
 pub use identify::{Correlation, Unidentifiable};
-pub use nonlinear::NonlinearParam;
+pub use nonlinear::{seen_tracks, NonlinearParam};
 pub use request::{fit, FitData, FitOutcome, FitRequest, FitSource, ModelChoice, StreamPolicy};
 pub use result::{ChannelFit, CoefStatus, Coefficient, Fit, SensorFit};
 pub use runs::{fit_runs, tracks, FitRun};
-pub use stand::StandParams;
+pub use stand::{ConeSetting, StandParams};
 
 use crate::units::SensorKind;
 use std::path::PathBuf;

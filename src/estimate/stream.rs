@@ -312,7 +312,7 @@ pub struct StreamedFit {
     pub warnings: Vec<String>,
 }
 
-/// Errors of [`fit_streaming`].
+/// Errors of the streamed fit.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum StreamError {

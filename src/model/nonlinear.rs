@@ -1,7 +1,7 @@
 //! Effects whose parameters enter nonlinearly (time delay, dead zone). Such an effect does
 //! not add regressors; it changes the true motion *as the sensor sees it*, and the linear
 //! model is then fitted on the transformed motion (variable projection, see
-//! [`crate::estimate::nonlinear`]).
+//! `crate::estimate`).
 
 use super::{Inputs, SensorKind, Side};
 use crate::motion::Track;

@@ -228,7 +228,7 @@ impl SpikeWatch {
 /// The checks of a recording read as a stream, in fixed memory (what a unit could do as the
 /// samples arrive): gaps in t of more than 5 times the median step of the first
 /// [`STREAM_REFERENCE`] steps (of all of them in shorter records, as the whole-record
-/// reader); saturation exactly as [`scan`]; spikes as [`scan`] but
+/// reader); saturation (flat runs at the record's extremes); spikes
 /// against the median and MAD of the first [`STREAM_REFERENCE`] second differences and the
 /// range seen so far.
 #[derive(Debug, Clone)]

@@ -15,7 +15,7 @@
 //!   frame, the paper's eq. 10 gauge) is fitted so that every pose measures |a| = g (eq. 14);
 //!   the gyro `ω = W (u − b − G a)` (W full) so that integrating it between consecutive poses
 //!   turns the first pose's gravity direction onto the next one's (eq. 16). Both are solved
-//!   by Levenberg–Marquardt ([`super::lm`]).
+//!   by Levenberg–Marquardt (an argmin solver in `estimate::lm`).
 //!
 //! Either way the result is an ordinary [`Fit`] in crosscal's forward convention
 //! (`u = b + K a`, `u = b + C ω + G a`, sensor frame, row-major, `K = M⁻¹`, `C = W⁻¹`), with
@@ -341,7 +341,7 @@ pub struct PoseRow {
 }
 
 impl PoseRow {
-    /// The row as a run for [`fit`].
+    /// The row as a run for a fit ([`crate::estimate::FitRequest::runs`]).
     pub fn as_run(&self) -> FitRun<'_> {
         FitRun {
             name: &self.name,
