@@ -112,6 +112,7 @@ pub fn describe(r: &RunPlan) -> String {
 
 /// The fit a plan predicts: noiseless data of the plan fitted with the plan's σ.
 pub fn predict(model: &Model, spec: &PlanSpec) -> Result<(Fit, Vec<Vec<f64>>), EstimateError> {
+    crate::simulate::check_runs(&spec.runs, spec.sample_rate_hz).map_err(EstimateError::Request)?;
     let cfg = SimConfig { runs: spec.runs.clone(), sample_rate_hz: spec.sample_rate_hz, ..SimConfig::paper() };
     let session = cfg.generate();
     let tr = tracks(&session, &DerivativeConfig::default());

@@ -71,7 +71,7 @@ fn simulate_fit_correct_check() {
 
     // Never overwrite the output unless asked.
     let (code, _, err) = run_in(dir, &["correct", "--profile", &prof, "demo/cone+10.csv", "-o", "corrected.csv"]);
-    assert_eq!(code, 2);
+    assert_eq!(code, 24);
     assert!(err.contains("already exists"), "{err}");
 
     let (code, out, err) = run_in(dir, &["check", "--profile", &prof, "demo/session.json"]);

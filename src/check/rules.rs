@@ -117,13 +117,25 @@ pub enum Rule {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum RulesError {
-    /// Cannot read the file.
-    #[error("{path}: {source}")]
+    /// Cannot read the file (the operating system's reason follows as the cause).
+    #[error("{path}")]
     Io {
         /// File.
         path: std::path::PathBuf,
         /// Cause.
         source: std::io::Error,
+    },
+    /// Not JSON, or a key repeated.
+    #[error("{path}:{line}:{column}: not valid JSON: {msg}")]
+    Json {
+        /// File.
+        path: std::path::PathBuf,
+        /// Line.
+        line: usize,
+        /// Column.
+        column: usize,
+        /// What is wrong.
+        msg: String,
     },
     /// Not valid rules.
     #[error("{path}:{line}:{column}: {msg}")]
@@ -157,6 +169,16 @@ impl Rules {
 
     /// Parses rules (the path names the file in messages).
     pub fn parse(path: &Path, text: &str) -> Result<Self, RulesError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let v = crate::json::parse_unique(text).map_err(|e| RulesError::Json {
+            path: path.to_path_buf(),
+            line: e.line(),
+            column: e.column(),
+            msg: e.to_string(),
+        })?;
+        if let Some(found) = v.get("format").and_then(|f| f.as_str()).filter(|f| *f != RULES_FORMAT) {
+            return Err(RulesError::UnknownFormat { path: path.to_path_buf(), found: found.to_string() });
+        }
         let r: Rules = serde_json::from_str(text).map_err(|e| RulesError::Parse {
             path: path.to_path_buf(),
             line: e.line(),

@@ -5,7 +5,7 @@ use anyhow::Context;
 use crosscal::app::validate::{correct_run, Mode};
 use crosscal::correct::{correct_csv_streaming, Calibration, OutputScale, StreamCsvError, StreamCsvOptions};
 use crosscal::profile::Profile;
-use crosscal::session::{parse_recording, recording_header, CsvLine, MotionSpec, ReadOptions, Run, RunSpec};
+use crosscal::session::{read_recording, recording_header, CsvLine, MotionSpec, ReadOptions, Run, RunSpec};
 use crosscal::units::{AccelUnit, GyroUnit, Units};
 use std::io::Write;
 use std::path::PathBuf;
@@ -83,7 +83,10 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             .ok_or_else(|| anyhow::anyhow!("--accel-unit '{u}': expected one of {}", AccelUnit::CHOICES))?;
     }
     if a.output.exists() && !a.force {
-        anyhow::bail!("{} already exists: choose another output or pass --force to replace it", a.output.display());
+        return Err(anyhow::Error::new(std::io::Error::new(
+            std::io::ErrorKind::AlreadyExists,
+            format!("{} already exists: choose another output or pass --force to replace it", a.output.display()),
+        )));
     }
     if a.output.canonicalize().ok().is_some_and(|o| a.input.canonicalize().ok().is_some_and(|i| i == o)) {
         anyhow::bail!("the output {} is the input: crosscal never modifies the data it is given", a.output.display());
@@ -106,14 +109,8 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         }
         return run_streaming(&a, &profile, &cal, &units, out_units, scale);
     }
-    let bytes = std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
-    let rec = parse_recording(
-        &a.input,
-        &bytes,
-        &units,
-        profile.g_m_s2,
-        ReadOptions { strict: a.strict, ..ReadOptions::default() },
-    )?;
+    let rec =
+        read_recording(&a.input, &units, profile.g_m_s2, ReadOptions { strict: a.strict, ..ReadOptions::default() })?;
     for w in &rec.warnings {
         eprintln!("warning: {w}");
     }
@@ -179,7 +176,7 @@ fn run_streaming(
     out_units: Units,
     scale: OutputScale,
 ) -> anyhow::Result<Outcome> {
-    let input = std::fs::File::open(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
+    let (input, _) = crosscal::session::open_regular(&a.input)?;
     let opts = StreamCsvOptions { scale, strict: a.strict };
     let mut failed = None;
     let mut done = None;

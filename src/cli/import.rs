@@ -15,7 +15,7 @@ pub struct Args {
     #[arg(long, global = true, default_value = "imported-session")]
     out: PathBuf,
     /// Serial number of the unit.
-    #[arg(long, global = true, default_value = "imported")]
+    #[arg(long, global = true, default_value = "imported", value_parser = super::parse_serial)]
     serial: String,
     /// Local gravity, m/s² (imucal's default 9.81; imu_tk's example 9.81744).
     #[arg(long, global = true)]

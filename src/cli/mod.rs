@@ -21,56 +21,132 @@ use std::process::ExitCode;
 
 /// Exit code: a check or acceptance rule failed.
 pub const EXIT_CHECK_FAILED: u8 = 1;
-/// Exit code: bad usage or an error not listed below.
+/// Exit code: bad usage, or a request these data cannot satisfy.
 pub const EXIT_INPUT: u8 = 2;
 
-/// Exit code of an error: one code per kind of bad input (documented in the README).
-pub fn exit_code(e: &anyhow::Error) -> u8 {
+/// Every exit code and its one meaning, as the README's table lists them (and
+/// `tests/exit_codes.rs` produces each one).
+pub const EXIT_CODES: &[(u8, &str)] = &[
+    (0, "success"),
+    (1, "a check or an acceptance rule failed"),
+    (2, "usage: a bad flag or value, or a request these data cannot satisfy"),
+    (3, "a file cannot be read or written"),
+    (4, "empty recording: no samples, or too few to analyse"),
+    (5, "header missing, a required column absent or a column repeated"),
+    (6, "a value is not a number, or is NaN, infinite or too large for a double"),
+    (7, "a row has more or fewer fields than the header"),
+    (8, "duplicate or decreasing t (or no usable sample interval)"),
+    (9, "gap in t (with --strict)"),
+    (10, "unknown or misspelled unit"),
+    (11, "a JSON file (manifest, profile, rules) is not valid JSON or repeats a key"),
+    (12, "unknown session format version"),
+    (13, "a run's file is missing or is not a regular file"),
+    (14, "a mount is not a rotation"),
+    (15, "profile of an unknown format version"),
+    (16, "profile of a different unit"),
+    (17, "the runs cannot identify the requested model (with --strict)"),
+    (18, "another invalid manifest value (out of its range, missing, of the wrong kind)"),
+    (19, "malformed CSV (quoting, encoding, a line over 1 MiB)"),
+    (20, "invalid rules file (unknown format version, rule kind, term or unit)"),
+    (21, "invalid profile (a coefficient missing, repeated or not finite; g out of range; a scale matrix that cannot be inverted; in another unit's folder)"),
+    (22, "the estimate failed (a nonlinear search did not converge, too few samples, values too large to compute with)"),
+    (23, "the correction cannot be made (a non-finite result; no temperature for a temperature model)"),
+    (24, "the output already exists (crosscal never overwrites without --force)"),
+];
+
+/// The exit code of a session reading problem.
+fn session_code(p: crosscal::session::Problem) -> u8 {
+    use crosscal::session::Problem;
+    match p {
+        Problem::Io => 3,
+        Problem::Empty => 4,
+        Problem::Header => 5,
+        Problem::Value => 6,
+        Problem::FieldCount => 7,
+        Problem::Time => 8,
+        Problem::Gap => 9,
+        Problem::Units => 10,
+        Problem::Json => 11,
+        Problem::Format => 12,
+        Problem::MissingFile => 13,
+        Problem::Mount => 14,
+        Problem::Malformed => 19,
+        _ => 18,
+    }
+}
+
+/// The exit code of one error of the chain, or `None` to look at its cause.
+fn code_of(cause: &(dyn std::error::Error + 'static)) -> Option<u8> {
+    use crosscal::check::rules::RulesError;
+    use crosscal::correct::{CorrectError, StreamCsvError};
     use crosscal::estimate::EstimateError;
     use crosscal::profile::ProfileError;
-    use crosscal::session::{Problem, SessionError};
-    for cause in e.chain() {
-        if let Some(s) = cause.downcast_ref::<SessionError>() {
-            return match s.problem() {
-                Problem::Io => 3,
-                Problem::Empty => 4,
-                Problem::Header => 5,
-                Problem::Value => 6,
-                Problem::Truncated => 7,
-                Problem::Time => 8,
-                Problem::Gap => 9,
-                Problem::Units => 10,
-                Problem::Json => 11,
-                Problem::Format => 12,
-                Problem::MissingFile => 13,
-                Problem::Mount => 14,
-                Problem::Malformed => 19,
-                _ => 18,
-            };
-        }
-        if let Some(p) = cause.downcast_ref::<ProfileError>() {
-            return match p {
-                ProfileError::Io { .. } => 3,
-                ProfileError::UnknownFormat { .. } => 15,
-                ProfileError::WrongUnit { .. } => 16,
-                _ => 18,
-            };
-        }
-        if let Some(r) = cause.downcast_ref::<crosscal::check::rules::RulesError>() {
-            return match r {
-                crosscal::check::rules::RulesError::Io { .. } => 3,
-                crosscal::check::rules::RulesError::UnknownFormat { .. } => 12,
-                _ => 11,
-            };
-        }
-        if let Some(EstimateError::Unidentifiable(_)) = cause.downcast_ref::<EstimateError>() {
-            return 17;
-        }
-        if cause.downcast_ref::<std::io::Error>().is_some() {
-            return 3;
-        }
+    use crosscal::session::SessionError;
+    if let Some(s) = cause.downcast_ref::<SessionError>() {
+        return Some(session_code(s.problem()));
     }
-    EXIT_INPUT
+    if let Some(p) = cause.downcast_ref::<ProfileError>() {
+        return Some(match p {
+            ProfileError::Io { .. } => 3,
+            ProfileError::Json { .. } => 11,
+            ProfileError::UnknownFormat { .. } => 15,
+            ProfileError::WrongUnit { .. } => 16,
+            ProfileError::BadTime(_) | ProfileError::BadSerial(_) => 2,
+            _ => 21,
+        });
+    }
+    if let Some(r) = cause.downcast_ref::<RulesError>() {
+        return Some(match r {
+            RulesError::Io { .. } => 3,
+            RulesError::Json { .. } => 11,
+            _ => 20,
+        });
+    }
+    if let Some(e) = cause.downcast_ref::<EstimateError>() {
+        return match e {
+            EstimateError::Read { .. } => None,
+            EstimateError::Unidentifiable(_) => Some(17),
+            EstimateError::NoData => Some(4),
+            EstimateError::NotConverged(_) | EstimateError::NonFinite { .. } | EstimateError::TooFewSamples { .. } => {
+                Some(22)
+            }
+            _ => Some(EXIT_INPUT),
+        };
+    }
+    if let Some(c) = cause.downcast_ref::<CorrectError>() {
+        return Some(match c {
+            CorrectError::Model(_) | CorrectError::Singular(_) => 21,
+            CorrectError::NonFinite { .. } | CorrectError::MissingTemperature(_) => 23,
+            _ => EXIT_INPUT,
+        });
+    }
+    if let Some(c) = cause.downcast_ref::<StreamCsvError>() {
+        return match c {
+            StreamCsvError::NonFinite { .. } => Some(23),
+            StreamCsvError::Write(_) => Some(3),
+            _ => None,
+        };
+    }
+    if let Some(n) = cause.downcast_ref::<crosscal::noise::NoiseError>() {
+        return Some(match n {
+            crosscal::noise::NoiseError::TooShort(_) => 4,
+            _ => 8,
+        });
+    }
+    if let Some(crosscal::simulate::SimulateError::Exists(_)) =
+        cause.downcast_ref::<crosscal::simulate::SimulateError>()
+    {
+        return Some(24);
+    }
+    if let Some(io) = cause.downcast_ref::<std::io::Error>() {
+        return Some(if io.kind() == std::io::ErrorKind::AlreadyExists { 24 } else { 3 });
+    }
+    None
+}
+
+/// Exit code of an error: the first error in its chain that says (see [`EXIT_CODES`]).
+pub fn exit_code(e: &anyhow::Error) -> u8 {
+    e.chain().find_map(code_of).unwrap_or(EXIT_INPUT)
 }
 
 /// Cross-coupling calibration of gyro and accelerometer triads on a conic-motion stand.
@@ -111,6 +187,8 @@ enum Command {
     Batch(batch::Args),
     /// Turn a recording laid out for imucal, imu_tk or a Tedaldi script into a crosscal session.
     Import(import::Args),
+    /// List the exit codes and what each means (as the README's table).
+    ExitCodes,
 }
 
 /// Stdout was closed by its reader (`crosscal … | head -1`): the command stops quietly
@@ -165,8 +243,29 @@ impl ModelArgs {
     }
 }
 
+/// A unit serial that can name a folder of the profile store (no path separator, no `..`).
+pub fn parse_serial(s: &str) -> Result<String, String> {
+    if crosscal::session::valid_serial(s) {
+        Ok(s.to_string())
+    } else {
+        Err(format!(
+            "'{s}' cannot be a serial: use letters, digits, '-', '_' or '.' (not starting with '.'), at most 128"
+        ))
+    }
+}
+
 fn parse_preset(s: &str) -> Result<crosscal::model::Preset, String> {
     s.parse().map_err(|_| format!("expected one of {}", crosscal::model::Preset::NAMES))
+}
+
+/// Prints [`EXIT_CODES`] as a Markdown table.
+fn print_exit_codes() -> anyhow::Result<Outcome> {
+    let mut s = String::from("| code | meaning |\n|---|---|\n");
+    for (code, meaning) in EXIT_CODES {
+        s.push_str(&format!("| {code} | {meaning} |\n"));
+    }
+    out(format_args!("{s}"))?;
+    Ok(Outcome::Ok)
 }
 
 /// Outcome of a subcommand that succeeded in running.
@@ -179,6 +278,12 @@ pub enum Outcome {
 
 /// Entry point.
 pub fn main() -> ExitCode {
+    // Ctrl-C or SIGTERM: remove the temporary files being written, then stop (no output is
+    // left half-written, and no hidden temporary file is left behind).
+    let _ = ctrlc::set_handler(|| {
+        crosscal::atomic::remove_in_progress();
+        std::process::exit(130);
+    });
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
@@ -201,6 +306,7 @@ pub fn main() -> ExitCode {
         Command::Profile(a) => profile::run(a),
         Command::Batch(a) => batch::run(a),
         Command::Import(a) => import::run(a),
+        Command::ExitCodes => print_exit_codes(),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

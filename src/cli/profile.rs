@@ -17,6 +17,7 @@ enum Sub {
     /// List units, or one unit's profile history (oldest first).
     List {
         /// Unit serial (all units when absent).
+        #[arg(value_parser = super::parse_serial)]
         serial: Option<String>,
         /// Profile store.
         #[arg(long, default_value = "calib-profiles")]
@@ -25,6 +26,7 @@ enum Sub {
     /// Show the latest profile of a unit (valid at a date with --at).
     Show {
         /// Unit serial.
+        #[arg(value_parser = super::parse_serial)]
         serial: String,
         /// The profile in force at this time (RFC 3339 or a date, e.g. 2026-11-23).
         #[arg(long)]
@@ -65,7 +67,7 @@ enum Sub {
         /// imucal calibration JSON.
         file: PathBuf,
         /// Serial of the unit.
-        #[arg(long)]
+        #[arg(long, value_parser = super::parse_serial)]
         serial: String,
         /// Local gravity (used when imucal's input unit is g), m/s².
         #[arg(long, default_value_t = 9.80665)]

@@ -36,7 +36,7 @@ pub struct Args {
     #[command(flatten)]
     runs: super::RunSet,
     /// Serial number of the simulated unit.
-    #[arg(long)]
+    #[arg(long, value_parser = super::parse_serial)]
     serial: Option<String>,
     /// Hide a catalogue effect in the unit (repeatable); give its values with --set.
     #[arg(long = "hidden")]
@@ -134,6 +134,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             _ => anyhow::bail!("--temperature expects START,END in °C"),
         }
     }
+    crosscal::simulate::check_runs(&cfg.runs, cfg.sample_rate_hz).map_err(anyhow::Error::msg)?;
     let session = cfg.generate();
     let path =
         write_session(&session, &a.out).with_context(|| format!("writing the session to {}", a.out.display()))?;

@@ -66,8 +66,16 @@ pub enum StreamCsvError {
     #[error(transparent)]
     Correct(#[from] CorrectError),
     /// The output could not be written.
-    #[error("writing the output: {0}")]
+    #[error("writing the output")]
     Write(#[from] std::io::Error),
+    /// A row's correction is not finite: refused rather than written.
+    #[error("{path}:{line}: the corrected values of this row are not finite (inputs too large for the calibration?); nothing is written")]
+    NonFinite {
+        /// The recording.
+        path: std::path::PathBuf,
+        /// Line of the row.
+        line: u64,
+    },
 }
 
 /// Corrects the recording `input` (named `path` in messages) into `out` as CSV, in the
@@ -98,6 +106,7 @@ pub fn correct_csv_streaming(
     let mut scan = StreamScan::new(units.time.to_s());
     let (mut t, mut gyro, mut accel, mut temp) =
         (Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK));
+    let mut lines: Vec<u64> = Vec::with_capacity(BLOCK);
     let (mut w_out, mut a_out, mut flags) = (vec![[0.0; 3]; BLOCK], vec![[0.0; 3]; BLOCK], vec![0u8; BLOCK]);
     let mut line = CsvLine::new();
     let mut row = Row::default();
@@ -107,7 +116,9 @@ pub fn correct_csv_streaming(
         gyro.clear();
         accel.clear();
         temp.clear();
+        lines.clear();
         while t.len() < BLOCK && rdr.read_row(&mut row)? {
+            lines.push(rdr.line());
             if let Some(gap) = scan.push(rdr.line(), row.t_s, row.gyro, row.accel).filter(|_| strict) {
                 return Err(gap.to_error(path, rdr.t_column()).into());
             }
@@ -126,6 +137,9 @@ pub fn correct_csv_streaming(
             corrector.push_block(&t, &gyro, &accel, &mut w_out, &mut a_out);
         }
         for k in 0..n {
+            if !w_out[k].iter().chain(&a_out[k]).all(|v| v.is_finite()) {
+                return Err(StreamCsvError::NonFinite { path: path.to_path_buf(), line: lines[k] });
+            }
             let (temp, flag) = (has_temp.then_some(temp[k]), has_flags.then_some(flags[k]));
             line.sample(t[k] - time_offset_s, w_out[k], a_out[k], scale.factors(), temp, flag).write_to(out)?;
             flagged += usize::from(flag.unwrap_or(0) != 0);

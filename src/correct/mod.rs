@@ -57,6 +57,16 @@ pub enum CorrectError {
     /// The session has no per-sample reference (protocol runs).
     #[error("{0} is a protocol session (static poses, turns, multi-position): it has no per-sample reference to check against; `crosscal fit` and `crosscal diagnose` report its pose and turn residuals")]
     ProtocolSession(String),
+    /// A sample's correction is not finite: refused rather than returned.
+    #[error(
+        "sample {sample} (t = {t_s} s): the corrected values are not finite (inputs too large for the calibration?)"
+    )]
+    NonFinite {
+        /// 1-based sample number.
+        sample: usize,
+        /// Its time stamp, s.
+        t_s: f64,
+    },
     /// Input arrays disagree in length.
     #[error("input lengths differ: t has {t}, gyro {g}, accel {a}")]
     Length {
@@ -112,6 +122,15 @@ fn set_flags(flags: &mut Vec<u8>, n: usize, k: usize, f: u8) {
     }
     if let Some(x) = flags.get_mut(k) {
         *x = f;
+    }
+}
+
+/// Refuses a correction with a non-finite value (naming the first such sample).
+fn ensure_finite(c: Corrected, t_s: &[f64]) -> Result<Corrected, CorrectError> {
+    let bad = c.w_rad_s.iter().zip(&c.a_m_s2).position(|(w, a)| !w.iter().chain(a).all(|v| v.is_finite()));
+    match bad {
+        Some(k) => Err(CorrectError::NonFinite { sample: k + 1, t_s: t_s.get(k).copied().unwrap_or(f64::NAN) }),
+        None => Ok(c),
     }
 }
 

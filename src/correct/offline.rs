@@ -1,7 +1,7 @@
 //! Offline correction of a whole record: centred derivative window, iterated to a fixed
 //! point (each pass re-estimates ε̂ and the effect terms from the previous pass).
 
-use super::{check_inputs, mv, set_flags, solve, Calibration, CorrectError, Corrected};
+use super::{check_inputs, ensure_finite, mv, set_flags, solve, Calibration, CorrectError, Corrected};
 use crate::model::State;
 use crate::motion::{derivative_offline, DerivativeConfig};
 
@@ -71,7 +71,9 @@ pub fn correct_offline(
             break;
         }
     }
-    Ok(Corrected { w_rad_s: w, a_m_s2: acc, iterations, converged, warmup: 0, flags, time_offset_s: cal.lag_s() })
+    let out =
+        Corrected { w_rad_s: w, a_m_s2: acc, iterations, converged, warmup: 0, flags, time_offset_s: cal.lag_s() };
+    ensure_finite(out, t_s)
 }
 
 /// Resamples a correction with a time offset onto the input stamps (cubic interpolation):

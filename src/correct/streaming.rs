@@ -1,7 +1,7 @@
 //! Streaming correction: causal, one sample at a time, fixed memory, no allocation per
 //! sample (see the module documentation of [`super`]).
 
-use super::{check_inputs, set_flags, Calibration, CorrectError, Corrected, SensorInverse};
+use super::{check_inputs, ensure_finite, set_flags, Calibration, CorrectError, Corrected, SensorInverse};
 use crate::model::State;
 use crate::motion::SlopeWeights;
 use nalgebra::Matrix3;
@@ -596,7 +596,7 @@ pub fn correct_streaming(
         out.w_rad_s.resize(n, [0.0; 3]);
         out.a_m_s2.resize(n, [0.0; 3]);
         s.push_block(t_s, gyro, accel, &mut out.w_rad_s, &mut out.a_m_s2);
-        return Ok(out);
+        return ensure_finite(out, t_s);
     }
     for k in 0..n {
         let (w, a) = s.push(t_s[k], gyro[k], accel[k], temp_c.map_or(f64::NAN, |t| t[k]));
@@ -604,5 +604,5 @@ pub fn correct_streaming(
         out.a_m_s2.push(a);
         set_flags(&mut out.flags, n, k, s.last_flags());
     }
-    Ok(out)
+    ensure_finite(out, t_s)
 }

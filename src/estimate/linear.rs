@@ -436,7 +436,8 @@ fn solve(
                 break (rs, 1.0);
             }
             let scaled = DMatrix::from_fn(q, q, |i, j| rs[(i, j)] / norms[cols.of_term[fitted[j]]]);
-            let svd = scaled.svd(false, true);
+            let svd =
+                crate::stats::svd(scaled, false, true).ok_or(EstimateError::NonFinite { sensor, axis: AXES[ch] })?;
             let (mut smin, mut smax, mut imin) = (f64::INFINITY, 0.0_f64, 0);
             for (i, &s) in svd.singular_values.iter().enumerate() {
                 if s < smin {
@@ -464,22 +465,16 @@ fn solve(
         }
         let known = opts.known_sigma.map(|k| k[3 * sensor.index() + ch]);
         let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n, known);
+        // Outputs too large for the arithmetic (squares overflow) leave no usable estimate:
+        // refused, not written into a profile.
+        if !(rss.is_finite() && theta.iter().all(|v| v.is_finite())) {
+            return Err(EstimateError::NonFinite { sensor, axis: AXES[ch] });
+        }
         for (a, &ti) in fitted.iter().enumerate() {
             values[ti] = theta[a];
             std_errors[ti] = Some(cov[a][a].sqrt());
         }
-        for a in 0..q {
-            for b in a + 1..q {
-                let c = cov[a][b] / (cov[a][a] * cov[b][b]).sqrt();
-                if c.abs() > 0.95 {
-                    correlated.push(Correlation {
-                        a: terms[fitted[a]].term.name.clone(),
-                        b: terms[fitted[b]].term.name.clone(),
-                        correlation: c,
-                    });
-                }
-            }
-        }
+        correlated.extend(correlations(terms, &fitted, &cov));
         fitted_sets.push(fitted.clone());
         channels.push(ChannelFit {
             axis: AXES[ch],
@@ -498,6 +493,24 @@ fn solve(
     }
 
     Ok(Solved { values, std_errors, status, channels, unidentifiable, correlated, fitted_sets })
+}
+
+/// Pairs of fitted coefficients whose estimates correlate above 0.95.
+fn correlations(terms: &[crate::model::TermRef<'_>], fitted: &[usize], cov: &[Vec<f64>]) -> Vec<Correlation> {
+    let mut out = Vec::new();
+    for a in 0..fitted.len() {
+        for b in a + 1..fitted.len() {
+            let c = cov[a][b] / (cov[a][a] * cov[b][b]).sqrt();
+            if c.abs() > 0.95 {
+                out.push(Correlation {
+                    a: terms[fitted[a]].term.name.clone(),
+                    b: terms[fitted[b]].term.name.clone(),
+                    correlation: c,
+                });
+            }
+        }
+    }
+    out
 }
 
 /// The sensor fit from its solution.

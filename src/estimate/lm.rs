@@ -161,8 +161,11 @@ impl LmResult {
         let j = DMatrix::from_fn(m, n, |i, k| self.jacobian[i][k]);
         let jtj = j.transpose() * &j;
         let s2 = 2.0 * self.cost() / (m.saturating_sub(n).max(1)) as f64;
-        let inv =
-            jtj.clone().try_inverse().unwrap_or_else(|| jtj.pseudo_inverse(1e-14).unwrap_or(DMatrix::zeros(n, n)));
+        let inv = jtj.clone().try_inverse().unwrap_or_else(|| {
+            crate::stats::svd(jtj, true, true)
+                .and_then(|svd| svd.pseudo_inverse(1e-14).ok())
+                .unwrap_or(DMatrix::from_element(n, n, f64::NAN))
+        });
         inv * s2
     }
 }

@@ -102,6 +102,14 @@ pub enum EstimateError {
     /// No runs.
     #[error("no samples to fit")]
     NoData,
+    /// The design of a channel holds values too large (or not finite) to compute with.
+    #[error("{sensor} channel {axis}: the design has values that are not finite (a declared rate, angle or a recorded value too large to compute with)")]
+    NonFinite {
+        /// Sensor.
+        sensor: SensorKind,
+        /// Axis letter.
+        axis: char,
+    },
     /// An effect needs a temperature that a run does not have.
     #[error("effect '{effect}' needs temperatures but run '{run}' has no temp column and no temperature_c")]
     MissingTemperature {

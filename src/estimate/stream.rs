@@ -2,7 +2,7 @@
 //! row (one reused record), the reference motion is evaluated per sample (conic: paper eq. 1
 //! with the spec's eq. 2; static: constant) and every design row goes into a QR
 //! accumulator; a second read gives the residual statistics, from the rows the first read
-//! spilled in binary to an anonymous temporary file (64 bytes a sample on disk, none in
+//! spilled in binary to a temporary file (64 bytes a sample on disk, none in
 //! memory; without a writable temporary directory the text is parsed again). Memory is
 //! O(parameters² + chunk) per run in flight, whatever the recordings' length; runs are
 //! read in parallel.
@@ -35,7 +35,7 @@ pub struct StreamRun<'a> {
     strict: bool,
     /// The used rows as parsed, in binary (an anonymous temporary file, written by the
     /// first read): later reads take them from here instead of parsing the text again.
-    spill: Mutex<Option<std::fs::File>>,
+    spill: Mutex<Option<Spill>>,
 }
 
 /// What the first read of a run's file saw.
@@ -47,6 +47,24 @@ struct Seen {
     /// Gaps, saturation and spikes in the file (as [`crate::session::sanity::StreamScan`]
     /// finds them).
     warnings: Vec<String>,
+}
+
+/// The rows of a run as parsed, in a closed temporary file (reopened for each later read,
+/// so that a session of a thousand runs does not hold a thousand files open). Removed when
+/// dropped, and by the binary's signal handler if the process is interrupted.
+struct Spill(tempfile::TempPath);
+
+impl Spill {
+    fn new(path: tempfile::TempPath) -> Self {
+        crate::atomic::register_temporary(&path);
+        Self(path)
+    }
+}
+
+impl Drop for Spill {
+    fn drop(&mut self) {
+        crate::atomic::forget_temporary(&self.0);
+    }
 }
 
 /// f64 values per spilled row: t, gyro x y z, accel x y z, temperature.
@@ -188,10 +206,9 @@ impl StreamRun<'_> {
     }
 
     /// A later read: the rows from the spill, bit for bit as parsed.
-    fn read_spill(&self, file: std::fs::File, blocks: &mut Blocks<'_, '_>) -> Result<(), SessionError> {
-        use std::io::{Read, Seek};
-        let mut file = file;
-        file.seek(std::io::SeekFrom::Start(0)).map_err(|e| self.io(e))?;
+    fn read_spill(&self, path: &Path, blocks: &mut Blocks<'_, '_>) -> Result<(), SessionError> {
+        use std::io::Read;
+        let file = std::fs::File::open(path).map_err(|e| self.io(e))?;
         let mut input = std::io::BufReader::with_capacity(1 << 18, file);
         let mut rec = [0u8; 8 * SPILL_VALUES];
         let value = |rec: &[u8; 8 * SPILL_VALUES], i: usize| {
@@ -230,7 +247,11 @@ impl StreamRun<'_> {
         }
         let mut scan = known.is_none().then(|| StreamScan::new(self.manifest.units.time.to_s()));
         let mut spill = if known.is_none() {
-            tempfile::tempfile().ok().map(|f| std::io::BufWriter::with_capacity(1 << 18, f))
+            tempfile::Builder::new()
+                .prefix(&format!(".crosscal-{}-spill-", std::process::id()))
+                .tempfile()
+                .ok()
+                .map(|f| std::io::BufWriter::with_capacity(1 << 18, f))
         } else {
             None
         };
@@ -273,7 +294,7 @@ impl StreamRun<'_> {
             }
             if let Some(file) = spill.and_then(|w| w.into_inner().ok()) {
                 if let Ok(mut s) = self.spill.lock() {
-                    *s = Some(file);
+                    *s = Some(Spill::new(file.into_temp_path()));
                 }
             }
         }
@@ -292,8 +313,9 @@ impl Samples for StreamRun<'_> {
             gyro: Vec::with_capacity(BLOCK),
             accel: Vec::with_capacity(BLOCK),
         };
-        match self.spill.lock().ok().and_then(|s| s.as_ref().and_then(|f| f.try_clone().ok())) {
-            Some(file) => self.read_spill(file, &mut blocks),
+        let spilled = self.spill.lock().ok().and_then(|s| s.as_ref().map(|f| f.0.to_path_buf()));
+        match spilled {
+            Some(path) => self.read_spill(&path, &mut blocks),
             None => self.read_text(&mut blocks),
         }
     }

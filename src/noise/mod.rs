@@ -168,7 +168,7 @@ fn fit_terms(tau: &[f64], avar: &[f64], weight: &[f64]) -> [f64; 5] {
             let n = norms[j];
             a.column_mut(j).iter_mut().for_each(|v| *v /= n);
         }
-        let Ok(x) = a.clone().svd(true, true).solve(&b, 1e-12) else {
+        let Some(Ok(x)) = crate::stats::svd(a.clone(), true, true).map(|svd| svd.solve(&b, 1e-12)) else {
             continue;
         };
         if x.iter().any(|v| *v < 0.0 || !v.is_finite()) {

@@ -7,6 +7,9 @@
 //! (file name and SHA-256) and the conventions of the numbers.
 
 pub mod interop;
+mod store;
+mod validate;
+
 use crate::estimate::{CoefStatus, Fit, SensorFit};
 use crate::model::{Model, ModelError};
 use crate::session::{RunUsed, Session};
@@ -14,6 +17,7 @@ use crate::units::SensorKind;
 use crate::units::Units;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
+pub use store::{history, latest, parse_time, save, serials, StoredProfile};
 
 /// The profile format this version writes and reads.
 pub const PROFILE_FORMAT: &str = "crosscal-profile/1";
@@ -150,19 +154,45 @@ pub struct Profile {
     pub protocol: Option<crate::estimate::protocol::ProtocolReport>,
 }
 
+/// What to say about a format this version does not read: another kind of crosscal file
+/// is named as such; a newer profile version asks for a newer crosscal.
+fn upgrade_hint(found: &str) -> String {
+    if found.starts_with("crosscal-session/") {
+        ": this is a session manifest, not a profile (a profile comes from `crosscal fit`)".into()
+    } else if found.starts_with("crosscal-rules/") {
+        ": this is a rules file, not a profile".into()
+    } else if found.starts_with("crosscal-profile/") {
+        "; upgrade crosscal to read newer profiles".into()
+    } else {
+        ": not a crosscal profile".into()
+    }
+}
+
 /// Profile errors.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ProfileError {
-    /// File system error.
-    #[error("{path}: {source}")]
+    /// File system error (the operating system's reason follows as the cause).
+    #[error("{path}")]
     Io {
         /// File.
         path: PathBuf,
         /// Cause.
         source: std::io::Error,
     },
-    /// Not JSON or not a profile.
+    /// The file is not JSON (or repeats a key).
+    #[error("{path}:{line}:{column}: not valid JSON: {msg}")]
+    Json {
+        /// File.
+        path: PathBuf,
+        /// Line.
+        line: usize,
+        /// Column.
+        column: usize,
+        /// Cause.
+        msg: String,
+    },
+    /// JSON, but not a profile: a field missing or of the wrong type.
     #[error("{path}:{line}:{column}: not a valid crosscal profile: {msg}")]
     Parse {
         /// File.
@@ -175,12 +205,34 @@ pub enum ProfileError {
         msg: String,
     },
     /// A format this version does not know.
-    #[error("{path}: profile format '{found}' is not supported: this crosscal reads '{PROFILE_FORMAT}'; upgrade crosscal to read newer profiles")]
+    #[error(
+        "{path}: profile format '{found}' is not supported: this crosscal reads '{PROFILE_FORMAT}'{}",
+        upgrade_hint(found)
+    )]
     UnknownFormat {
         /// File.
         path: PathBuf,
         /// Format found.
         found: String,
+    },
+    /// A profile whose numbers cannot be used: a coefficient missing, repeated or not finite,
+    /// an unusable g, a scale matrix too close to singular to invert.
+    #[error("{path}: {msg}")]
+    Invalid {
+        /// File.
+        path: PathBuf,
+        /// What is wrong and what was expected.
+        msg: String,
+    },
+    /// A profile in a unit's folder of the store that belongs to another unit.
+    #[error("{path}: the profile is of unit '{profile_serial}' but sits in the folder of unit '{folder}': moved or copied by hand?")]
+    WrongFolder {
+        /// File.
+        path: PathBuf,
+        /// Serial in the profile.
+        profile_serial: String,
+        /// The folder's unit.
+        folder: String,
     },
     /// The profile names an effect this version does not know.
     #[error("{path}: cannot rebuild the profile's model")]
@@ -195,7 +247,7 @@ pub enum ProfileError {
     #[error("'{0}' is not a time: expected RFC 3339 (2026-11-23T12:00:00Z) or a date (2026-11-23)")]
     BadTime(String),
     /// Serial cannot be used as a folder name.
-    #[error("serial '{0}' cannot name a profile folder")]
+    #[error("serial '{0}' cannot name a profile folder: use letters, digits, '-', '_' or '.' (not starting with '.')")]
     BadSerial(String),
     /// The profile belongs to another unit.
     #[error("{path}: the profile is for unit '{profile_serial}' but the data are of unit '{data_serial}'; use that unit's profile")]
@@ -319,13 +371,12 @@ impl Profile {
 
     /// Parses a profile, refusing unknown formats with a clear message.
     pub fn from_json(path: &Path, text: &str) -> Result<Self, ProfileError> {
-        let parse_err = |e: serde_json::Error| ProfileError::Parse {
-            path: path.to_path_buf(),
-            line: e.line(),
-            column: e.column(),
-            msg: e.to_string(),
-        };
-        let v: serde_json::Value = serde_json::from_str(text).map_err(parse_err)?;
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let at = |e: &serde_json::Error| (path.to_path_buf(), e.line(), e.column(), e.to_string());
+        let v = crate::json::parse_unique(text).map_err(|e| {
+            let (path, line, column, msg) = at(&e);
+            ProfileError::Json { path, line, column, msg }
+        })?;
         match v.get("format").and_then(|f| f.as_str()) {
             Some(PROFILE_FORMAT) => {}
             Some(other) => {
@@ -340,8 +391,12 @@ impl Profile {
                 })
             }
         }
-        let p: Profile = serde_json::from_str(text).map_err(parse_err)?;
-        p.model().map_err(|source| ProfileError::Model { path: path.to_path_buf(), source })?;
+        let p: Profile = serde_json::from_str(text).map_err(|e| {
+            let (path, line, column, msg) = at(&e);
+            ProfileError::Parse { path, line, column, msg }
+        })?;
+        let model = p.model().map_err(|source| ProfileError::Model { path: path.to_path_buf(), source })?;
+        validate::validate(&p, &model).map_err(|msg| ProfileError::Invalid { path: path.to_path_buf(), msg })?;
         Ok(p)
     }
 
@@ -371,87 +426,6 @@ impl Profile {
 pub(crate) fn now_utc() -> String {
     let now = jiff::Timestamp::now();
     now.round(jiff::Unit::Millisecond).unwrap_or(now).to_string()
-}
-
-/// A file in the profile store and what reading it gave.
-pub type StoredProfile = (PathBuf, Result<Profile, ProfileError>);
-
-/// Every readable profile of unit `serial` in the store `root`, oldest first (by creation
-/// time, then file name). Files that are not profiles are returned as errors, in order.
-pub fn history(root: &Path, serial: &str) -> Result<Vec<StoredProfile>, ProfileError> {
-    let dir = root.join(serial);
-    let rd = std::fs::read_dir(&dir).map_err(|source| ProfileError::Io { path: dir.clone(), source })?;
-    let mut files: Vec<PathBuf> =
-        rd.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|x| x == "json")).collect();
-    files.sort();
-    let mut out: Vec<StoredProfile> = files.into_iter().map(|p| (p.clone(), Profile::read(&p))).collect();
-    out.sort_by(|a, b| {
-        // By time, not by text: "…:35Z" is earlier than "…:35.1Z" though it sorts after it.
-        let key = |x: &StoredProfile| x.1.as_ref().ok().and_then(|p| p.created_utc.parse::<jiff::Timestamp>().ok());
-        key(a).cmp(&key(b)).then_with(|| a.0.cmp(&b.0))
-    });
-    Ok(out)
-}
-
-/// The newest readable profile of unit `serial` in `root` created at or before `at` (RFC 3339;
-/// None = now).
-pub fn latest(root: &Path, serial: &str, at: Option<&str>) -> Result<(PathBuf, Profile), ProfileError> {
-    let cutoff = match at {
-        Some(a) => Some(parse_time(a)?),
-        None => None,
-    };
-    let found = history(root, serial)?.into_iter().rev().find_map(|(path, p)| {
-        let p = p.ok()?;
-        let t = p.created_utc.parse::<jiff::Timestamp>().ok()?;
-        cutoff.is_none_or(|c| t <= c).then_some((path, p))
-    });
-    found.ok_or_else(|| ProfileError::Io {
-        path: root.join(serial),
-        source: std::io::Error::new(
-            std::io::ErrorKind::NotFound,
-            match at {
-                Some(a) => format!("no profile of unit '{serial}' created at or before {a}"),
-                None => format!("no profile of unit '{serial}'"),
-            },
-        ),
-    })
-}
-
-/// Parses a UTC time: RFC 3339 (`2026-11-23T12:00:00Z`) or a date (`2026-11-23`, end of day).
-pub fn parse_time(s: &str) -> Result<jiff::Timestamp, ProfileError> {
-    if let Ok(t) = s.parse::<jiff::Timestamp>() {
-        return Ok(t);
-    }
-    s.parse::<jiff::civil::Date>()
-        .ok()
-        .and_then(|d| d.at(23, 59, 59, 999_000_000).to_zoned(jiff::tz::TimeZone::UTC).ok())
-        .map(|z| z.timestamp())
-        .ok_or_else(|| ProfileError::BadTime(s.to_string()))
-}
-
-/// Saves a profile under `root/<serial>/<timestamp>.json` atomically, never overwriting:
-/// if the name is taken, `-1`, `-2`, … are appended. Returns the path written.
-pub fn save(profile: &Profile, root: &Path) -> Result<PathBuf, ProfileError> {
-    if !crate::session::valid_serial(&profile.serial) {
-        return Err(ProfileError::BadSerial(profile.serial.clone()));
-    }
-    let dir = root.join(&profile.serial);
-    std::fs::create_dir_all(&dir).map_err(|source| ProfileError::Io { path: dir.clone(), source })?;
-    let json = profile.to_json();
-    let stem = profile.file_stem();
-    for k in 0..1000 {
-        let name = if k == 0 { format!("{stem}.json") } else { format!("{stem}-{k}.json") };
-        let path = dir.join(name);
-        match crate::atomic::write_new(&path, json.as_bytes()) {
-            Ok(()) => return Ok(path),
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
-            Err(source) => return Err(ProfileError::Io { path, source }),
-        }
-    }
-    Err(ProfileError::Io {
-        path: dir,
-        source: std::io::Error::other("more than 1000 profiles with the same time stamp"),
-    })
 }
 
 /// How one coefficient changed between two profiles of a unit.
@@ -487,19 +461,6 @@ pub fn diff(a: &Profile, b: &Profile) -> Vec<CoefChange> {
             Some(CoefChange { name: cb.name.clone(), unit: cb.unit.clone(), before: ca.value, after: cb.value, z })
         })
         .collect()
-}
-
-/// Serials with at least one file in the store, sorted.
-pub fn serials(root: &Path) -> Result<Vec<String>, ProfileError> {
-    let rd = std::fs::read_dir(root).map_err(|source| ProfileError::Io { path: root.to_path_buf(), source })?;
-    let mut out: Vec<String> = rd
-        .filter_map(|e| e.ok())
-        .filter(|e| e.path().is_dir())
-        .filter_map(|e| e.file_name().to_str().map(str::to_string))
-        .filter(|s| crate::session::valid_serial(s))
-        .collect();
-    out.sort();
-    Ok(out)
 }
 
 impl Profile {

@@ -110,11 +110,47 @@ fn csv_err(
 
 /// Reads a recording file. `g_m_s2` converts `g` to m/s².
 pub fn read_recording(path: &Path, units: &Units, g_m_s2: f64, opts: ReadOptions) -> Result<Recording, SessionError> {
+    let (file, size) = open_regular(path)?;
+    // Streamed (the reader buffers it): never held whole. The first million samples' room
+    // is reserved from the file's size; beyond that the arrays grow as samples arrive.
+    read_stream(path, file, (size / 64).min(1 << 20) as usize, units, g_m_s2, opts)
+}
+
+/// Opens a file that must be a regular file (not a folder, FIFO or device, which would be
+/// refused late or block), with its size.
+pub fn open_regular(path: &Path) -> Result<(std::fs::File, u64), SessionError> {
     let io = |source| SessionError::Io { path: path.to_path_buf(), source };
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() {
+        return Err(SessionError::NotRegular { path: path.to_path_buf(), what: file_kind(&meta) });
+    }
     let file = std::fs::File::open(path).map_err(io)?;
-    let size = file.metadata().map_err(io)?.len() as usize;
-    // Streamed (the reader buffers it): never held whole.
-    read_stream(path, file, size / 64, units, g_m_s2, opts)
+    Ok((file, meta.len()))
+}
+
+/// What a file that is not a regular file is, in words.
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    let t = meta.file_type();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a folder"
+    } else if t.is_file() {
+        "a regular file"
+    } else {
+        "not a regular file"
+    }
 }
 
 /// One CSV row converted to SI (stand-frame reference columns when requested).
@@ -162,6 +198,34 @@ impl<R: std::io::Read> std::io::Read for Hashing<R> {
 /// Bytes read from the input at a time (the buffer grows for longer lines).
 const LINE_BUFFER: usize = 1 << 18;
 
+/// The longest line a recording may have, bytes: a row of numbers is a few hundred bytes,
+/// so a longer line is not a recording (and memory stays bounded whatever the input).
+pub const MAX_LINE: usize = 1 << 20;
+
+/// Why the next line could not be had.
+#[derive(Debug)]
+enum LineError {
+    /// The input failed.
+    Io(std::io::Error),
+    /// Line `0` is longer than [`MAX_LINE`].
+    TooLong(u64),
+}
+
+impl LineError {
+    fn into_session(self, path: &Path) -> SessionError {
+        match self {
+            Self::Io(source) => SessionError::Io { path: path.to_path_buf(), source },
+            Self::TooLong(line) => csv_err(
+                Problem::Malformed,
+                path,
+                line,
+                "-",
+                format!("the line is longer than {MAX_LINE} bytes: expected rows of numbers a few hundred bytes long (is this file a recording?)"),
+            ),
+        }
+    }
+}
+
 /// The lines of a text, from one reused buffer: `\n`, `\r\n` and a lone `\r` end a line
 /// (as for the csv crate); a UTF-8 byte-order mark at the start is skipped.
 struct Lines<R> {
@@ -205,7 +269,7 @@ impl<R: std::io::Read> Lines<R> {
     }
 
     /// The next line as a range of [`Self::buf`] (without its terminator) and its number.
-    fn next_line(&mut self) -> std::io::Result<Option<(std::ops::Range<usize>, u64)>> {
+    fn next_line(&mut self) -> Result<Option<(std::ops::Range<usize>, u64)>, LineError> {
         loop {
             if self.fresh && (self.end - self.start >= 3 || self.eof) {
                 self.fresh = false;
@@ -235,9 +299,11 @@ impl<R: std::io::Read> Lines<R> {
                     self.start = self.end;
                     self.next_no += 1;
                     return Ok(Some((line, self.next_no - 1)));
+                } else if self.end - self.start > MAX_LINE {
+                    return Err(LineError::TooLong(self.next_no));
                 }
             }
-            self.fill()?;
+            self.fill().map_err(LineError::Io)?;
         }
     }
 }
@@ -283,11 +349,21 @@ fn fast_row(line: &[u8], slots: &[u8], vals: &mut [f64; SLOTS]) -> bool {
             } else {
                 return false;
             }
-        } else if i < n && line[i] != b',' {
+        } else if i < n {
+            // More on the line than the header has columns: the general path names it.
             return false;
         }
     }
     true
+}
+
+/// A field as an error message shows it: the first 40 characters, then an ellipsis.
+fn shown(field: &[u8]) -> String {
+    let text = String::from_utf8_lossy(field);
+    match text.char_indices().nth(40) {
+        Some((at, _)) => format!("{}…", &text[..at]),
+        None => text.into_owned(),
+    }
 }
 
 /// A record of a line holding only spaces (one field, blank): skipped like an empty line.
@@ -315,11 +391,10 @@ fn read_header<R: std::io::Read>(
     rec: &mut csv::ByteRecord,
     path: &Path,
 ) -> Result<(u64, Vec<String>), SessionError> {
-    let io = |source| SessionError::Io { path: path.to_path_buf(), source };
     let header_line;
     let mut names: Vec<String> = Vec::new();
     loop {
-        let Some((range, no)) = lines.next_line().map_err(io)? else {
+        let Some((range, no)) = lines.next_line().map_err(|e| e.into_session(path))? else {
             if !lines.input.nonblank {
                 return Err(csv_err(
                     Problem::Empty,
@@ -532,21 +607,29 @@ impl<R: std::io::Read> RowReader<R> {
         let field = self.rec.get(k).unwrap_or(b"").trim_ascii();
         // Straight from the bytes (Eisel–Lemire, as std's parser, without the UTF-8 pass).
         let parsed = fast_float2::parse::<f64, _>(field).ok();
+        let column = || format!("{} ({})", k + 1, self.names[k]);
         match parsed {
             Some(v) if v.is_finite() => Ok(v),
-            Some(v) => Err(csv_err(
+            Some(_) if !field.iter().any(u8::is_ascii_digit) => Err(csv_err(
                 Problem::Value,
                 &self.path,
                 line,
-                format!("{} ({})", k + 1, self.names[k]),
-                format!("expected a finite number, found '{v}' (NaN or infinite values are not accepted)"),
+                column(),
+                format!("expected a finite number, found '{}' (NaN or infinite values are not accepted)", shown(field)),
+            )),
+            Some(_) => Err(csv_err(
+                Problem::Value,
+                &self.path,
+                line,
+                column(),
+                format!("expected a finite number, found '{}', which overflows a double (|x| < 1.8e308)", shown(field)),
             )),
             None => Err(csv_err(
                 Problem::Value,
                 &self.path,
                 line,
-                format!("{} ({})", k + 1, self.names[k]),
-                format!("expected a number, found '{}'", String::from_utf8_lossy(field)),
+                column(),
+                format!("expected a number, found '{}'", shown(field)),
             )),
         }
     }
@@ -559,9 +642,7 @@ impl<R: std::io::Read> RowReader<R> {
     /// Reads the next sample into `row`; false at the end of the file.
     pub fn read_row(&mut self, row: &mut Row) -> Result<bool, SessionError> {
         loop {
-            let Some((range, line)) =
-                self.lines.next_line().map_err(|source| SessionError::Io { path: self.path.clone(), source })?
-            else {
+            let Some((range, line)) = self.lines.next_line().map_err(|e| e.into_session(&self.path))? else {
                 return Ok(false);
             };
             let bytes = &self.lines.buf[range];
@@ -612,10 +693,23 @@ impl<R: std::io::Read> RowReader<R> {
         if blank_record(&self.rec) {
             return Ok(false);
         }
+        if self.rec.len() > self.width {
+            let n = self.rec.len();
+            return Err(csv_err(
+                Problem::FieldCount,
+                &self.path,
+                line,
+                format!("{}", self.width + 1),
+                format!(
+                    "the row has {n} fields, the header has {}: a field too many (a stray comma, or a row of another layout)",
+                    self.width
+                ),
+            ));
+        }
         if self.rec.len() < self.width {
             let n = self.rec.len();
             return Err(csv_err(
-                Problem::Truncated,
+                Problem::FieldCount,
                 &self.path,
                 line,
                 format!("{} ({})", n + 1, self.names[n]),

@@ -13,8 +13,8 @@ pub enum Problem {
     Header,
     /// A value is not a number, or is NaN or infinite.
     Value,
-    /// A row has fewer fields than the header (truncated row).
-    Truncated,
+    /// A row has more or fewer fields than the header (a truncated row, a stray comma).
+    FieldCount,
     /// Time stamps repeat or decrease.
     Time,
     /// A gap in time larger than allowed (with `strict`).
@@ -41,13 +41,22 @@ pub enum Problem {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum SessionError {
-    /// The file could not be opened or read.
-    #[error("{path}: cannot read: {source}")]
+    /// The file could not be opened or read (the operating system's reason follows as the
+    /// cause).
+    #[error("{path}: cannot read")]
     Io {
         /// The file.
         path: PathBuf,
         /// The operating-system error.
         source: std::io::Error,
+    },
+    /// The path names something that is not a regular file (a folder, FIFO or device).
+    #[error("{path} is {what}: expected a regular file")]
+    NotRegular {
+        /// The path.
+        path: PathBuf,
+        /// What it is.
+        what: &'static str,
     },
     /// The manifest is not valid JSON or does not have the expected shape.
     #[error("{path}:{line}:{column}: {msg}")]
@@ -104,6 +113,7 @@ impl SessionError {
     pub fn problem(&self) -> Problem {
         match self {
             Self::Io { .. } => Problem::Io,
+            Self::NotRegular { .. } => Problem::MissingFile,
             Self::Json { .. } => Problem::Json,
             Self::UnknownFormat { .. } => Problem::Format,
             Self::Manifest { problem, .. } | Self::Csv { problem, .. } => *problem,

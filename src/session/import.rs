@@ -69,7 +69,7 @@ fn field(path: &Path, line: usize, fields: &[&str], i: usize, name: &str) -> Res
             path,
             line,
             &format!("{} ({name})", i + 1),
-            Problem::Truncated,
+            Problem::FieldCount,
             format!("the row ends before column '{name}'"),
         )
     })?;
@@ -396,7 +396,7 @@ pub fn imu_tk(acc: &Path, gyro: &Path, out_dir: &Path, opts: &ImportOptions) -> 
             gyro,
             tg.len().min(ta.len()) + 1,
             "1 (t)",
-            Problem::Truncated,
+            Problem::FieldCount,
             format!(
                 "{} gyro rows but {} accelerometer rows: the files must share their time stamps",
                 tg.len(),
@@ -500,7 +500,7 @@ fn read_intervals(path: &Path, n: usize) -> Result<Vec<(usize, usize)>, SessionE
             path,
             1,
             "-",
-            Problem::Truncated,
+            Problem::FieldCount,
             "expected two rows of equal length: start indices, then end indices".into(),
         ));
     }

@@ -13,7 +13,7 @@ pub mod sanity;
 
 use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
 pub use csvread::{
-    parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
+    open_regular, parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
 };
 pub use csvwrite::{recording_csv, recording_header, CsvLine};
 pub use error::{Problem, SessionError};
@@ -352,21 +352,27 @@ pub fn rows_past_end(manifest_path: &Path, spec: &RunSpec, len: usize) -> Sessio
 }
 
 /// The CSV of a run (relative to the manifest's folder); an error naming the manifest's
-/// line when it does not exist.
+/// line when it does not exist or is not a regular file (a folder, FIFO or device), and the
+/// operating system's reason when it cannot be looked at (e.g. a symbolic-link loop).
 pub fn run_path(manifest_path: &Path, spec: &RunSpec) -> Result<PathBuf, SessionError> {
     let dir = manifest_path.parent().unwrap_or(Path::new("."));
     let path = dir.join(&spec.file);
-    if !path.is_file() {
+    let refuse = |what: String| {
         let (line, column) = locate(&std::fs::read_to_string(manifest_path).unwrap_or_default(), &spec.file);
-        return Err(SessionError::Manifest {
+        SessionError::Manifest {
             problem: Problem::MissingFile,
             path: manifest_path.to_path_buf(),
             line,
             column,
-            msg: format!("run '{}': file '{}' does not exist (looked for {})", spec.name, spec.file, path.display()),
-        });
+            msg: format!("run '{}': file '{}' {what} (looked for {})", spec.name, spec.file, path.display()),
+        }
+    };
+    match std::fs::metadata(&path) {
+        Ok(m) if m.is_file() => Ok(path),
+        Ok(m) => Err(refuse(format!("is {}: expected the run's CSV recording", csvread::file_kind(&m)))),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(refuse("does not exist".into())),
+        Err(source) => Err(SessionError::Io { path, source }),
     }
-    Ok(path)
 }
 
 /// Best-effort 1-based (line, column) of the first occurrence of `"needle"` in `text`.
@@ -379,6 +385,50 @@ fn locate(text: &str, needle: &str) -> (usize, usize) {
     let line = before.matches('\n').count() + 1;
     let column = pos - before.rfind('\n').map_or(0, |p| p + 1) + 1;
     (line, column)
+}
+
+/// The physical and practical bounds a manifest's numbers must keep, so that a typo (or a
+/// hostile file) is refused with the limit in the message instead of hanging a fit or
+/// allocating without end.
+#[derive(Debug, Clone, Copy)]
+pub struct Limits {
+    /// Local gravity, m/s².
+    pub g_m_s2: (f64, f64),
+    /// |stand rate| of a conic run, deg/s (100 revolutions per second).
+    pub rate_deg_s: f64,
+    /// |phase| of a conic run, degrees.
+    pub phase_deg: f64,
+    /// |total angle| of a rotation run, degrees (100 turns).
+    pub angle_deg: f64,
+    /// Run temperature, °C.
+    pub temperature_c: (f64, f64),
+    /// Runs in one manifest.
+    pub runs: usize,
+    /// Seconds of an initial rest.
+    pub init_rest_s: f64,
+    /// Samples of a detector window or a shortest pose.
+    pub window: usize,
+}
+
+/// The bounds of every manifest.
+pub const LIMITS: Limits = Limits {
+    g_m_s2: (9.0, 10.5),
+    rate_deg_s: 36_000.0,
+    phase_deg: 1e6,
+    angle_deg: 36_000.0,
+    temperature_c: (-100.0, 300.0),
+    runs: 100_000,
+    init_rest_s: 86_400.0,
+    window: 1_000_000,
+};
+
+/// A finite number within `[lo, hi]`, or a message naming the key, the value and the limit.
+fn within(name: &str, key: &str, x: f64, lo: f64, hi: f64, unit: &str) -> Result<f64, String> {
+    if x.is_finite() && (lo..=hi).contains(&x) {
+        Ok(x)
+    } else {
+        Err(format!("run '{name}': {key} is {x}: expected {lo} to {hi} {unit}"))
+    }
 }
 
 /// Reads and validates a manifest (without reading the recordings).
@@ -450,9 +500,13 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
     let g_m_s2 = match obj.get("stand").and_then(|s| s.get("g")) {
         None => 9.80665,
         Some(v) => match v.as_f64() {
-            Some(g) if g.is_finite() && g > 0.0 => g,
+            Some(g) if (LIMITS.g_m_s2.0..=LIMITS.g_m_s2.1).contains(&g) => g,
             _ => {
-                return Err(bad("\"g\"", format!("stand.g is {v}: expected local gravity in m/s^2, a positive number")))
+                let (lo, hi) = LIMITS.g_m_s2;
+                return Err(bad(
+                    "\"g\"",
+                    format!("stand.g is {v}: expected local gravity in m/s^2, between {lo} and {hi}"),
+                ));
             }
         },
     };
@@ -460,6 +514,12 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
         .get("runs")
         .and_then(Value::as_array)
         .ok_or_else(|| bad("runs", "missing \"runs\": expected a list of runs".into()))?;
+    if runs_json.len() > LIMITS.runs {
+        return Err(bad(
+            "runs",
+            format!("the manifest has {} runs: at most {} are read (split the session)", runs_json.len(), LIMITS.runs),
+        ));
+    }
     if runs_json.is_empty() {
         return Err(bad("runs", "\"runs\" is empty: a session needs at least one run".into()));
     }
@@ -539,13 +599,20 @@ fn parse_run(i: usize, r: &Value, bad_kind: &Bad<'_>) -> Result<RunSpec, Session
             ))
         }
     };
+    let temperature_c = match num(r, "temperature_c") {
+        Some(t) => Some(
+            within(&name, "temperature_c", t, LIMITS.temperature_c.0, LIMITS.temperature_c.1, "degC")
+                .map_err(|m| bad("temperature_c", m))?,
+        ),
+        None => None,
+    };
     Ok(RunSpec {
         rows: run_rows(&name, r, &bad)?,
         mount: run_mount(&name, r, bad_kind)?,
         name,
         file,
         motion,
-        temperature_c: num(r, "temperature_c"),
+        temperature_c,
         note: r.get("note").and_then(Value::as_str).map(str::to_string),
     })
 }
@@ -557,9 +624,11 @@ fn conic_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSpec,
     let need = |key: &str| {
         num(m, key).ok_or_else(|| bad(name, format!("run '{name}': conic motion needs a finite number \"{key}\"")))
     };
+    let check =
+        |key: &str, x: f64, lim: f64, unit: &str| within(name, key, x, -lim, lim, unit).map_err(|m| bad(key, m));
     let cone_angle_deg = need("cone_angle_deg")?;
-    let rate_deg_s = need("rate_deg_s")?;
-    let phase_deg = num(m, "phase_deg").unwrap_or(0.0);
+    let rate_deg_s = check("rate_deg_s", need("rate_deg_s")?, LIMITS.rate_deg_s, "deg/s")?;
+    let phase_deg = check("phase_deg", num(m, "phase_deg").unwrap_or(0.0), LIMITS.phase_deg, "degrees")?;
     if !(0.0..=90.0).contains(&cone_angle_deg) {
         return Err(bad(name, format!("run '{name}': cone_angle_deg is {cone_angle_deg}: expected 0..90 degrees")));
     }
@@ -622,6 +691,7 @@ fn rotation_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSp
     if angle_deg == 0.0 {
         return Err(bad(name, format!("run '{name}': angle_deg is 0: a rotation run must turn")));
     }
+    within(name, "angle_deg", angle_deg, -LIMITS.angle_deg, LIMITS.angle_deg, "degrees").map_err(|m| bad(name, m))?;
     Ok(MotionSpec::Rotation { axis_stand: [axis[0] / norm, axis[1] / norm, axis[2] / norm], angle_deg })
 }
 
@@ -630,10 +700,19 @@ fn multi_position_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<Mo
     let window = m.get("window").and_then(Value::as_u64).unwrap_or(101) as usize;
     let threshold_multiplier = num(m, "threshold_multiplier");
     let min_pose_samples = m.get("min_pose_samples").and_then(Value::as_u64).unwrap_or(100) as usize;
-    if init_rest_s <= 0.0 || window < 3 || min_pose_samples < 2 || threshold_multiplier.is_some_and(|t| t <= 0.0) {
+    if init_rest_s <= 0.0
+        || init_rest_s > LIMITS.init_rest_s
+        || !(3..=LIMITS.window).contains(&window)
+        || !(2..=LIMITS.window).contains(&min_pose_samples)
+        || threshold_multiplier.is_some_and(|t| t <= 0.0 || t > 1e6)
+    {
         return Err(bad(
             name,
-            format!("run '{name}': multi_position needs init_rest_s > 0, window >= 3, min_pose_samples >= 2 and threshold_multiplier > 0"),
+            format!(
+                "run '{name}': multi_position needs 0 < init_rest_s <= {}, 3 <= window <= {w}, 2 <= min_pose_samples <= {w} and 0 < threshold_multiplier <= 1e6",
+                LIMITS.init_rest_s,
+                w = LIMITS.window
+            ),
         ));
     }
     let poses = match m.get("poses") {

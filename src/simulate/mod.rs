@@ -92,6 +92,44 @@ pub struct RunPlan {
     pub duration_s: f64,
 }
 
+/// Samples a simulation may hold in memory (about 8 GB of session and tracks).
+pub const MAX_SAMPLES: f64 = 1e8;
+
+/// Refuses runs that cannot be simulated: a duration or sample rate that is not positive
+/// and finite, a motion outside the manifest's limits, or more than [`MAX_SAMPLES`] samples
+/// in all (the message says how many and the limit).
+pub fn check_runs(runs: &[RunPlan], sample_rate_hz: f64) -> Result<(), String> {
+    if !(sample_rate_hz.is_finite() && sample_rate_hz > 0.0 && sample_rate_hz <= 1e5) {
+        return Err(format!("the sample rate is {sample_rate_hz} Hz: expected more than 0 and at most 100000 Hz"));
+    }
+    let mut total = 0.0;
+    for r in runs {
+        if !(r.duration_s.is_finite() && r.duration_s > 0.0) {
+            return Err(format!(
+                "run '{}': duration {} s: expected a positive number of seconds",
+                r.name, r.duration_s
+            ));
+        }
+        if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, .. } = r.motion {
+            let lim = crate::session::LIMITS.rate_deg_s;
+            if !(-lim..=lim).contains(&rate_deg_s) || !(0.0..=90.0).contains(&cone_angle_deg) {
+                return Err(format!(
+                    "run '{}': rate {rate_deg_s} deg/s, cone angle {cone_angle_deg} deg: expected |rate| <= {lim} deg/s and a cone angle of 0 to 90 deg",
+                    r.name
+                ));
+            }
+        }
+        total += r.duration_s * sample_rate_hz;
+    }
+    if total > MAX_SAMPLES {
+        return Err(format!(
+            "{} runs at {sample_rate_hz} Hz make {total:.3e} samples: at most {MAX_SAMPLES:e} are simulated (shorten --duration or lower --rate-hz)",
+            runs.len()
+        ));
+    }
+    Ok(())
+}
+
 /// A simulation.
 #[derive(Debug, Clone)]
 pub struct SimConfig {

@@ -35,6 +35,28 @@ pub fn robust_sigma(v: &[f64], centre: f64) -> Option<f64> {
     median(&mut dev).map(|m| MAD_TO_SIGMA * m)
 }
 
+/// The SVD of `m` when every entry is finite and the iteration converges (nalgebra's
+/// `svd` iterates without end on NaN or infinity: a hostile input must not hang a fit).
+pub fn svd(
+    m: nalgebra::DMatrix<f64>,
+    want_u: bool,
+    want_v: bool,
+) -> Option<nalgebra::SVD<f64, nalgebra::Dyn, nalgebra::Dyn>> {
+    if !m.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    let iterations = 100 * m.nrows().max(m.ncols()).max(1);
+    nalgebra::SVD::try_new(m, want_u, want_v, f64::EPSILON, iterations)
+}
+
+/// Singular values of a 3×3 matrix (None when it is not finite or does not converge).
+pub fn singular_values3(m: &nalgebra::Matrix3<f64>) -> Option<nalgebra::Vector3<f64>> {
+    if !m.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    nalgebra::SVD::try_new(*m, false, false, f64::EPSILON, 300).map(|s| s.singular_values)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

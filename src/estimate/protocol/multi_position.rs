@@ -63,7 +63,7 @@ fn ellipsoid_guess(means: &[[f64; 3]], g: f64) -> [f64; 9] {
     let n = means.len();
     let a = DMatrix::from_fn(n, 6, |r, c| if c < 3 { means[r][c] * means[r][c] } else { means[r][c - 3] });
     let y = nalgebra::DVector::from_element(n, 1.0);
-    if let Ok(sol) = a.clone().svd(true, true).solve(&y, 1e-12) {
+    if let Some(Ok(sol)) = crate::stats::svd(a.clone(), true, true).map(|svd| svd.solve(&y, 1e-12)) {
         let c = [sol[0], sol[1], sol[2]];
         if c.iter().all(|&x| x > 0.0) {
             let centre: Vec<f64> = (0..3).map(|i| -sol[3 + i] / (2.0 * c[i])).collect();
@@ -111,7 +111,7 @@ fn condition(jac: &[Vec<f64>], scale: &[f64]) -> f64 {
     let m = jac.len();
     let n = scale.len();
     let j = DMatrix::from_fn(m, n, |i, k| jac[i][k] * scale[k]);
-    let sv = j.singular_values();
+    let Some(sv) = crate::stats::svd(j, false, false).map(|s| s.singular_values) else { return f64::INFINITY };
     let max = sv.iter().copied().fold(0.0, f64::max);
     let min = sv.iter().copied().fold(f64::INFINITY, f64::min);
     max / min
