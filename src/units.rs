@@ -234,3 +234,14 @@ pub const DEG_PER_RAD: f64 = 180.0 / std::f64::consts::PI;
 
 /// Radians per degree.
 pub const RAD_PER_DEG: f64 = std::f64::consts::PI / 180.0;
+
+/// A number for a message: plain for everyday magnitudes, in scientific notation for very
+/// large or very small ones (so that `1e200` is not printed as 201 digits).
+pub fn show(x: f64) -> String {
+    let a = x.abs();
+    if a != 0.0 && !(1e-4..1e7).contains(&a) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}

@@ -49,3 +49,56 @@ pub fn par_map<I: Sync, T: Send>(items: &[I], f: impl Fn(&I) -> T + Sync) -> Vec
     });
     out
 }
+
+/// Runs the binary in a folder with a time limit (a hang is a failure, not a stuck test);
+/// returns (exit code, stdout, stderr).
+pub fn run_timed(dir: &std::path::Path, args: &[&str], secs: u64) -> (i32, String, String) {
+    use std::io::Read;
+    let mut child = std::process::Command::new(bin())
+        .args(args)
+        .current_dir(dir)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run crosscal");
+    let (mut so, mut se) = (child.stdout.take().expect("stdout"), child.stderr.take().expect("stderr"));
+    let out = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = so.read_to_string(&mut s);
+        s
+    });
+    let err = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = se.read_to_string(&mut s);
+        s
+    });
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().expect("wait") {
+            break s;
+        }
+        if start.elapsed().as_secs() >= secs {
+            let _ = child.kill();
+            panic!("crosscal {args:?} did not finish in {secs} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    (status.code().unwrap_or(-1), out.join().unwrap_or_default(), err.join().unwrap_or_default())
+}
+
+/// Runs a shell command line in a folder (for pipes and limits); returns (exit code,
+/// stdout, stderr). `$CROSSCAL` names the binary.
+pub fn sh_in(dir: &std::path::Path, script: &str) -> (i32, String, String) {
+    let out = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(script)
+        .env("CROSSCAL", bin())
+        .current_dir(dir)
+        .output()
+        .expect("run sh");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}

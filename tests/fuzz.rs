@@ -172,3 +172,200 @@ proptest! {
         }
     }
 }
+
+/// Structure-aware mutations of a JSON document: at a chosen place, a huge, negative, zero
+/// or overflowing number, a long string, null, an empty list, a deleted key, an unknown
+/// field, or a key written twice.
+#[derive(Debug, Clone, Copy)]
+enum JsonEdit {
+    Huge,
+    NegativeHuge,
+    Zero,
+    Overflow,
+    LongString,
+    Null,
+    EmptyList,
+    Delete,
+    ExtraField,
+    DuplicateKey,
+}
+
+fn json_edits() -> impl Strategy<Value = Vec<(usize, JsonEdit)>> {
+    let edit = prop_oneof![
+        Just(JsonEdit::Huge),
+        Just(JsonEdit::NegativeHuge),
+        Just(JsonEdit::Zero),
+        Just(JsonEdit::Overflow),
+        Just(JsonEdit::LongString),
+        Just(JsonEdit::Null),
+        Just(JsonEdit::EmptyList),
+        Just(JsonEdit::Delete),
+        Just(JsonEdit::ExtraField),
+        Just(JsonEdit::DuplicateKey),
+    ];
+    prop::collection::vec((any::<usize>(), edit), 1..4)
+}
+
+/// Paths (object keys and list indices) of every value in `v`, depth first.
+fn places(v: &serde_json::Value, here: &mut Vec<serde_json::Value>, out: &mut Vec<Vec<serde_json::Value>>) {
+    out.push(here.clone());
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                here.push(serde_json::json!(k));
+                places(x, here, out);
+                here.pop();
+            }
+        }
+        serde_json::Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                here.push(serde_json::json!(i));
+                places(x, here, out);
+                here.pop();
+            }
+        }
+        _ => {}
+    }
+}
+
+fn at<'a>(v: &'a mut serde_json::Value, path: &[serde_json::Value]) -> Option<&'a mut serde_json::Value> {
+    let mut cur = v;
+    for p in path {
+        cur = match p {
+            serde_json::Value::String(k) => cur.get_mut(k.as_str())?,
+            serde_json::Value::Number(i) => cur.get_mut(i.as_u64()? as usize)?,
+            _ => return None,
+        };
+    }
+    Some(cur)
+}
+
+/// `base` with the edits applied, as text (duplicate keys and overflowing numbers are made
+/// in the text, which a JSON value cannot hold).
+fn mutate_json(base: &str, edits: &[(usize, JsonEdit)]) -> String {
+    let mut v: serde_json::Value = serde_json::from_str(base).unwrap();
+    let mut text_edits = Vec::new();
+    for &(k, e) in edits {
+        let mut all = Vec::new();
+        places(&v, &mut Vec::new(), &mut all);
+        let path = all[k % all.len()].clone();
+        let parent_is_object = path.last().is_some_and(|p| p.is_string());
+        match e {
+            JsonEdit::Delete if parent_is_object => {
+                let key = path.last().and_then(|p| p.as_str()).unwrap_or("").to_string();
+                if let Some(serde_json::Value::Object(m)) = at(&mut v, &path[..path.len() - 1]) {
+                    m.remove(&key);
+                }
+            }
+            JsonEdit::ExtraField => {
+                if let Some(serde_json::Value::Object(m)) = at(&mut v, &path) {
+                    m.insert("unexpected_field".into(), serde_json::json!([1, "x"]));
+                }
+            }
+            JsonEdit::DuplicateKey | JsonEdit::Overflow => text_edits.push((k, e)),
+            _ => {
+                if let Some(x) = at(&mut v, &path) {
+                    *x = match e {
+                        JsonEdit::Huge => serde_json::json!(1e300),
+                        JsonEdit::NegativeHuge => serde_json::json!(-1e300),
+                        JsonEdit::Zero => serde_json::json!(0),
+                        JsonEdit::LongString => serde_json::json!("y".repeat(5000)),
+                        JsonEdit::Null => serde_json::Value::Null,
+                        _ => serde_json::json!([]),
+                    };
+                }
+            }
+        }
+    }
+    let mut text = serde_json::to_string_pretty(&v).unwrap();
+    for (k, e) in text_edits {
+        match e {
+            // A key written again in its object: `"key": value` becomes `"key": 1, "key": value`.
+            JsonEdit::DuplicateKey => {
+                let keys: Vec<usize> = text.match_indices("\": ").map(|(i, _)| i).collect();
+                if let Some(&end) = keys.get(k % keys.len().max(1)) {
+                    if let Some(start) = text[..end].rfind('"') {
+                        let key = text[start..=end].to_string();
+                        text.insert_str(start, &format!("{key}: 1, "));
+                    }
+                }
+            }
+            _ => {
+                let nums: Vec<usize> = text
+                    .match_indices(": ")
+                    .map(|(i, _)| i + 2)
+                    .filter(|&i| text[i..].starts_with(|c: char| c.is_ascii_digit()))
+                    .collect();
+                if let Some(&i) = nums.get(k % nums.len().max(1)) {
+                    text.insert_str(i, "9e400+");
+                    text = text.replacen("9e400+", "9e400", 1);
+                    let end = text[i + 5..]
+                        .find(|c: char| !(c.is_ascii_digit() || ".eE+-".contains(c)))
+                        .map_or(text.len(), |e| i + 5 + e);
+                    text.replace_range(i + 5..end, "");
+                }
+            }
+        }
+    }
+    text
+}
+
+const RULES: &str = r#"{ "format": "crosscal-rules/1",
+  "rules": [
+    { "kind": "coefficient", "select": "gyro.c_*", "max_abs_deviation": 0.02 },
+    { "kind": "std_error", "select": "*", "max": 1e-3 },
+    { "kind": "noise", "sensor": "gyro", "term": "white", "max": 0.2, "unit": "deg/sqrt(h)" },
+    { "kind": "residual", "sensor": "accel", "max_pct": 0.01 },
+    { "kind": "reduction", "sensor": "gyro", "min": 10 },
+    { "kind": "adequate" } ] }"#;
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 6_000, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// A manifest read after structure-aware damage either is refused or keeps every
+    /// number within the manifest's limits.
+    #[test]
+    fn manifest_reader_survives_structured_damage(e in json_edits()) {
+        let text = mutate_json(MANIFEST, &e);
+        if let Ok(m) = parse_manifest(Path::new("s.json"), &text) {
+            let lim = crosscal::session::LIMITS;
+            prop_assert!((lim.g_m_s2.0..=lim.g_m_s2.1).contains(&m.g_m_s2));
+            prop_assert!(!m.runs.is_empty() && m.runs.len() <= lim.runs);
+            for r in &m.runs {
+                if let crosscal::session::MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = r.motion {
+                    prop_assert!(rate_deg_s.abs() <= lim.rate_deg_s && phase_deg.is_finite());
+                    prop_assert!((0.0..=90.0).contains(&cone_angle_deg));
+                }
+                prop_assert!(r.temperature_c.is_none_or(|t| t.is_finite()));
+            }
+        }
+    }
+
+    /// Rules read after damage are refused or parse; evaluating them never panics.
+    #[test]
+    fn rules_reader_survives_structured_damage(e in json_edits()) {
+        let text = mutate_json(RULES, &e);
+        let _ = crosscal::check::rules::Rules::parse(Path::new("r.json"), &text);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 1_500, failure_persistence: None, ..ProptestConfig::default() })]
+
+    /// A profile that survives structure-aware damage and still loads can correct: its
+    /// matrices invert and a sample comes out finite.
+    #[test]
+    fn profile_reader_survives_structured_damage(e in json_edits()) {
+        thread_local!(static JSON: String = small_profile_json());
+        let text = JSON.with(|j| mutate_json(j, &e));
+        if let Ok(p) = Profile::from_json(Path::new("p.json"), &text) {
+            let cal = crosscal::correct::Calibration::from_profile(&p);
+            prop_assert!(cal.is_ok(), "{:?}", cal.err());
+            let cal = cal.unwrap();
+            let r = crosscal::correct::correct_offline(&cal, &[0.0, 0.01, 0.02], &[[0.1, 0.2, 0.3]; 3], &[[0.0, 0.0, 9.8]; 3], Some(&[20.0; 3]));
+            if let Ok(c) = r {
+                prop_assert!(c.w_rad_s.iter().chain(&c.a_m_s2).all(|v| v.iter().all(|x| x.is_finite())));
+            }
+        }
+    }
+}

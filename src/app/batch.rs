@@ -129,7 +129,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
     let session = match Session::load(&manifest) {
         Ok(s) => s,
         Err(e) => {
-            r.reasons.push(format!("cannot read the session: {e}"));
+            r.reasons.push(format!("cannot read the session: {}", super::chain(&e)));
             return r;
         }
     };
@@ -149,7 +149,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
             match save(&p, &opts.store) {
                 Ok(path) => (path, p, false),
                 Err(e) => {
-                    r.reasons.push(format!("cannot store the profile: {e}"));
+                    r.reasons.push(format!("cannot store the profile: {}", super::chain(&e)));
                     return r;
                 }
             }
@@ -169,7 +169,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
     let acc = match super::accept::acceptance(&profile, &session, diagnose) {
         Ok(a) => a,
         Err(e) => {
-            r.reasons.push(format!("check failed: {e}"));
+            r.reasons.push(format!("check failed: {}", super::chain(&e)));
             return r;
         }
     };
@@ -200,6 +200,23 @@ fn lot_spread(vals: &[f64], std_errors: &[f64]) -> Option<(f64, f64)> {
     let mad_sigma = mad_small_sample(vals.len()) * crate::stats::robust_sigma(vals, med)?;
     let floor = crate::stats::median(&mut std_errors.to_vec()).unwrap_or(0.0);
     Some((med, mad_sigma.max(floor)))
+}
+
+/// Makes sure the batch can store what it fits before any unit is fitted: the profile store
+/// is a folder that exists (created if need be) or the batch does not start.
+pub fn prepare(opts: &BatchOptions) -> Result<(), super::AppError> {
+    let store = &opts.store;
+    let fail = |source| super::AppError::Profile {
+        what: format!("store {}", store.display()),
+        source: crate::profile::ProfileError::Io { path: store.clone(), source },
+    };
+    if store.exists() && !store.is_dir() {
+        return Err(fail(std::io::Error::new(
+            std::io::ErrorKind::NotADirectory,
+            "the profile store must be a folder, and this is a file",
+        )));
+    }
+    std::fs::create_dir_all(store).map_err(fail)
 }
 
 /// Fits, stores and judges every unit (in parallel), then flags batch outliers.

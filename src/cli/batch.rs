@@ -42,6 +42,10 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         anyhow::bail!("{}: no unit folders (expected one sub-folder per unit with its session.json)", a.dir.display());
     }
     let opts = BatchOptions { model, store: a.out.clone(), rules, resume: a.resume, jobs: a.jobs };
+    // Where the results go is settled before the first unit is fitted.
+    crosscal::app::batch::prepare(&opts)?;
+    let rdir = a.report_dir.clone().unwrap_or_else(|| a.dir.clone());
+    std::fs::create_dir_all(&rdir).with_context(|| format!("creating the report folder {}", rdir.display()))?;
     let tty = std::io::stderr().is_terminal();
     let bar = tty.then(|| {
         let b = indicatif::ProgressBar::new(dirs.len() as u64);
@@ -75,7 +79,6 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
-    let rdir = a.report_dir.unwrap_or_else(|| a.dir.clone());
     let write = |name: &str, text: String| -> anyhow::Result<()> {
         let path = rdir.join(name);
         crosscal::atomic::write_atomic(&path, true, |w| std::io::Write::write_all(w, text.as_bytes()))

@@ -427,7 +427,7 @@ fn within(name: &str, key: &str, x: f64, lo: f64, hi: f64, unit: &str) -> Result
     if x.is_finite() && (lo..=hi).contains(&x) {
         Ok(x)
     } else {
-        Err(format!("run '{name}': {key} is {x}: expected {lo} to {hi} {unit}"))
+        Err(format!("run '{name}': {key} is {}: expected {lo} to {hi} {unit}", crate::units::show(x)))
     }
 }
 
