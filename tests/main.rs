@@ -10,6 +10,7 @@ mod diagnose;
 mod exit_codes;
 mod fixtures;
 mod fuzz;
+mod fuzz_found;
 mod hostile;
 mod identify;
 mod noise;

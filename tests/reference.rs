@@ -35,7 +35,7 @@ fn write_reference_session(dir: &std::path::Path) -> UnitTruth {
                 let t = k as f64 * 0.01 + 0.003 * ((k * 7919 % 13) as f64 / 13.0 - 0.5);
                 let kin = c.at(t, G);
                 let s = State {
-                    t_s: t,
+                    t_session_s: t,
                     w: mount.to_sensor(kin.w_rad_s).xyz,
                     e: mount.to_sensor(kin.e_rad_s2).xyz,
                     a: mount.to_sensor(kin.a_m_s2).xyz,

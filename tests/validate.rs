@@ -138,7 +138,7 @@ proptest! {
             }
         }
         let s = State {
-            t_s: t,
+            t_session_s: t,
             w: [w[0], w[1], w[2]],
             e: [e[0], e[1], e[2]],
             a: [a[0] * G, a[1] * G, a[2] * G],
@@ -149,7 +149,7 @@ proptest! {
         let ug = forward(&m.terms(SensorKind::Gyro), &gv, &s);
         let ua = forward(&m.terms(SensorKind::Accel), &av, &s);
         let cal = Calibration::from_model(&m, Default::default()).unwrap();
-        let (wh, ah, flags) = cal.invert_state(ug, ua, s.e, s.t_s, s.temp_c).expect("converges");
+        let (wh, ah, flags) = cal.invert_state(ug, ua, s.e, s.t_session_s, s.temp_c).expect("converges");
         prop_assert_eq!(flags, 0);
         for i in 0..3 {
             prop_assert!((wh[i] - s.w[i]).abs() <= 1e-9 * s.w.iter().fold(1e-3_f64, |m, v| m.max(v.abs())), "ω{}: {} vs {}", i, wh[i], s.w[i]);

@@ -10,12 +10,17 @@ use crate::units::SensorKind;
 use nalgebra::Matrix3;
 use std::sync::Arc;
 
+/// A term beyond b, A and E: on the output side its regressor times its value; on the
+/// input side (`components` not empty) the channel's row of A applied to its input
+/// perturbation, `value · Σ_j A_ij · regressor(component j)`.
 #[derive(Debug, Clone)]
 struct OtherTerm {
     effect: Arc<dyn Effect>,
     index: usize,
     channel: usize,
     value: f64,
+    /// (weight A_ij, term index of component j) for an input-side term.
+    components: Vec<(f64, usize)>,
 }
 
 /// The inverse of one sensor's model.
@@ -39,6 +44,8 @@ impl SensorInverse {
         let mut scale = Matrix3::zeros();
         let mut eps = Matrix3::zeros();
         let mut others = Vec::new();
+        // Per other term: (input axis, component term) of an input-side term's perturbation.
+        let mut axes: Vec<Vec<(usize, usize)>> = Vec::new();
         for e in model.effects() {
             if e.sensor() != sensor {
                 continue;
@@ -55,11 +62,25 @@ impl SensorInverse {
                     Role::Epsilon(j) => eps[(i, j)] += value,
                     Role::Other => {
                         if value != 0.0 {
-                            others.push(OtherTerm { effect: Arc::clone(e), index: t.index, channel: i, value })
+                            axes.push(t.input_components());
+                            let components = Vec::new();
+                            others.push(OtherTerm {
+                                effect: Arc::clone(e),
+                                index: t.index,
+                                channel: i,
+                                value,
+                                components,
+                            })
                         }
                     }
                 }
             }
+        }
+        // Input-side terms see the element's row of A: the weights are known now.
+        let has_scale = model.terms(sensor).iter().any(|t| matches!(t.term.role, Role::Scale(_)));
+        let a = if has_scale { scale } else { Matrix3::identity() };
+        for (o, axes) in others.iter_mut().zip(axes) {
+            o.components = axes.into_iter().map(|(j, k)| (a[(o.channel, j)], k)).collect();
         }
         let scale = Coupling::new(scale);
         let scale_inv = scale.try_inverse().ok_or(CorrectError::Singular(sensor))?;
@@ -71,7 +92,13 @@ impl SensorInverse {
     pub(super) fn other(&self, s: &State) -> [f64; 3] {
         let mut g = [0.0; 3];
         for o in &self.others {
-            g[o.channel] += o.value * o.effect.regressor(o.index, s);
+            if o.components.is_empty() {
+                g[o.channel] += o.value * o.effect.regressor(o.index, s);
+            } else {
+                for &(w, k) in &o.components {
+                    g[o.channel] += o.value * w * o.effect.regressor(k, s);
+                }
+            }
         }
         g
     }
@@ -153,7 +180,7 @@ impl Calibration {
         for _ in 0..100 {
             // The effects' regressors see the input as the sensor saw it (before the inverses
             // of the nonlinear effects), exactly as in the forward model.
-            let s = State { t_s, w, e, a: acc, temp_c };
+            let s = State { t_session_s: t_s, w, e, a: acc, temp_c };
             let og = g.other(&s);
             let oa = a.other(&s);
             let wn = solve(g.scale_inv.matrix(), gyro, g.bias, ee, og);

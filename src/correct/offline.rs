@@ -39,14 +39,13 @@ pub fn correct_offline(
     let mut e = vec![[0.0; 3]; n];
     let mut iterations = 0;
     let mut converged = !needs_eps;
-    let t0 = t_s.first().copied().unwrap_or(0.0);
     while needs_eps && iterations < 50 {
         iterations += 1;
         derivative_offline(t_s, &w, &deriv, &mut e);
         let (mut change_w, mut size_w, mut change_a, mut size_a) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
         for k in 0..n {
             let (sw, sa) = if nonlinear { seen[k] } else { (w[k], acc[k]) };
-            let s = State { t_s: t_s[k] - t0, w: sw, e: e[k], a: sa, temp_c: temp_c.map_or(f64::NAN, |t| t[k]) };
+            let s = State { t_session_s: t_s[k], w: sw, e: e[k], a: sa, temp_c: temp_c.map_or(f64::NAN, |t| t[k]) };
             let ee = mv(g.eps.matrix(), e[k]);
             let og = g.other(&s);
             let oa = a.other(&s);

@@ -160,7 +160,6 @@ pub struct Streaming {
     accel_inv: Cols,
     /// −A⁻¹ b of the accelerometer.
     accel_neg_ab: Lanes,
-    t_first: Option<f64>,
     t_last: f64,
     last_flags: u8,
 }
@@ -188,7 +187,6 @@ impl Streaming {
             step,
             accel_inv,
             accel_neg_ab,
-            t_first: None,
             t_last: f64::NAN,
             last_flags: 0,
         }
@@ -209,7 +207,6 @@ impl Streaming {
         self.filled = 0;
         self.head = 0;
         self.steady = 0;
-        self.t_first = None;
         self.t_last = f64::NAN;
     }
 
@@ -235,7 +232,6 @@ impl Streaming {
     /// The body of [`Self::push`].
     #[inline(always)]
     fn push_one(&mut self, t_s: f64, gyro: [f64; 3], accel: [f64; 3], temp_c: f64) -> ([f64; 3], [f64; 3]) {
-        let t0 = *self.t_first.get_or_insert(t_s);
         let n = self.window;
         // Uniform sampling: count consecutive steps equal to the last one.
         let step = t_s - self.t_last;
@@ -289,7 +285,7 @@ impl Streaming {
             // Fixed-point passes for the remaining effects, from the linear solution.
             for _ in 0..4 {
                 let s = State {
-                    t_s: t_s - t0,
+                    t_session_s: t_s,
                     w: [w4[0], w4[1], w4[2]],
                     e: [p[0] + h0 * w4[0], p[1] + h0 * w4[1], p[2] + h0 * w4[2]],
                     a: acc,

@@ -4,6 +4,7 @@
 //! ([`QrAccumulator`]) in one pass per source, each channel is solved from R (so the
 //! condition number is never squared), and a second pass gives the residual statistics.
 
+use super::channel::{channel_plan, prediction, ChannelPlan};
 use super::robust::robust_refit;
 use super::{identify, nonlinear, ChannelFit, CoefStatus, Coefficient, Correlation, EstimateError, Fit, FitOptions};
 use super::{FitRun, SensorFit, Unidentifiable};
@@ -55,6 +56,9 @@ pub(crate) struct Columns {
     pub source: Vec<usize>,
     /// Column of each term.
     pub of_term: Vec<usize>,
+    /// Per term on the input side: (input axis, column) of each component of its input
+    /// perturbation (empty for output-side terms); see [`super::channel`].
+    pub inputs: Vec<Vec<(usize, usize)>>,
 }
 
 impl Columns {
@@ -72,7 +76,19 @@ impl Columns {
                 }
             }
         }
-        Self { source, of_term }
+        let inputs = terms
+            .iter()
+            .map(|t| {
+                t.input_components()
+                    .into_iter()
+                    .filter_map(|(j, k)| {
+                        let ti = terms.iter().position(|u| std::ptr::addr_eq(u.effect, t.effect) && u.index == k)?;
+                        Some((j, of_term[ti]))
+                    })
+                    .collect()
+            })
+            .collect();
+        Self { source, of_term, inputs }
     }
 
     pub(crate) fn len(&self) -> usize {
@@ -240,18 +256,8 @@ fn residual_pass(
     // Per sensor: the design's columns once per block, then the fitted coefficients
     // (channel, column, value) in term order.
     let mut blocks: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; (d.cols.len() + 3) * BLOCK]).collect();
-    let coefs: Vec<Vec<(usize, usize, f64)>> = designs
-        .iter()
-        .zip(solved)
-        .map(|(d, sol)| {
-            d.terms
-                .iter()
-                .enumerate()
-                .filter(|&(ti, _)| sol.values[ti] != 0.0)
-                .map(|(ti, t)| (t.term.channel, d.cols.of_term[ti], sol.values[ti]))
-                .collect()
-        })
-        .collect();
+    let coefs: Vec<Vec<(usize, usize, f64)>> =
+        designs.iter().zip(solved).map(|(d, sol)| prediction(&d.terms, &d.cols, &sol.values)).collect();
     src.for_each_block(&mut |states, g, a| {
         let n = states.len();
         for (di, ((d, cols), coefs)) in designs.iter().zip(blocks.iter_mut()).zip(&coefs).enumerate() {
@@ -380,6 +386,66 @@ pub(crate) fn fit_sensor(
     fit_core(model, &[sensor], &sources, runs, opts).map(|mut v| v.remove(0)).map_err(SamplesError::in_memory)
 }
 
+/// The identifiability check of one channel: the column-scaled reduced problem is
+/// decomposed, and while a singular value falls below `rcond · s_max` the coefficient most
+/// likely to be the culprit of the lost combination is held at its nominal value.
+struct Identify<'a, 't> {
+    terms: &'a [crate::model::TermRef<'t>],
+    status: &'a mut Vec<CoefStatus>,
+    values: &'a mut Vec<f64>,
+    lost: &'a mut Vec<Unidentifiable>,
+}
+
+impl Identify<'_, '_> {
+    /// The plan, reduced problem and condition number once every kept combination is
+    /// identifiable.
+    #[allow(clippy::too_many_arguments)]
+    fn channel(
+        &mut self,
+        r: &Mat<f64>,
+        norms: &[f64],
+        cols: &Columns,
+        fitted: &mut Vec<usize>,
+        ch: usize,
+        p: usize,
+        opts: &FitOptions,
+        sensor: SensorKind,
+    ) -> Result<(ChannelPlan, Mat<f64>, f64), EstimateError> {
+        loop {
+            let q = fitted.len();
+            let plan = channel_plan(self.terms, cols, self.values, self.status, fitted, ch);
+            let rs = reduce(r, &plan, p, ch);
+            if q == 0 {
+                return Ok((plan, rs, 1.0));
+            }
+            let scale: Vec<f64> = plan.columns.iter().map(|c| plan_norm(r, norms, c)).collect();
+            let scaled = DMatrix::from_fn(q, q, |i, j| rs[(i, j)] / scale[j]);
+            let svd =
+                crate::stats::svd(scaled, false, true).ok_or(EstimateError::NonFinite { sensor, axis: AXES[ch] })?;
+            let (mut smin, mut smax, mut imin) = (f64::INFINITY, 0.0_f64, 0);
+            for (i, &s) in svd.singular_values.iter().enumerate() {
+                if s < smin {
+                    smin = s;
+                    imin = i;
+                }
+                smax = smax.max(s);
+            }
+            if smin > opts.rcond * smax {
+                return Ok((plan, rs, smax / smin));
+            }
+            let Some(vt) = svd.v_t.as_ref() else {
+                return Ok((plan, rs, f64::INFINITY));
+            };
+            let combo: Vec<f64> = (0..q).map(|j| vt[(imin, j)]).collect();
+            let (report, drop_at) = identify::lost_combination(self.terms, fitted, &combo, ch);
+            let ti = fitted.remove(drop_at);
+            self.status[ti] = CoefStatus::Unidentifiable;
+            self.values[ti] = self.terms[ti].term.nominal;
+            self.lost.push(report);
+        }
+    }
+}
+
 /// Solves one sensor from its accumulated R factor: identifiability, coefficients,
 /// covariance (white-noise), per-channel residual RMS.
 fn solve(
@@ -419,52 +485,48 @@ fn solve(
         let mut fitted: Vec<usize> =
             (0..terms.len()).filter(|&ti| terms[ti].term.channel == ch && status[ti] == CoefStatus::Fitted).collect();
         // Columns nobody excites cannot be fitted at all.
-        fitted.retain(|&ti| {
-            let c = cols.of_term[ti];
-            if norms[c] <= 1e-12 * max_norm.max(f64::MIN_POSITIVE) {
+        let first = channel_plan(terms, cols, &values, &status, &fitted, ch);
+        let mut keep = Vec::with_capacity(fitted.len());
+        for (&ti, col) in fitted.iter().zip(&first.columns) {
+            if plan_norm(&r, &norms, col) <= 1e-12 * max_norm.max(f64::MIN_POSITIVE) {
                 unidentifiable.push(identify::zero_column(&terms[ti], ch));
                 status[ti] = CoefStatus::Unidentifiable;
-                false
             } else {
-                true
+                keep.push(ti);
             }
-        });
-        let (rs, cond) = loop {
-            let q = fitted.len();
-            let rs = reduce(&r, cols, terms, &values, &status, &fitted, ch, p);
-            if q == 0 {
-                break (rs, 1.0);
-            }
-            let scaled = DMatrix::from_fn(q, q, |i, j| rs[(i, j)] / norms[cols.of_term[fitted[j]]]);
-            let svd =
-                crate::stats::svd(scaled, false, true).ok_or(EstimateError::NonFinite { sensor, axis: AXES[ch] })?;
-            let (mut smin, mut smax, mut imin) = (f64::INFINITY, 0.0_f64, 0);
-            for (i, &s) in svd.singular_values.iter().enumerate() {
-                if s < smin {
-                    smin = s;
-                    imin = i;
-                }
-                smax = smax.max(s);
-            }
-            if smin > opts.rcond * smax {
-                break (rs, smax / smin);
-            }
-            let Some(vt) = svd.v_t.as_ref() else {
-                break (rs, f64::INFINITY);
-            };
-            let combo: Vec<f64> = (0..q).map(|j| vt[(imin, j)]).collect();
-            let (report, drop_at) = identify::lost_combination(terms, &fitted, &combo, ch);
-            let ti = fitted.remove(drop_at);
-            status[ti] = CoefStatus::Unidentifiable;
-            values[ti] = terms[ti].term.nominal;
-            unidentifiable.push(report);
-        };
+        }
+        fitted = keep;
+        let mut unid = Identify { terms, status: &mut status, values: &mut values, lost: &mut unidentifiable };
+        let (mut plan, mut rs, cond) = unid.channel(&r, &norms, cols, &mut fitted, ch, p, opts, sensor)?;
         let q = fitted.len();
         if n <= q as u64 {
             return Err(EstimateError::TooFewSamples { sensor, axis: AXES[ch], n, q });
         }
         let known = opts.known_sigma.map(|k| k[3 * sensor.index() + ch]);
-        let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n, known);
+        let (mut theta, mut cov, mut rss, mut sigma2) = solve_reduced(&rs, q, n, known);
+        // Input-side coefficients: Gauss–Newton on the bilinear model from R (module
+        // `channel`), until the estimates stop moving.
+        for _ in 0..50 {
+            if !plan.bilinear {
+                break;
+            }
+            let before: Vec<f64> = fitted.iter().map(|&ti| values[ti]).collect();
+            for (a, &ti) in fitted.iter().enumerate() {
+                values[ti] = theta[a];
+            }
+            plan = channel_plan(terms, cols, &values, &status, &fitted, ch);
+            rs = reduce(&r, &plan, p, ch);
+            (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n, known);
+            let moved = theta
+                .iter()
+                .zip(&before)
+                .zip(&cov)
+                .map(|((t, b), c)| (t - b).abs() / (t.abs() + c[0].abs().sqrt() + f64::MIN_POSITIVE))
+                .fold(0.0, f64::max);
+            if moved < 1e-13 {
+                break;
+            }
+        }
         // Outputs too large for the arithmetic (squares overflow) leave no usable estimate:
         // refused, not written into a profile.
         if !(rss.is_finite() && theta.iter().all(|v| v.is_finite())) {
@@ -545,37 +607,34 @@ fn rescale(c: &mut ChannelFit, fitted: &[usize], std_errors: &mut [Option<f64>],
 }
 
 /// The channel's reduced problem `[R_s | z; 0 | ρ]` ((q+1) × (q+1)) from the accumulated R:
-/// QR of the fitted columns of R beside the output column minus the held coefficients'
-/// contribution.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn reduce(
-    r: &Mat<f64>,
-    cols: &Columns,
-    terms: &[crate::model::TermRef<'_>],
-    values: &[f64],
-    status: &[CoefStatus],
-    fitted: &[usize],
-    ch: usize,
-    p: usize,
-) -> Mat<f64> {
+/// QR of the plan's columns of R beside the output column minus the plan's known part.
+pub(crate) fn reduce(r: &Mat<f64>, plan: &ChannelPlan, p: usize, ch: usize) -> Mat<f64> {
     let rows = r.nrows();
-    let q = fitted.len();
+    let q = plan.columns.len();
     let mut m = Mat::<f64>::zeros(rows, q + 1);
-    for (a, &ti) in fitted.iter().enumerate() {
-        let c = cols.of_term[ti];
-        for i in 0..rows {
-            m[(i, a)] = r[(i, c)];
+    for (a, col) in plan.columns.iter().enumerate() {
+        match col.as_slice() {
+            // One column as it is (the same bits as before input-side effects existed).
+            [(c, w)] if w.to_bits() == 1.0f64.to_bits() => {
+                for i in 0..rows {
+                    m[(i, a)] = r[(i, *c)];
+                }
+            }
+            _ => {
+                for &(c, w) in col {
+                    for i in 0..rows {
+                        m[(i, a)] += w * r[(i, c)];
+                    }
+                }
+            }
         }
     }
     for i in 0..rows {
         m[(i, q)] = r[(i, p + ch)];
     }
-    for (ti, t) in terms.iter().enumerate() {
-        if t.term.channel == ch && status[ti] != CoefStatus::Fitted && values[ti] != 0.0 {
-            let c = cols.of_term[ti];
-            for i in 0..rows {
-                m[(i, q)] -= values[ti] * r[(i, c)];
-            }
+    for &(c, w) in &plan.offset {
+        for i in 0..rows {
+            m[(i, q)] -= w * r[(i, c)];
         }
     }
     let qr = m.as_ref().qr();
@@ -589,6 +648,15 @@ pub(crate) fn reduce(
     // Keep the diagonal of R_s positive so that the residual norm sits in out[(q, q)].
     out[(q, q)] = out[(q, q)].abs();
     out
+}
+
+/// The data norm of a plan column `Σ w · column`: ‖R w‖ (R preserves norms); the
+/// accumulated norm when it is one column.
+fn plan_norm(r: &Mat<f64>, norms: &[f64], col: &[(usize, f64)]) -> f64 {
+    match col {
+        [(c, w)] if w.to_bits() == 1.0f64.to_bits() => norms[*c],
+        _ => (0..r.nrows()).map(|i| col.iter().map(|&(c, w)| w * r[(i, c)]).sum::<f64>().powi(2)).sum::<f64>().sqrt(),
+    }
 }
 
 /// Solves the reduced problem `[R_s | z; 0 | ρ]`: θ by back substitution, the covariance

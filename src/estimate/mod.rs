@@ -21,6 +21,7 @@
 //! never a diagonal scale first) is held at its nominal value and reported by name, with the
 //! kind of run that would identify it; the rest of the fit proceeds.
 
+mod channel;
 pub mod identify;
 mod linear;
 mod lm;
@@ -29,7 +30,7 @@ pub mod protocol;
 mod request;
 mod result;
 mod robust;
-mod runs;
+pub(crate) mod runs;
 mod stand;
 mod stream;
 

@@ -75,7 +75,8 @@ pub(crate) fn robust_refit(
             let fitted = &fitted_sets[ch];
             let q = fitted.len();
             let r = accs[ch].r();
-            let rs = reduce(&r, cols, terms, values, status, fitted, ch, p);
+            let plan = super::channel::channel_plan(terms, cols, values, status, fitted, ch);
+            let rs = reduce(&r, &plan, p, ch);
             let known = opts.known_sigma.map(|k| k[3 * sensor.index() + ch]);
             let (theta, cov, rss, sigma2) = solve_reduced(&rs, q, n as u64, known);
             for (a, &ti) in fitted.iter().enumerate() {

@@ -6,6 +6,17 @@ use crate::motion::{track, DerivativeConfig, Track};
 use crate::session::Session;
 use crate::units::SensorKind;
 
+/// Time on the session clock of a sample stamped `t_s` in a run whose first stamp is
+/// `t0_s`: the run's declared start plus the time since its first sample, or the stamp as
+/// recorded when the run declares no start.
+#[inline]
+pub fn session_time(start_s: Option<f64>, t_s: f64, t0_s: f64) -> f64 {
+    match start_s {
+        Some(s) => s + (t_s - t0_s),
+        None => t_s,
+    }
+}
+
 /// One run's data prepared for fitting: its true motion and the sensor outputs.
 #[derive(Debug, Clone, Copy)]
 pub struct FitRun<'a> {
@@ -21,6 +32,9 @@ pub struct FitRun<'a> {
     pub temp_c: Option<&'a [f64]>,
     /// Constant temperature, °C, when there is no per-sample temperature.
     pub temp_const_c: Option<f64>,
+    /// The run's start on the session clock, s (manifest `start_s`): session time is then
+    /// this plus the time since the run's first sample; `None`: the time as recorded.
+    pub start_s: Option<f64>,
 }
 
 impl FitRun<'_> {
@@ -34,12 +48,12 @@ impl FitRun<'_> {
         self.len() == 0
     }
 
-    /// The true state at sample k (t measured from the run's first sample).
+    /// The true state at sample k (time on the session clock).
     #[inline]
     pub fn state(&self, k: usize) -> State {
         let tr = self.track;
         State {
-            t_s: tr.t_s[k] - tr.t_s[0],
+            t_session_s: session_time(self.start_s, tr.t_s[k], tr.t_s[0]),
             w: tr.w_rad_s[k].xyz,
             e: tr.e_rad_s2[k].xyz,
             a: tr.a_m_s2[k].xyz,
@@ -76,6 +90,7 @@ pub fn fit_runs<'a>(session: &'a Session, tracks: &'a [Track]) -> Vec<FitRun<'a>
             accel: &r.rec.accel,
             temp_c: r.rec.temp_c.as_deref(),
             temp_const_c: r.spec.temperature_c,
+            start_s: r.spec.start_s,
         })
         .collect()
 }

@@ -417,7 +417,7 @@ fn linearise(
             if let Some(pt) = &pert {
                 for (j, (hi, lo)) in pt.iter().enumerate() {
                     let at = |tr: &Track| crate::model::State {
-                        t_s: st.t_s,
+                        t_session_s: st.t_session_s,
                         w: tr.w_rad_s[k].xyz,
                         e: tr.e_rad_s2[k].xyz,
                         a: tr.a_m_s2[k].xyz,

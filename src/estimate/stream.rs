@@ -157,6 +157,7 @@ struct Blocks<'f, 'g> {
     reference: Reference,
     f: &'f mut BlockFn<'g>,
     t0: f64,
+    start_s: Option<f64>,
     used: usize,
     states: Vec<State>,
     gyro: Vec<[f64; 3]>,
@@ -170,7 +171,8 @@ impl Blocks<'_, '_> {
             self.t0 = row.t_s;
         }
         let (w, e, a) = self.reference.at(row.t_s);
-        self.states.push(State { t_s: row.t_s - self.t0, w, e, a, temp_c: row.temp_c });
+        let t_session_s = crate::estimate::runs::session_time(self.start_s, row.t_s, self.t0);
+        self.states.push(State { t_session_s, w, e, a, temp_c: row.temp_c });
         self.gyro.push(row.gyro);
         self.accel.push(row.accel);
         self.used += 1;
@@ -308,6 +310,7 @@ impl Samples for StreamRun<'_> {
             reference: Reference::of(self.spec, self.manifest.g_m_s2),
             f,
             t0: f64::NAN,
+            start_s: self.spec.start_s,
             used: 0,
             states: Vec::with_capacity(BLOCK),
             gyro: Vec::with_capacity(BLOCK),

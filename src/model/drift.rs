@@ -49,7 +49,7 @@ impl Effect for Drift {
     }
 
     fn explain(&self) -> &'static str {
-        "Bias drift with time: u_i += d_i t (t from the start of each run), from warm-up or slow relaxation. It shows as a residual trend within runs, the same sign whatever the motion."
+        "Bias drift with time: u_i += d_i t on the session clock (t as recorded, or each run's start_s plus the time since its first sample), from warm-up or slow relaxation. Over a session recorded run after run it shows as offsets between runs that grow with their start time and as a trend within each run, the same sign whatever the motion."
     }
 
     fn terms(&self) -> &[Term] {
@@ -58,6 +58,6 @@ impl Effect for Drift {
 
     #[inline]
     fn regressor(&self, _k: usize, s: &State) -> f64 {
-        s.t_s
+        s.t_session_s
     }
 }

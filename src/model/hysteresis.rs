@@ -32,6 +32,10 @@ impl Hysteresis {
     }
 }
 
+fn norm(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
 impl Effect for Hysteresis {
     fn id(&self) -> &'static str {
         Self::id_of(self.sensor)
@@ -52,8 +56,13 @@ impl Effect for Hysteresis {
         Side::Input
     }
 
+    /// The element's own input is shifted by h_i·sign(ẋ_i).
+    fn input_components(&self, k: usize) -> Vec<(usize, usize)> {
+        vec![(k % 3, k % 3)]
+    }
+
     fn explain(&self) -> &'static str {
-        "Hysteresis: the output depends on whether the input is rising or falling (u_i += h_i sign(dx_i/dt)), from friction in gimbal bearings or magnetic hysteresis. It shows as a residual square wave locked to the cone phase, switching where the input on that axis turns. For the accelerometer dx/dt is taken as the gravity rotation rate -(w x a)."
+        "Hysteresis: the output depends on whether the input is rising or falling (u_i += h_i sign(dx_i/dt)), from friction in gimbal bearings or magnetic hysteresis. It shows as a residual square wave locked to the cone phase, switching where the input on that axis turns. For the accelerometer dx/dt is taken as the gravity rotation rate -(w x a); a rate of change below 1e-6 of its scale counts as none. The friction acts on the sensing element's input, before its scale and coupling."
     }
 
     fn terms(&self) -> &[Term] {
@@ -62,17 +71,21 @@ impl Effect for Hysteresis {
 
     #[inline]
     fn regressor(&self, k: usize, s: &State) -> f64 {
-        let d = match self.sensor {
-            SensorKind::Gyro => s.e[k % 3],
+        // The rate of change of the input and a scale it is measured against: a component
+        // below 1e-6 of it is zero (no direction), not a sign drawn from rounding (the z
+        // axis of a conic stand sees ω×a = 0 up to rounding).
+        let (d, scale) = match self.sensor {
+            SensorKind::Gyro => (s.e[k % 3], norm(s.e)),
             SensorKind::Accel => {
                 let (w, a) = (s.w, s.a);
                 let c = [w[1] * a[2] - w[2] * a[1], w[2] * a[0] - w[0] * a[2], w[0] * a[1] - w[1] * a[0]];
-                -c[k % 3]
+                (-c[k % 3], norm(w) * norm(a))
             }
         };
-        if d > 0.0 {
+        let tol = 1e-6 * scale;
+        if d > tol {
             1.0
-        } else if d < 0.0 {
+        } else if d < -tol {
             -1.0
         } else {
             0.0

@@ -55,6 +55,13 @@ impl Effect for LeverArm {
         Side::Input
     }
 
+    /// Accelerometer i at r_i senses `a + ε×r_i + ω×(ω×r_i)` along its own row of K: the
+    /// perturbation of coefficient r_im has component j equal to the regressor of term (j, m).
+    fn input_components(&self, k: usize) -> Vec<(usize, usize)> {
+        let m = k % 3;
+        (0..3).map(|j| (j, 3 * j + m)).collect()
+    }
+
     fn explain(&self) -> &'static str {
         "Lever arm (size effect): the accelerometers are not at the stand's centre of rotation, \
          so each also senses the tangential acceleration ε × r and the centripetal acceleration \

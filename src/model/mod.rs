@@ -58,8 +58,9 @@ use std::sync::Arc;
 /// The true state a regressor may depend on (sensor frame, SI).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct State {
-    /// Time since the start of the run, s.
-    pub t_s: f64,
+    /// Time on the session clock, s: the time stamp as recorded, or the run's declared
+    /// `start_s` plus the time since its first sample (what drift is measured against).
+    pub t_session_s: f64,
     /// Angular rate, rad/s.
     pub w: [f64; 3],
     /// Angular acceleration, rad/s².
@@ -214,6 +215,14 @@ pub trait Effect: Send + Sync + fmt::Debug {
     /// Where the effect acts (output side unless it says otherwise).
     fn side(&self) -> Side {
         Side::Output
+    }
+    /// For an effect on the input side: how term `k`'s perturbation of the sensing element's
+    /// input decomposes over the input axes, as (input axis j, index of the term of this
+    /// effect whose regressor is component j). Channel i then sees `Σ_j K_ij · component_j`
+    /// (the element's row of the scale/coupling matrix applied to its perturbed input).
+    /// Empty for output-side effects.
+    fn input_components(&self, _k: usize) -> Vec<(usize, usize)> {
+        Vec::new()
     }
     /// Whether the regressors need a temperature (a `temp` column or `temperature_c`).
     fn needs_temperature(&self) -> bool {
@@ -757,6 +766,12 @@ impl TermRef<'_> {
     pub fn regressors(&self, states: &[State], out: &mut [f64]) {
         self.effect.regressors(self.index, states, out);
     }
+
+    /// For an input-side term: (input axis, term index of the effect) of each component of
+    /// its input perturbation (see [`Effect::input_components`]); empty otherwise.
+    pub fn input_components(&self) -> Vec<(usize, usize)> {
+        self.effect.input_components(self.index)
+    }
 }
 
 /// Name of a matrix coefficient, e.g. `matrix_name(Gyro, "c", 0, 1)` = `gyro.c_xy`.
@@ -764,13 +779,43 @@ pub fn matrix_name(sensor: SensorKind, letter: &str, i: usize, j: usize) -> Stri
     format!("{}.{letter}_{}{}", sensor.as_str(), AXES[i], AXES[j])
 }
 
-/// Forward model of one sensor: `u_i = Σ_k θ_k φ_k(state)` over the terms of channel i.
+/// The sensor's scale/coupling matrix from the values of its `Role::Scale` terms (the
+/// identity when the model has none).
+pub fn scale_matrix(terms: &[TermRef<'_>], values: &[f64]) -> [[f64; 3]; 3] {
+    let mut k = [[0.0; 3]; 3];
+    let mut any = false;
+    for (t, &v) in terms.iter().zip(values) {
+        if let Role::Scale(j) = t.term.role {
+            k[t.term.channel][j] += v;
+            any = true;
+        }
+    }
+    if !any {
+        k = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    }
+    k
+}
+
+/// Forward model of one sensor: `u_i = Σ_k θ_k φ_k(state)` over the terms of channel i,
+/// input-side terms weighted by the channel's row of the scale matrix
+/// (`u_i = K_i·(x + Δ) + …`, see [`Effect::input_components`]).
 #[inline]
 pub fn forward(terms: &[TermRef<'_>], values: &[f64], s: &State) -> [f64; 3] {
     let mut u = [0.0; 3];
+    let mut k = None;
     for (t, &v) in terms.iter().zip(values) {
-        if v != 0.0 {
+        if v == 0.0 {
+            continue;
+        }
+        let comps = t.input_components();
+        if comps.is_empty() {
             u[t.term.channel] += v * t.regressor(s);
+        } else {
+            let k = k.get_or_insert_with(|| scale_matrix(terms, values));
+            let i = t.term.channel;
+            for (j, kj) in comps {
+                u[i] += v * k[i][j] * t.effect.regressor(kj, s);
+            }
         }
     }
     u

@@ -138,6 +138,7 @@ impl RunSpec {
             temperature_c: None,
             note: None,
             rows,
+            start_s: None,
         }
     }
 
@@ -155,6 +156,9 @@ impl RunSpec {
             }
             if let Some(n) = &self.note {
                 o.insert("note".into(), serde_json::json!(n));
+            }
+            if let Some(s) = self.start_s {
+                o.insert("start_s".into(), serde_json::json!(s));
             }
         }
         v
@@ -209,6 +213,10 @@ pub struct RunSpec {
     /// Sample range `[start, end)` (0-based data rows) of the CSV this run uses (version 2);
     /// `None` uses the whole file.
     pub rows: Option<(usize, usize)>,
+    /// The run's start on the session clock, s (optional `start_s`, any format version):
+    /// for sessions whose runs each restart their time stamps; without it the session clock
+    /// is `t` as recorded.
+    pub start_s: Option<f64>,
 }
 
 /// A parsed manifest.
@@ -606,7 +614,15 @@ fn parse_run(i: usize, r: &Value, bad_kind: &Bad<'_>) -> Result<RunSpec, Session
         ),
         None => None,
     };
+    let start_s = match num(r, "start_s") {
+        Some(s) => Some(within(&name, "start_s", s, -1e9, 1e9, "s").map_err(|m| bad("start_s", m))?),
+        None if r.get("start_s").is_some() => {
+            return Err(bad("start_s", format!("run '{name}': start_s must be a finite number of seconds")))
+        }
+        None => None,
+    };
     Ok(RunSpec {
+        start_s,
         rows: run_rows(&name, r, &bad)?,
         mount: run_mount(&name, r, bad_kind)?,
         name,

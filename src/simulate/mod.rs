@@ -279,7 +279,7 @@ impl SimConfig {
             }
             for k in 0..n {
                 let state = |tr: &crate::motion::Track| State {
-                    t_s: tr.t_s[k] - tr.t_s[0],
+                    t_session_s: tr.t_s[k],
                     w: tr.w_rad_s[k].xyz,
                     e: tr.e_rad_s2[k].xyz,
                     a: tr.a_m_s2[k].xyz,

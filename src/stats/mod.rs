@@ -46,7 +46,7 @@ pub fn svd(
         return None;
     }
     let iterations = 100 * m.nrows().max(m.ncols()).max(1);
-    nalgebra::SVD::try_new(m, want_u, want_v, f64::EPSILON, iterations)
+    nalgebra::SVD::try_new(m, want_u, want_v, 5.0 * f64::EPSILON, iterations)
 }
 
 /// Singular values of a 3×3 matrix (None when it is not finite or does not converge).
@@ -54,7 +54,7 @@ pub fn singular_values3(m: &nalgebra::Matrix3<f64>) -> Option<nalgebra::Vector3<
     if !m.iter().all(|x| x.is_finite()) {
         return None;
     }
-    nalgebra::SVD::try_new(*m, false, false, f64::EPSILON, 300).map(|s| s.singular_values)
+    nalgebra::SVD::try_new(*m, false, false, 5.0 * f64::EPSILON, 300).map(|s| s.singular_values)
 }
 
 #[cfg(test)]

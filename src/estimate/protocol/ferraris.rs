@@ -34,6 +34,7 @@ impl Obs<'_> {
             accel: &self.accel,
             temp_c: None,
             temp_const_c: self.run.spec.temperature_c,
+            start_s: None,
         }
     }
 }

@@ -350,6 +350,7 @@ impl PoseRow {
             accel: &self.accel,
             temp_c: None,
             temp_const_c: None,
+            start_s: None,
         }
     }
 }
