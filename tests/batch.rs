@@ -108,7 +108,13 @@ fn a_lot_of_50_units_flags_exactly_the_bad_ones_with_their_reasons_and_the_outli
     bad.sort();
     let mut expected: Vec<String> = [&coupling, &gsens, &corrupt, &missing].into_iter().flatten().cloned().collect();
     expected.sort();
-    assert_eq!(bad, expected);
+    let why: Vec<String> = r
+        .units
+        .iter()
+        .filter(|u| u.verdict != Verdict::Pass)
+        .map(|u| format!("{}: {}", folder(u), u.reasons.join(" | ")))
+        .collect();
+    assert_eq!(bad, expected, "{why:#?}");
     let reasons = |f: &str| r.units.iter().find(|u| folder(u) == f).unwrap().reasons.join(" | ");
     for f in &coupling {
         assert!(reasons(f).contains("gyro cross-coupling") && reasons(f).contains("gyro.c_xy"), "{f}: {}", reasons(f));

@@ -65,6 +65,27 @@ pub struct Args {
     /// Accelerometer random walk, m/s²/√s.
     #[arg(long, default_value_t = 0.0)]
     accel_random_walk: f64,
+    /// Make the --gyro-noise and --accel-noise first-order Gauss–Markov (AR(1)) with this
+    /// correlation per sample, keeping their standard deviation (real sensors are rarely white).
+    #[arg(long)]
+    ar1: Option<f64>,
+    /// Quantise the outputs to GYRO,ACCEL resolution in the file's units (e.g. 0.001,1e-5).
+    #[arg(long, value_parser = parse_list)]
+    quantize: Option<List>,
+    /// Jitter the time stamps by this standard deviation, ms (the samples stay regular).
+    #[arg(long, default_value_t = 0.0)]
+    jitter_ms: f64,
+    /// Let the time run on across the runs (one session clock), with this pause between
+    /// runs, s.
+    #[arg(long)]
+    session_clock: Option<f64>,
+    /// Write rad/s and m/s² instead of deg/s and g.
+    #[arg(long)]
+    si_units: bool,
+    /// A disturbance outside the catalogue (repeatable): wobble:CHANNEL:HARMONIC:AMPLITUDE:EVERY,
+    /// sine:CHANNEL:FREQ_HZ:AMPLITUDE or saturate:SENSOR:LIMIT (deg/s or g; channels gyro-y …).
+    #[arg(long = "disturb", value_parser = crosscal::simulate::realism::Disturbance::parse)]
+    disturb: Vec<crosscal::simulate::realism::Disturbance>,
 }
 
 fn parse_set(s: &str) -> Result<(String, f64), String> {
@@ -86,6 +107,33 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let mut cfg = SimConfig::paper();
     cfg.gyro_noise_deg_s = a.gyro_noise;
     cfg.accel_noise_g = a.accel_noise;
+    if let Some(rho) = a.ar1 {
+        if !(0.0..1.0).contains(&rho) {
+            anyhow::bail!("--ar1 must be in [0, 1)");
+        }
+        cfg.gyro_process.ar1 = Some((rho, a.gyro_noise.to_radians()));
+        cfg.accel_process.ar1 = Some((rho, a.accel_noise * cfg.g_m_s2));
+        cfg.gyro_noise_deg_s = 0.0;
+        cfg.accel_noise_g = 0.0;
+    }
+    if let Some(List(q)) = &a.quantize {
+        match q.as_slice() {
+            [g, acc] if *g >= 0.0 && *acc >= 0.0 => cfg.realism.quantum = [*g, *acc],
+            _ => anyhow::bail!("--quantize expects GYRO,ACCEL resolutions (non-negative)"),
+        }
+    }
+    if !(a.jitter_ms.is_finite() && a.jitter_ms >= 0.0) {
+        anyhow::bail!("--jitter-ms must be finite and non-negative");
+    }
+    cfg.realism.jitter_s = a.jitter_ms * 1e-3;
+    if let Some(gap) = a.session_clock {
+        if !(gap.is_finite() && gap >= 0.0) {
+            anyhow::bail!("--session-clock expects a pause between runs in s (finite, non-negative)");
+        }
+        cfg.realism.session_clock_gap_s = Some(gap);
+    }
+    cfg.realism.si_units = a.si_units;
+    cfg.realism.disturbances = a.disturb.clone();
     cfg.seed = a.seed;
     cfg.sample_rate_hz = a.runs.rate_hz;
     cfg.runs = a.runs.plan();

@@ -1,48 +1,71 @@
 //! Model versus measurement: where the fitted model fails, and which catalogued physical
-//! effect would explain it.
+//! effect would explain it — accepted only on evidence the noise cannot fake.
 //!
-//! 1. Fit the model; per sensor channel compare the residual RMS with the **noise floor**,
-//!    estimated from the residual's first differences (σ̂ = 1.4826·MAD(Δr)/√2, blind to
-//!    anything smooth), and split the residual into its **systematic** part (per run:
-//!    constant + [`HARMONICS`] cone harmonics; one χ² test per channel pooled over runs
-//!    against white noise, at the level of [`SIGNIFICANCE_Z`]).
-//! 2. For each catalogue effect not in the model, refit with it and score it: residual
-//!    reduction, a likelihood-ratio (χ²) p-value and ΔBIC = Σ_s N_s ln(RSS₁/RSS₀) + Δp ln N
-//!    over both sensors. Nonlinear effects (time delay, dead zone) are fitted by variable
-//!    projection for each try. Candidates that do not reach ΔBIC < [`BIC_EVIDENCE`] are not proposed.
-//! 3. Climb greedily: add the best candidate, re-score the rest, until the systematic
-//!    residual is at the noise floor or nothing helps. Candidates whose scores are within
-//!    [`BIC_TIE`] of the best are reported as indistinguishable on these runs.
-//! 4. Verdict: adequate (nothing systematic, nothing proposed), explained (the proposed
-//!    effects bring the systematic residual to the noise floor), or unexplained (the channel,
-//!    harmonic and runs where the systematic residual stays).
+//! 1. Fit the model; per run and channel, model the residual's noise (an AR(p) after the
+//!    run's systematic basis, [`space`]) and look for narrow-band lines in its spectrum
+//!    ([`lines`]). The noise floor is the noise model's standard deviation.
+//! 2. Build the whitened Gram of every catalogue effect's columns beside the model's
+//!    ([`space`]): every statistic below is generalised least squares, honest under
+//!    serially correlated noise, computed without another pass over the samples.
+//! 3. Climb greedily ([`select`]): add the effect with the largest χ² reduction among those
+//!    that are supported in-sample (p and ΔBIC), predict left-out runs, and have one size
+//!    in every run; two that explain the same residual are one finding. Stop when none
+//!    qualifies.
+//! 4. Verdict: adequate (nothing systematic, no line off the cone, nothing added),
+//!    explained (the added effects leave nothing systematic), or unexplained (where the
+//!    residual's systematic part or lines sit: channel, harmonic or frequency, runs, size).
 
+pub mod algebra;
+pub mod lines;
+pub mod picture;
 pub mod protocol;
 pub mod report;
+pub mod select;
+pub mod space;
+
+pub use lines::Line;
+pub use picture::{channel_reports, residuals, RunMotions, RunResiduals};
+pub use select::{Evidence, BIC_EVIDENCE};
+pub use space::HARMONICS;
 
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
-use crate::model::{catalog, forward, Model};
-use crate::session::MotionSpec;
-use crate::stats::{chi2_upper, systematic, Systematic};
+use crate::model::{find, Model};
 use crate::units::{SensorKind, AXES};
+use rayon::prelude::*;
+use select::{Leftover, Space};
 use serde::{Deserialize, Serialize};
-use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// Fits exactly `model` to prepared runs through the one entry point.
 fn refit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
     Ok(crate::estimate::fit(&FitRequest::runs(model, runs).options(*opts))?.fit)
 }
 
-/// Cone harmonics in the systematic-residual fit.
-pub const HARMONICS: usize = 6;
-/// ΔBIC below which an effect counts as supported (very strong evidence).
-pub const BIC_EVIDENCE: f64 = -10.0;
-/// Candidates whose ΔBIC differ by less than this are indistinguishable.
-pub const BIC_TIE: f64 = 10.0;
+/// Relative numerical resolution below which a residual is rounding, not physics (no
+/// sensor resolves 1e-10 of its signal).
+const RESOLUTION: f64 = 1e-10;
+
+/// Per channel: the smallest residual that is not rounding of the recording and the
+/// arithmetic (RESOLUTION × output RMS).
+fn resolution(space: &Space) -> Vec<f64> {
+    (0..6)
+        .map(|c| {
+            let (mut ms, mut n) = (0.0, 0.0);
+            for rg in &space.runs {
+                ms += rg.output_ms[c] * rg.noise[c].n as f64;
+                n += rg.noise[c].n as f64;
+            }
+            RESOLUTION * (ms / n.max(1.0)).sqrt()
+        })
+        .collect()
+}
+
 /// Normal quantile of the pooled χ² test for a systematic residual (0.001 %).
 pub const SIGNIFICANCE_Z: f64 = 4.265;
 /// At most this many effects are added by the ladder.
-pub const MAX_STEPS: usize = 4;
+pub const MAX_STEPS: usize = 6;
+/// A candidate whose χ² gain, once the chosen effect is in, keeps less than this share of
+/// its own is explained by the same residual feature (indistinguishable on these runs).
+const SHARED_FEATURE: f64 = 0.1;
 
 /// Residual picture of one channel.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -53,15 +76,32 @@ pub struct ChannelReport {
     pub axis: char,
     /// Residual RMS (SI).
     pub residual_rms: f64,
-    /// Noise floor σ̂ from first differences (SI).
+    /// Noise floor: the standard deviation of the noise model (SI).
     pub noise_floor: f64,
     /// RMS of the systematic part (SI).
     pub systematic_rms: f64,
-    /// Whether the systematic part is significant (pooled χ² over runs).
+    /// Whether the systematic part is significant (pooled GLS χ² over runs).
     pub systematic: bool,
     /// Where the systematic part is largest: (run, harmonic, amplitude SI); harmonic 0 is a
-    /// constant, None for non-conic runs.
+    /// constant, None a slow variation (or a run without a cone).
     pub worst: Option<(String, Option<usize>, f64)>,
+}
+
+/// The noise model of one channel, pooled over runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct NoiseReport {
+    /// Sensor.
+    pub sensor: SensorKind,
+    /// Axis.
+    pub axis: char,
+    /// Standard deviation of the noise (SI).
+    pub sigma: f64,
+    /// Lag-one autocorrelation of the noise model (0 for white noise).
+    pub lag1: f64,
+    /// Largest AR order chosen over the runs.
+    pub ar_order: usize,
+    /// Variance of the noise over the variance of its one-step innovations (1 when white).
+    pub colour: f64,
 }
 
 /// One candidate effect's score.
@@ -73,14 +113,18 @@ pub struct Candidate {
     pub sensor: SensorKind,
     /// Coefficients it adds that the runs could identify.
     pub added_params: usize,
-    /// That sensor's RSS before (SI²).
+    /// That sensor's whitened residual χ² before (noise units: about one per sample).
     pub rss_before: f64,
-    /// Sensor RSS with the effect.
+    /// The same with the effect.
     pub rss_after: f64,
-    /// Likelihood-ratio p-value of the added coefficients.
+    /// χ² p-value of the added coefficients (generalised least squares).
     pub p_value: f64,
     /// ΔBIC (negative = supported).
     pub delta_bic: f64,
+    /// The evidence in full (held-out gain, per-run consistency).
+    pub evidence: Evidence,
+    /// Why it is not accepted (None: it qualifies).
+    pub rejected: Option<String>,
     /// Physical explanation.
     pub explanation: String,
 }
@@ -92,7 +136,7 @@ pub struct Step {
     pub effect: String,
     /// Its score when added.
     pub score: Candidate,
-    /// Other candidates indistinguishable from it at this step.
+    /// Other candidates that explain the same residual feature on these runs.
     pub indistinguishable: Vec<String>,
     /// Channel picture after adding it.
     pub channels: Vec<ChannelReport>,
@@ -106,7 +150,7 @@ pub enum Verdict {
     Adequate,
     /// The proposed effects bring the residual to the noise floor.
     Explained,
-    /// A systematic residual remains that no catalogued effect explains.
+    /// A systematic residual or a line remains that no catalogued effect explains.
     Unexplained,
 }
 
@@ -117,6 +161,10 @@ pub struct Diagnosis {
     pub model: String,
     /// Channel picture of the model as given.
     pub channels: Vec<ChannelReport>,
+    /// The noise model per channel.
+    pub noise: Vec<NoiseReport>,
+    /// Narrow-band lines in the residual's spectrum.
+    pub lines: Vec<Line>,
     /// First-round scores of every applicable candidate, best first.
     pub candidates: Vec<Candidate>,
     /// Effects added, in order.
@@ -125,8 +173,10 @@ pub struct Diagnosis {
     pub verdict: Verdict,
     /// Effects proposed (empty unless explained).
     pub proposal: Vec<String>,
-    /// Where an unexplained systematic residual sits, in words.
+    /// Where an unexplained systematic residual or line sits, in words.
     pub unexplained: Vec<String>,
+    /// What these runs cannot identify, and the run that would.
+    pub unidentifiable: Vec<String>,
     /// Cautions (aliasing between candidates, missing inputs).
     pub warnings: Vec<String>,
     /// Fit of the model at the end of the ladder (see [`ladder_model`]).
@@ -202,173 +252,133 @@ pub fn ladder_model(base: &Model, d: &Diagnosis) -> Model {
     m
 }
 
-/// Motion of each run (for the cone phase).
-pub type RunMotions<'a> = [&'a MotionSpec];
-
-fn values_of(f: &Fit, model: &Model, sensor: SensorKind) -> Vec<f64> {
-    let sf = f.sensor(sensor);
-    model.terms(sensor).iter().map(|t| sf.value(&t.term.name).unwrap_or(t.term.nominal)).collect()
+/// The analysed session: the base fit, the feature space and the runs' names.
+struct Analysis {
+    base_fit: Fit,
+    space: Space,
+    names: Vec<String>,
 }
 
-/// Residuals (output − model, SI) of a fitted model, one run.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RunResiduals {
-    /// Run name.
-    pub run: String,
-    /// Time stamps, s.
-    pub t_s: Vec<f64>,
-    /// Cone phase θ (rad) per sample, for conic runs.
-    pub theta: Option<Vec<f64>>,
-    /// Six channels: gyro x, y, z, accel x, y, z.
-    pub r: Vec<Vec<f64>>,
-    /// Sum of squared outputs per channel (for the recording's numerical resolution).
-    pub output_ss: [f64; 6],
-}
-
-/// Residuals of a fitted model on every run (nonlinear effects applied).
-pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotions<'_>) -> Vec<RunResiduals> {
-    let mut out: Vec<RunResiduals> = runs
-        .iter()
-        .zip(motions.iter())
-        .map(|(run, m)| RunResiduals {
-            run: run.name.to_string(),
-            t_s: run.track.t_s.clone(),
-            theta: match m {
-                MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
-                    let c = crate::motion::Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
-                    Some(run.track.t_s.iter().map(|&t| c.theta(t).rem_euclid(std::f64::consts::TAU)).collect())
-                }
-                _ => None,
-            },
-            r: (0..6).map(|_| Vec::with_capacity(run.len())).collect(),
-            output_ss: [0.0; 6],
-        })
+/// Analyses each run around a fitted model (in parallel; each run's residual lives only
+/// while its Grams are built).
+fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotions<'_>, has_temp: bool) -> Analysis {
+    let universe = space::Universe::new(model, &base_fit, has_temp);
+    let residual = |i: usize| residuals(model, &base_fit, &runs[i..=i], &motions[i..=i]).remove(0).r;
+    let stats: Vec<space::RunNoiseStats> =
+        (0..runs.len()).into_par_iter().map(|i| space::run_noise(&runs[i], motions[i], &residual(i))).collect();
+    let pooled = space::pooled_noise(&stats);
+    let grams: Vec<space::RunGram> = stats
+        .into_par_iter()
+        .enumerate()
+        .map(|(i, st)| space::run_gram(&universe, model, &base_fit, &runs[i], st, &pooled, &residual(i)))
         .collect();
-    for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
-        let terms = model.terms(sensor);
-        let values = values_of(f, model, sensor);
-        let seen = crate::estimate::seen_tracks(model, f, sensor, runs);
-        let moved: Vec<FitRun<'_>> = match &seen {
-            Some(tracks) => runs.iter().zip(tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect(),
-            None => runs.to_vec(),
-        };
-        for (run, o) in moved.iter().zip(out.iter_mut()) {
-            for k in 0..run.len() {
-                let u = forward(&terms, &values, &run.state(k));
-                let y = run.output(sensor, k);
-                for ch in 0..3 {
-                    o.r[3 * si + ch].push(y[ch] - u[ch]);
-                    o.output_ss[3 * si + ch] += y[ch] * y[ch];
-                }
-            }
-        }
-    }
-    out
+    let names = runs.iter().map(|r| r.name.to_string()).collect();
+    Analysis { base_fit, space: Space::new(universe, grams), names }
 }
 
-/// Relative numerical resolution below which a residual is rounding, not physics.
-const RESOLUTION: f64 = 1e-10;
-
-/// Channel reports (residual RMS, noise floor, systematic part) from residuals.
-pub fn channel_reports(res: &[RunResiduals], motions: &RunMotions<'_>) -> Vec<ChannelReport> {
-    let mut out = Vec::with_capacity(6);
-    for c in 0..6 {
-        let sensor = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
-        let mut diffs = Vec::new();
-        let (mut ss, mut n, mut sys_ss) = (0.0, 0usize, 0.0);
-        let (mut chi, mut dof) = (0.0, 0usize);
-        let mut worst: Option<(String, Option<usize>, f64)> = None;
-        for (ri, run) in res.iter().enumerate() {
-            let r = &run.r[c];
-            diffs.extend(r.windows(2).map(|w| (w[1] - w[0]).abs()));
-            ss += r.iter().map(|v| v * v).sum::<f64>();
-            n += r.len();
-            let sys: Systematic = systematic(r, &run.t_s, crate::motion::cone_phase(motions[ri]), HARMONICS);
-            sys_ss += sys.curve.iter().map(|v| v * v).sum::<f64>();
-            if sys.sigma2 > 0.0 {
-                chi += sys.explained / sys.sigma2;
-                dof += sys.params;
-            }
-            let (h, amp) = if sys.amplitudes.is_empty() {
-                (None, sys.max_abs())
-            } else {
-                let (h, a) = sys
-                    .amplitudes
-                    .iter()
-                    .enumerate()
-                    .fold((0, 0.0), |acc, (h, &a)| if a > acc.1 { (h, a) } else { acc });
-                (Some(h), a)
-            };
-            if worst.as_ref().is_none_or(|w| amp > w.2) {
-                worst = Some((run.run.clone(), h, amp));
-            }
-        }
-        // One pooled test per channel over all runs, at 0.001 % (few false alarms even
-        // over many channels and sessions).
-        // Residuals below 1e-10 of the output RMS are rounding of the recording and of the
-        // arithmetic (no sensor resolves 1e-10 of its signal): never "systematic".
-        let out_ss: f64 = res.iter().map(|r| r.output_ss[c]).sum();
-        let resolution = RESOLUTION * (out_ss / n.max(1) as f64).sqrt();
-        let sys_rms = (sys_ss / n.max(1) as f64).sqrt();
-        let significant = dof > 0 && chi > chi2_upper(dof, SIGNIFICANCE_Z) && sys_rms > resolution;
-        let mad = crate::stats::median(&mut diffs).unwrap_or(0.0);
-        // For white noise, |Δr| has median 0.6745·√2·σ.
-        let noise_floor = mad / (0.674_489_75 * std::f64::consts::SQRT_2);
-        out.push(ChannelReport {
-            sensor,
-            axis: AXES[c % 3],
-            residual_rms: (ss / n.max(1) as f64).sqrt(),
-            noise_floor,
-            systematic_rms: sys_rms,
-            systematic: significant,
-            worst,
-        });
+/// Pooled standard deviation of a channel's noise.
+fn noise_sigma(space: &Space, c: usize) -> f64 {
+    let (mut v, mut n) = (0.0, 0.0);
+    for rg in &space.runs {
+        v += rg.noise[c].ar.marginal_var * rg.noise[c].n as f64;
+        n += rg.noise[c].n as f64;
     }
-    out
+    (v / n.max(1.0)).sqrt()
 }
 
-fn sensor_rss(f: &Fit, sensor: SensorKind) -> (f64, u64, usize) {
-    let sf = f.sensor(sensor);
-    let rss = sf.channels.iter().map(|c| c.residual_rms * c.residual_rms * c.n as f64).sum();
-    let n = sf.channels.iter().map(|c| c.n).sum();
-    let p = sf.coefficients.iter().filter(|c| c.status == CoefStatus::Fitted).count();
-    (rss, n, p)
+/// The noise model per channel, pooled over runs.
+fn noise_reports(space: &Space) -> Vec<NoiseReport> {
+    (0..6)
+        .map(|c| {
+            let (mut n, mut var, mut innov, mut lag1, mut order) = (0.0, 0.0, 0.0, 0.0, 0);
+            for rg in &space.runs {
+                let rn = &rg.noise[c];
+                let w = rn.n as f64;
+                n += w;
+                var += w * rn.ar.marginal_var;
+                innov += w * rn.ar.innovation_var;
+                // ρ₁ of an AR model from its first Yule–Walker equation.
+                let r1 = if rn.ar.phi.len() == 1 { rn.ar.phi[0] } else { lag_one(&rn.ar) };
+                lag1 += w * r1;
+                order = order.max(rn.ar.order());
+            }
+            let n = n.max(1.0);
+            NoiseReport {
+                sensor: if c < 3 { SensorKind::Gyro } else { SensorKind::Accel },
+                axis: AXES[c % 3],
+                sigma: (var / n).sqrt(),
+                lag1: lag1 / n,
+                ar_order: order,
+                colour: if innov > 0.0 { var / innov } else { 1.0 },
+            }
+        })
+        .collect()
 }
 
-/// Scores a refit against the base fit over both sensors: the likelihood-ratio statistic
-/// LR = Σ_s N_s ln(RSS₀/RSS₁) (χ² with Δp degrees of freedom under "no effect", giving the
-/// p-value) and ΔBIC = −LR + Δp ln N.
-fn score(base: &Fit, with: &Fit, effect: &str, explanation: &str) -> Candidate {
-    let fitted_nl = |f: &Fit| f.nonlinear.iter().filter(|p| p.fitted).count();
-    let mut lr = 0.0;
-    let mut dp = fitted_nl(with).saturating_sub(fitted_nl(base));
-    let mut n_total = 0.0;
-    let (mut best_sensor, mut best_gain) = (SensorKind::Gyro, f64::NEG_INFINITY);
-    let (mut rss_before, mut rss_after) = (0.0, 0.0);
-    for s in SensorKind::BOTH {
-        let (rss0, n, p0) = sensor_rss(base, s);
-        let (rss1, _, p1) = sensor_rss(with, s);
-        dp += p1.saturating_sub(p0);
-        n_total += n as f64;
-        let gain = if rss0 > 0.0 && rss1 > 0.0 { n as f64 * (rss0 / rss1).ln() } else { 0.0 };
-        lr += gain;
-        if gain > best_gain {
-            best_gain = gain;
-            best_sensor = s;
-            rss_before = rss0;
-            rss_after = rss1;
+/// Lag-one autocorrelation of an AR model by simulating its impulse response (exact to
+/// 1e-6 for stable models): ρ₁ = Σ ψ_k ψ_{k+1} / Σ ψ_k².
+fn lag_one(ar: &crate::stats::ArModel) -> f64 {
+    if ar.phi.is_empty() {
+        return 0.0;
+    }
+    let mut psi = vec![1.0];
+    for k in 1..4096 {
+        let v: f64 = ar.phi.iter().enumerate().filter(|(i, _)| *i < k).map(|(i, p)| p * psi[k - 1 - i]).sum();
+        psi.push(v);
+        if k > 64 && v.abs() < 1e-9 {
+            break;
         }
     }
-    let p_value = if dp == 0 { 1.0 } else { ChiSquared::new(dp as f64).map(|d| d.sf(lr.max(0.0))).unwrap_or(1.0) };
+    let num: f64 = psi.windows(2).map(|w| w[0] * w[1]).sum();
+    let den: f64 = psi.iter().map(|v| v * v).sum();
+    num / den
+}
+
+/// The channel picture of a set of effects: residual RMS from its fit, the systematic
+/// part from the Grams.
+fn picture(
+    space: &Space,
+    l: &select::Leftover,
+    fit: &Fit,
+    noise: &[NoiseReport],
+    names: &[String],
+    c: usize,
+) -> ChannelReport {
+    let sensor = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
+    let ch = &fit.sensor(sensor).channels[c % 3];
+    let sys_rms = (l.ss / l.n.max(1.0)).sqrt();
+    let significant =
+        l.dof > 0 && l.chi2 > crate::stats::chi2_upper(l.dof, SIGNIFICANCE_Z) && sys_rms > resolution(space)[c];
+    ChannelReport {
+        sensor,
+        axis: AXES[c % 3],
+        residual_rms: ch.residual_rms,
+        noise_floor: noise[c].sigma,
+        systematic_rms: sys_rms,
+        systematic: significant,
+        worst: l.worst.map(|(r, f, a, _)| (names[r].clone(), f, a)),
+    }
+}
+
+fn pictures(a: &Analysis, set: &[usize], fit: &Fit, noise: &[NoiseReport]) -> Vec<ChannelReport> {
+    let left: Vec<Leftover> = a.space.systematic(&a.space.solve(set));
+    (0..6).map(|c| picture(&a.space, &left[c], fit, noise, &a.names, c)).collect()
+}
+
+fn candidate(id: &str, ev: Evidence, base_q: &[f64]) -> Candidate {
+    let s = usize::from(ev.delta_q_sensor[1] > ev.delta_q_sensor[0]);
+    let before: f64 = base_q[3 * s..3 * s + 3].iter().sum();
     Candidate {
-        effect: effect.to_string(),
-        sensor: best_sensor,
-        added_params: dp,
-        rss_before,
-        rss_after,
-        p_value,
-        delta_bic: -lr + dp as f64 * n_total.max(1.0).ln(),
-        explanation: explanation.to_string(),
+        effect: id.to_string(),
+        sensor: SensorKind::BOTH[s],
+        added_params: ev.added_params,
+        rss_before: before,
+        rss_after: before - ev.delta_q_sensor[s],
+        p_value: ev.p_value,
+        delta_bic: ev.delta_bic,
+        rejected: ev.rejection(),
+        evidence: ev,
+        explanation: find(id).map_or("", |e| e.explain()).to_string(),
     }
 }
 
@@ -380,116 +390,224 @@ pub fn diagnose(
     opts: &FitOptions,
 ) -> Result<Diagnosis, EstimateError> {
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
+    let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
+    conclude(a, model, runs, motions, opts, has_temp)
+}
+
+/// The diagnosis of an analysed session.
+fn conclude(
+    a: Analysis,
+    model: &Model,
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    opts: &FitOptions,
+    has_temp: bool,
+) -> Result<Diagnosis, EstimateError> {
     let mut warnings = Vec::new();
     if !has_temp {
         warnings.push("no temperature in some runs: temperature effects were not tried".to_string());
     }
-    let mut current = model.clone();
-    let mut current_fit = refit(&current, runs, opts)?;
-    let channels = channel_reports(&residuals(&current, &current_fit, runs, motions), motions);
-    let disagreements = if current.nonlinear().is_empty() && runs.len() > 1 {
-        per_run_disagreements(&current, &current_fit, runs, opts)
+    let noise = noise_reports(&a.space);
+    let base_set = a.space.base_set();
+    let channels = pictures(&a, &base_set, &a.base_fit, &noise);
+    let disagreements = if model.nonlinear().is_empty() && runs.len() > 1 {
+        per_run_disagreements(model, &a.base_fit, runs, opts)
     } else {
         Vec::new()
     };
-    let mut steps: Vec<Step> = Vec::new();
-    let mut first_round: Option<Vec<Candidate>> = None;
-    let mut picture = channels.clone();
-    while steps.len() < MAX_STEPS && picture.iter().any(|c| c.systematic) {
-        let options: Vec<(&'static str, &'static str)> =
-            catalog().iter().filter(|e| !e.needs_temperature() || has_temp).map(|e| (e.id(), e.explain())).collect();
-        // Candidates are scored with the nonlinear parameters found so far held (a linear
-        // refit each); the chosen one is then refitted jointly with everything.
-        let mut held = current.clone();
-        for e in current.nonlinear() {
-            let values = current_fit.nonlinear.iter().filter(|p| p.effect == e.effect.id()).map(|p| p.value).collect();
-            let _ = held.fix_nonlinear(e.effect.id(), values);
-        }
-        let mut scored = Vec::new();
-        let screening = FitOptions { screening: true, ..*opts };
-        for (id, explain) in options {
-            if current.has(id) {
-                continue;
-            }
-            let mut m = held.clone();
-            if m.add_effect(id).is_err() {
-                continue;
-            }
-            let Ok(f) = refit(&m, runs, &screening) else { continue };
-            scored.push((score(&current_fit, &f, id, explain), id, f));
-        }
-        scored.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
-        if first_round.is_none() {
-            first_round = Some(scored.iter().map(|s| s.0.clone()).collect());
-        }
-        let Some((best, id, _)) = scored.first().cloned() else { break };
-        if best.delta_bic >= BIC_EVIDENCE {
-            break;
-        }
-        let mut m = current.clone();
-        if m.add_effect(id).is_err() {
-            break;
-        }
-        let f = refit(&m, runs, opts)?;
-        let best = score(&current_fit, &f, id, &best.explanation);
-        let indistinguishable: Vec<String> = scored[1..]
-            .iter()
-            .filter(|s| s.0.sensor == best.sensor && s.0.delta_bic - best.delta_bic < BIC_TIE)
-            .map(|s| s.0.effect.clone())
-            .collect();
-        if !indistinguishable.is_empty() {
-            warnings.push(format!(
-                "{} and {} fit these runs equally well (ΔBIC within {BIC_TIE}): they alias on these runs; add runs at another rate, direction, cone angle or mount to separate them",
-                best.effect,
-                indistinguishable.join(", ")
-            ));
-        }
-        current = m;
-        current_fit = f;
-        picture = channel_reports(&residuals(&current, &current_fit, runs, motions), motions);
-        steps.push(Step { effect: best.effect.clone(), score: best, indistinguishable, channels: picture.clone() });
-    }
-    let remaining: Vec<&ChannelReport> = picture.iter().filter(|c| c.systematic).collect();
-    let verdict = if steps.is_empty() && remaining.is_empty() {
-        Verdict::Adequate
-    } else if remaining.is_empty() {
-        Verdict::Explained
-    } else {
+    let base_fit = a.base_fit.clone();
+    let (steps, first_round, final_model, a) = climb(a, model, runs, motions, opts, has_temp, &mut warnings)?;
+    let final_fit = a.base_fit.clone();
+    let _ = base_fit;
+    let picture_now = steps.last().map_or_else(|| channels.clone(), |s| s.channels.clone());
+    let names: Vec<&str> = a.names.iter().map(String::as_str).collect();
+    let tol = runs.iter().map(|r| run_span(r)).fold(0.0, f64::max);
+    let found = lines::group(&a.space.runs, &names, if tol > 0.0 { 4.0 / tol } else { 0.05 });
+    let remaining: Vec<&ChannelReport> = picture_now.iter().filter(|c| c.systematic).collect();
+    let off_cone: Vec<&Line> = found.iter().filter(|l| l.cone_harmonic.is_none()).collect();
+    let verdict = if !remaining.is_empty() || !off_cone.is_empty() {
         Verdict::Unexplained
+    } else if steps.is_empty() {
+        Verdict::Adequate
+    } else {
+        Verdict::Explained
     };
-    let unexplained = remaining
-        .iter()
-        .map(|c| {
-            let at = match &c.worst {
-                Some((run, Some(0), a)) => format!("a constant offset of {a:.3e} in run {run}"),
-                Some((run, Some(h), a)) => {
-                    format!("harmonic {h} of the cone frequency, amplitude {a:.3e}, largest in run {run}")
-                }
-                Some((run, None, a)) => format!("a slow variation of up to {a:.3e} in run {run}"),
-                None => "no single place".to_string(),
-            };
-            format!(
-                "{} {}: systematic residual RMS {:.3e} against a noise floor of {:.3e} (SI); it sits at {at}",
-                c.sensor, c.axis, c.systematic_rms, c.noise_floor
-            )
-        })
-        .collect();
+    let mut unexplained: Vec<String> = remaining.iter().map(|c| describe_leftover(c)).collect();
+    unexplained.extend(off_cone.iter().map(|l| l.describe()));
+    if verdict == Verdict::Unexplained && !steps.is_empty() {
+        warnings.push(format!(
+            "the effects added ({}) are the closest catalogued match, not a full explanation: a systematic residual remains",
+            steps.iter().map(|s| s.effect.as_str()).collect::<Vec<_>>().join(", ")
+        ));
+    }
+    let unidentifiable = unidentifiable(&final_model, &final_fit, &first_round);
     let proposal =
         if verdict == Verdict::Explained { steps.iter().map(|s| s.effect.clone()).collect() } else { Vec::new() };
     Ok(Diagnosis {
-        disagreements,
-        final_fit: current_fit,
         model: model.name.clone(),
         channels,
-        candidates: first_round.unwrap_or_default(),
+        noise,
+        lines: found,
+        candidates: first_round,
         steps,
         verdict,
         proposal,
         unexplained,
+        unidentifiable,
         warnings,
+        final_fit,
+        disagreements,
     })
 }
 
+fn run_span(r: &FitRun<'_>) -> f64 {
+    let t = &r.track.t_s;
+    t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0)
+}
+
+type Climb = (Vec<Step>, Vec<Candidate>, Model, Analysis);
+
+/// The greedy climb over candidate effects (module documentation, step 3). After each
+/// effect is added the model is refitted (nonlinear parameters by variable projection on
+/// all samples) and the runs analysed again around it, so that the noise model, the
+/// columns of nonlinear effects and the systematic part follow the model.
+#[allow(clippy::too_many_arguments)]
+fn climb(
+    mut a: Analysis,
+    model: &Model,
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    opts: &FitOptions,
+    has_temp: bool,
+    warnings: &mut Vec<String>,
+) -> Result<Climb, EstimateError> {
+    let mut current = model.clone();
+    let mut steps: Vec<Step> = Vec::new();
+    let mut first_round: Option<Vec<Candidate>> = None;
+    while steps.len() < MAX_STEPS {
+        let space = &a.space;
+        let set = space.base_set();
+        let base = space.solve(&set);
+        let base_heldout = space.heldout(&set);
+        let base_q = space.channel_q(&base);
+        let mut scored: Vec<(Candidate, Vec<usize>)> = space
+            .universe
+            .candidates
+            .par_iter()
+            .map(|&id| {
+                let cand = space.effect_params(id);
+                (candidate(id, space.evidence(&set, &base, &base_heldout, &cand), &base_q), cand)
+            })
+            .collect();
+        scored.sort_by(|x, y| x.0.delta_bic.total_cmp(&y.0.delta_bic));
+        // A sensor whose noise is rounding (a noiseless recording) has nothing to explain.
+        let res = resolution(space);
+        let exact: Vec<bool> =
+            (0..2).map(|s| (3 * s..3 * s + 3).all(|c| noise_sigma(space, c) <= 10.0 * res[c])).collect();
+        for (c, _) in &mut scored {
+            if c.rejected.is_none() && exact[usize::from(c.sensor == SensorKind::Accel)] {
+                c.rejected = Some("the residual is at the recording's numerical resolution".into());
+            }
+        }
+        if steps.is_empty() {
+            first_round = Some(scored.iter().map(|s| s.0.clone()).collect());
+        }
+        let passing: Vec<&(Candidate, Vec<usize>)> = scored.iter().filter(|s| s.0.rejected.is_none()).collect();
+        let Some(best) = passing.iter().max_by(|x, y| x.0.evidence.delta_q.total_cmp(&y.0.evidence.delta_q)) else {
+            break;
+        };
+        let indistinguishable = aliases(space, &set, best, &passing);
+        if !indistinguishable.is_empty() {
+            warnings.push(format!(
+                "{} or {}: they explain the same residual on these runs (one finding, not two); runs at another rate, direction, cone angle or mount would separate them",
+                best.0.effect,
+                indistinguishable.join(" or ")
+            ));
+        }
+        let mut m = current.clone();
+        if m.add_effect(&best.0.effect).is_err() {
+            break;
+        }
+        let f = refit(&m, runs, opts)?;
+        let next = analyse(&m, f, runs, motions, has_temp);
+        let noise = noise_reports(&next.space);
+        let channels = pictures(&next, &next.space.base_set(), &next.base_fit, &noise);
+        steps.push(Step { effect: best.0.effect.clone(), score: best.0.clone(), indistinguishable, channels });
+        current = m;
+        a = next;
+    }
+    Ok((steps, first_round.unwrap_or_default(), current, a))
+}
+
+/// The passing candidates that explain the same residual feature as `best`: each adds less
+/// than [`SHARED_FEATURE`] of its own gain once `best` is in, and `best` adds as little
+/// once it is in.
+fn aliases(
+    space: &Space,
+    set: &[usize],
+    best: &(Candidate, Vec<usize>),
+    passing: &[&(Candidate, Vec<usize>)],
+) -> Vec<String> {
+    let gain_after = |first: &[usize], then: &[usize]| {
+        let mut with = set.to_vec();
+        with.extend(first);
+        let l = space.solve(&with);
+        let h = space.heldout(&with);
+        space.evidence(&with, &l, &h, then).delta_q
+    };
+    passing
+        .iter()
+        .filter(|o| o.0.effect != best.0.effect && o.0.evidence.delta_q >= 0.5 * best.0.evidence.delta_q)
+        .filter(|o| gain_after(&best.1, &o.1) < SHARED_FEATURE * o.0.evidence.delta_q)
+        .filter(|o| gain_after(&o.1, &best.1) < SHARED_FEATURE * best.0.evidence.delta_q)
+        .map(|o| o.0.effect.clone())
+        .collect()
+}
+
+fn describe_leftover(c: &ChannelReport) -> String {
+    let (u, k) = c.sensor.display_unit();
+    let show = |v: f64| format!("{:.3e}", v * k);
+    let at = match &c.worst {
+        Some((run, Some(0), a)) => format!("a constant offset of {} {u} in run {run}", show(*a)),
+        Some((run, Some(h), a)) => {
+            format!("harmonic {h} of the cone frequency, amplitude {} {u}, largest in run {run}", show(*a))
+        }
+        Some((run, None, a)) => format!("a slow variation of about {} {u} in run {run}", show(*a)),
+        None => "no single place".to_string(),
+    };
+    format!(
+        "{} {}: systematic residual RMS {} {u} against a noise floor of {} {u}; it sits at {at}",
+        c.sensor,
+        c.axis,
+        show(c.systematic_rms),
+        show(c.noise_floor)
+    )
+}
+
+/// What the runs cannot identify: the final fit's lost combinations (with the run that
+/// would identify each) and candidate effects the runs see only in part.
+fn unidentifiable(model: &Model, f: &Fit, candidates: &[Candidate]) -> Vec<String> {
+    let _ = model;
+    let mut out: Vec<String> = f
+        .gyro
+        .unidentifiable
+        .iter()
+        .chain(&f.accel.unidentifiable)
+        .map(|u| {
+            format!("{} ({}): {}; held at {}; {}", u.held, u.axis, u.reason, crate::units::show(u.held_at), u.remedy)
+        })
+        .collect();
+    for c in candidates {
+        let total = find(&c.effect).map_or(0, |e| e.coefficients().len());
+        if c.added_params < total {
+            out.push(format!(
+                "{}: these runs identify {} of its {} coefficients; runs at other rates, cone angles or mounts would identify the rest",
+                c.effect, c.added_params, total
+            ));
+        }
+    }
+    out
+}
 /// One rung of the model ladder.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Rung {
@@ -514,8 +632,15 @@ pub struct Rung {
     pub heldout_gain: bool,
 }
 
-fn rung(name: &str, f: &Fit, res: &[RunResiduals], motions: &RunMotions<'_>) -> Rung {
-    let ch = channel_reports(res, motions);
+fn sensor_rss(f: &Fit, sensor: SensorKind) -> (f64, u64, usize) {
+    let sf = f.sensor(sensor);
+    let rss = sf.channels.iter().map(|c| c.residual_rms * c.residual_rms * c.n as f64).sum();
+    let n = sf.channels.iter().map(|c| c.n).sum();
+    let p = sf.coefficients.iter().filter(|c| c.status == CoefStatus::Fitted).count();
+    (rss, n, p)
+}
+
+fn rung(name: &str, f: &Fit, noise: &[NoiseReport]) -> Rung {
     let mut bic = 0.0;
     let mut n_total = 0.0;
     let mut params = f.nonlinear.iter().filter(|p| p.fitted).count();
@@ -528,13 +653,13 @@ fn rung(name: &str, f: &Fit, res: &[RunResiduals], motions: &RunMotions<'_>) -> 
         params += p;
     }
     bic += params as f64 * n_total.max(1.0).ln();
-    let max = (0..6).map(|c| res.iter().flat_map(|r| r.r[c].iter()).fold(0.0_f64, |m, v| m.max(v.abs()))).collect();
+    let chans = || SensorKind::BOTH.into_iter().flat_map(|s| f.sensor(s).channels.iter());
     Rung {
         model: name.to_string(),
         params,
-        rms: ch.iter().map(|c| c.residual_rms).collect(),
-        max,
-        noise_floor: ch.iter().map(|c| c.noise_floor).collect(),
+        rms: chans().map(|c| c.residual_rms).collect(),
+        max: chans().map(|c| c.residual_max).collect(),
+        noise_floor: noise.iter().map(|n| n.sigma).collect(),
         bic,
         reduction: Vec::new(),
         heldout_rms: Vec::new(),
@@ -542,32 +667,40 @@ fn rung(name: &str, f: &Fit, res: &[RunResiduals], motions: &RunMotions<'_>) -> 
     }
 }
 
-/// Leave-one-run-out residual RMS per channel of a model (nonlinear parameters of `all`
-/// held, so each fold is a linear fit).
-pub fn heldout_rms(
-    model: &Model,
-    all: &Fit,
-    runs: &[FitRun<'_>],
-    motions: &RunMotions<'_>,
-    opts: &FitOptions,
-) -> Vec<f64> {
-    let mut held = model.clone();
-    for e in model.nonlinear() {
-        let values = all.nonlinear.iter().filter(|p| p.effect == e.effect.id()).map(|p| p.value).collect();
-        let _ = held.fix_nonlinear(e.effect.id(), values);
-    }
-    let mut ss = [0.0; 6];
-    let mut n = 0usize;
-    for i in 0..runs.len() {
-        let train: Vec<FitRun<'_>> = runs.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, r)| *r).collect();
-        let Ok(f) = refit(&held, &train, opts) else { continue };
-        let res = residuals(&held, &f, std::slice::from_ref(&runs[i]), &motions[i..=i]);
-        for c in 0..6 {
-            ss[c] += res[0].r[c].iter().map(|v| v * v).sum::<f64>();
+/// Leave-one-run-out residual RMS per channel of `model` from the Grams: the model's free
+/// coefficients refitted without each run, the run predicted, its whitened χ² turned back
+/// into a residual RMS (noise floor × √(χ²/n)). Coefficients the model holds or lacks are
+/// moved from the base fit's values to theirs. None when the model has an effect outside
+/// the analysed universe.
+fn heldout_of(space: &Space, model: &Model, noise: &[NoiseReport]) -> Option<Vec<f64>> {
+    let mut set = Vec::new();
+    let mut shift = Vec::new();
+    for (i, p) in space.universe.params.iter().enumerate() {
+        if !model.has(p.effect) {
+            if p.base {
+                shift.push((i, p.nominal - p.value));
+            }
+            continue;
         }
-        n += runs[i].len();
+        match model.locate_status(&p.name) {
+            Some(crate::model::TermStatus::Fixed(v)) => shift.push((i, v - p.value)),
+            _ => set.push(i),
+        }
     }
-    ss.iter().map(|s| (s / n.max(1) as f64).sqrt()).collect()
+    for e in model.effect_ids().into_iter().chain(model.nonlinear().iter().map(|e| e.effect.id())) {
+        if !space.universe.params.iter().any(|p| p.effect == e) {
+            return None;
+        }
+    }
+    let q = space.heldout_channels(&set, &shift);
+    Some(
+        (0..6)
+            .map(|c| {
+                let n: usize = space.runs.iter().map(|r| r.noise[c].n).sum();
+                noise[c].sigma * (q[c].max(0.0) / n.max(1) as f64).sqrt()
+            })
+            .collect(),
+    )
 }
 
 /// The model ladder: the paper's model, the default model, then each effect `diagnose` adds
@@ -580,11 +713,12 @@ pub fn compare(
     opts: &FitOptions,
     extra: &[Vec<String>],
 ) -> Result<(Vec<Rung>, Diagnosis), EstimateError> {
-    let paper = Model::paper();
     let base = Model::default_model();
-    let d = diagnose(&base, runs, motions, opts)?;
-    // The ladder's models, each fitted once.
-    let mut models = vec![("paper (eqs. 3-4)".to_string(), paper), ("default".to_string(), base.clone())];
+    let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
+    let first = analyse(&base, refit(&base, runs, opts)?, runs, motions, has_temp);
+    let space = first.space.clone();
+    let d = conclude(first, &base, runs, motions, opts, has_temp)?;
+    let mut models = vec![("paper (eqs. 3-4)".to_string(), Model::paper()), ("default".to_string(), base.clone())];
     let mut m = base;
     for st in &d.steps {
         let _ = m.add_effect(&st.effect);
@@ -599,9 +733,9 @@ pub fn compare(
     let mut rungs = Vec::with_capacity(models.len());
     for (name, model) in &models {
         let f = refit(model, runs, opts)?;
-        let mut r = rung(name, &f, &residuals(model, &f, runs, motions), motions);
+        let mut r = rung(name, &f, &d.noise);
         if runs.len() > 1 {
-            r.heldout_rms = heldout_rms(model, &f, runs, motions, opts);
+            r.heldout_rms = heldout_of(&space, model, &d.noise).unwrap_or_else(|| r.rms.clone());
         }
         rungs.push(r);
     }

@@ -711,6 +711,11 @@ impl Model {
             .find_map(|(ei, e)| e.terms().iter().position(|t| t.name == name).map(|k| (ei, k)))
     }
 
+    /// How the model treats a coefficient (None when it has no such coefficient).
+    pub fn locate_status(&self, name: &str) -> Option<TermStatus> {
+        self.locate(name).map(|(ei, k)| self.status[ei][k])
+    }
+
     /// Whether the model has the effect (linear or nonlinear).
     pub fn has(&self, id: &str) -> bool {
         self.effects.iter().any(|e| e.id() == id) || self.nonlinear.iter().any(|e| e.effect.id() == id)

@@ -6,6 +6,7 @@
 
 pub mod noise;
 pub mod protocol;
+pub mod realism;
 
 use crate::atomic::write_new;
 use crate::frames::Mount;
@@ -156,6 +157,8 @@ pub struct SimConfig {
     pub gyro_process: noise::NoiseProcess,
     /// Coloured noise added to each accelerometer axis (m/s²).
     pub accel_process: noise::NoiseProcess,
+    /// Session clock, jitter, quantisation, units and disturbances outside the catalogue.
+    pub realism: realism::Realism,
 }
 
 /// The cyclic mounts used for re-mounted runs: nominal, then x→y→z→x twice.
@@ -207,6 +210,7 @@ impl SimConfig {
             temperature_c: None,
             gyro_process: Default::default(),
             accel_process: Default::default(),
+            realism: Default::default(),
         }
     }
 
@@ -225,7 +229,14 @@ impl SimConfig {
     /// Generates the session in memory, exactly as it would read back from disk (outputs
     /// are generated in deg/s and g, then converted like the reader does).
     pub fn generate(&self) -> Session {
-        let units = Units { gyro: GyroUnit::DegPerS, accel: AccelUnit::G, time: TimeUnit::S };
+        let units = if self.realism.si_units {
+            Units { gyro: GyroUnit::RadPerS, accel: AccelUnit::MPerS2, time: TimeUnit::S }
+        } else {
+            Units { gyro: GyroUnit::DegPerS, accel: AccelUnit::G, time: TimeUnit::S }
+        };
+        let mut jrng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x0717_7e12);
+        let mut clock_s = 0.0;
+        let mut conic_index = 0usize;
         let mut rng = ChaCha8Rng::seed_from_u64(self.seed);
         let gn = Normal::new(0.0, self.gyro_noise_deg_s.max(0.0)).ok();
         let an = Normal::new(0.0, self.accel_noise_g.max(0.0)).ok();
@@ -242,7 +253,8 @@ impl SimConfig {
         let mut elapsed = 0.0;
         for plan in &self.runs {
             let n = (plan.duration_s * self.sample_rate_hz).round().max(1.0) as usize;
-            let t_s: Vec<f64> = (0..n).map(|k| k as f64 / self.sample_rate_hz).collect();
+            let t0 = if self.realism.session_clock_gap_s.is_some() { clock_s } else { 0.0 };
+            let t_s: Vec<f64> = (0..n).map(|k| t0 + k as f64 / self.sample_rate_hz).collect();
             let mut rec = Recording { t_s, ..Default::default() };
             let tr = track_for(&plan.motion, &plan.mount, &rec, self.g_m_s2, &deriv);
             // Nonlinear effects change the motion as each sensor sees it.
@@ -295,6 +307,8 @@ impl SimConfig {
                     g[i] = (ug[i] * to_deg + ng) * kg;
                     a[i] = (ua[i] / self.g_m_s2 + na) * ka;
                 }
+                let theta = crate::motion::cone_phase(&plan.motion).map(|p| p.theta(rec.t_s[k]));
+                self.realism.disturb(rec.t_s[k], theta, conic_index, &mut g, &mut a);
                 if coloured {
                     for i in 0..3 {
                         g[i] += gens[i].next_sample(&mut prng);
@@ -304,6 +318,13 @@ impl SimConfig {
                 rec.gyro.push(g);
                 rec.accel.push(a);
             }
+            self.realism.finish(
+                &mut rec,
+                [1.0 / units.gyro.to_rad_s(), 1.0 / units.accel.to_m_s2(self.g_m_s2)],
+                &mut jrng,
+            );
+            conic_index += usize::from(matches!(plan.motion, MotionSpec::Conic { .. }));
+            clock_s = t0 + n as f64 / self.sample_rate_hz + self.realism.session_clock_gap_s.unwrap_or(0.0);
             elapsed += plan.duration_s;
             runs.push(Run {
                 spec: RunSpec {

@@ -4,11 +4,14 @@
 //!
 //! Nothing here knows about sessions, motions or models: inputs are plain slices.
 
+pub mod ar;
 pub mod autocov;
 pub mod harmonics;
 pub mod qr;
 pub mod segment;
+pub mod spectrum;
 
+pub use ar::ArModel;
 pub use autocov::{dot, newey_west_lags, AutoCov, LongRunVariance};
 pub use harmonics::{chi2_999, chi2_upper, systematic, PhaseLine, Systematic};
 pub use qr::QrAccumulator;

@@ -1,0 +1,93 @@
+//! Least squares from Gram matrices: column-scaled symmetric eigen-solves with a rank
+//! threshold, so that coefficients the runs cannot identify get no weight instead of
+//! exploding (a pseudo-inverse in the scaled metric).
+
+use nalgebra::{DMatrix, DVector};
+
+/// Relative eigenvalue below which a scaled direction counts as unidentified.
+pub const RCOND: f64 = 1e-10;
+
+/// Solves A X = B for symmetric positive semi-definite A (pseudo-inverse in the metric of
+/// A's diagonal).
+pub fn solve_sym(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let (pinv, _) = pinv_sym(a);
+    &pinv * b
+}
+
+/// The scaled pseudo-inverse of a symmetric PSD matrix and its numerical rank.
+pub fn pinv_sym(a: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
+    let n = a.nrows();
+    if n == 0 {
+        return (DMatrix::zeros(0, 0), 0);
+    }
+    let d: Vec<f64> =
+        (0..n).map(|i| if a[(i, i)] > 0.0 && a[(i, i)].is_finite() { 1.0 / a[(i, i)].sqrt() } else { 0.0 }).collect();
+    let mut s = a.clone();
+    for i in 0..n {
+        for j in 0..n {
+            s[(i, j)] *= d[i] * d[j];
+        }
+    }
+    if s.iter().any(|v| !v.is_finite()) {
+        return (DMatrix::zeros(n, n), 0);
+    }
+    let eig = s.symmetric_eigen();
+    let top = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
+    let mut inv = DMatrix::<f64>::zeros(n, n);
+    let mut rank = 0;
+    for (k, &l) in eig.eigenvalues.iter().enumerate() {
+        if top > 0.0 && l > RCOND * top {
+            rank += 1;
+            let v = eig.eigenvectors.column(k);
+            inv += (v * v.transpose()) / l;
+        }
+    }
+    for i in 0..n {
+        for j in 0..n {
+            inv[(i, j)] *= d[i] * d[j];
+        }
+    }
+    (inv, rank)
+}
+
+/// A least-squares solution on a subset of the columns of a Gram system.
+#[derive(Debug, Clone)]
+pub struct Lsq {
+    /// The subset (global indices).
+    pub set: Vec<usize>,
+    /// Coefficients on the subset.
+    pub beta: DVector<f64>,
+    /// Residual sum of squares yᵀy − bᵀβ (whitened: χ² units).
+    pub q: f64,
+    /// Numerical rank.
+    pub rank: usize,
+}
+
+impl Lsq {
+    /// Solves G_SS β = b_S on the subset `set` of the system (G, b, yᵀy).
+    pub fn solve(g: &DMatrix<f64>, b: &DVector<f64>, yy: f64, set: &[usize]) -> Self {
+        let gs = DMatrix::from_fn(set.len(), set.len(), |i, j| g[(set[i], set[j])]);
+        let bs = DVector::from_fn(set.len(), |i, _| b[set[i]]);
+        let (pinv, rank) = pinv_sym(&gs);
+        let beta = &pinv * &bs;
+        let q = yy - bs.dot(&beta);
+        Self { set: set.to_vec(), beta, q, rank }
+    }
+
+    /// χ² of data (G, b, yᵀy) around this solution: yᵀy − 2βᵀb + βᵀGβ.
+    pub fn q_on(&self, g: &DMatrix<f64>, b: &DVector<f64>, yy: f64) -> f64 {
+        let mut q = yy;
+        for (i, &gi) in self.set.iter().enumerate() {
+            q -= 2.0 * self.beta[i] * b[gi];
+            for (j, &gj) in self.set.iter().enumerate() {
+                q += self.beta[i] * g[(gi, gj)] * self.beta[j];
+            }
+        }
+        q
+    }
+
+    /// The coefficient of global parameter `p` (0 when not in the subset).
+    pub fn value(&self, p: usize) -> f64 {
+        self.set.iter().position(|&s| s == p).map_or(0.0, |i| self.beta[i])
+    }
+}

@@ -1,0 +1,138 @@
+//! The residual picture of a fitted model per run and channel, for reports and plots:
+//! residuals with the cone phase, and per channel the residual RMS, a white-noise floor
+//! from first differences and the systematic part (per run: constant + cone harmonics).
+//! The diagnosis itself works on whitened Grams ([`super::space`]); this is what a
+//! reader's eye sees.
+
+use crate::estimate::{Fit, FitRun};
+use crate::model::{forward, Model};
+use crate::session::MotionSpec;
+use crate::stats::{chi2_upper, systematic, Systematic};
+use crate::units::{SensorKind, AXES};
+
+use super::{ChannelReport, HARMONICS, SIGNIFICANCE_Z};
+
+/// Motion of each run (for the cone phase).
+pub type RunMotions<'a> = [&'a MotionSpec];
+
+fn values_of(f: &Fit, model: &Model, sensor: SensorKind) -> Vec<f64> {
+    let sf = f.sensor(sensor);
+    model.terms(sensor).iter().map(|t| sf.value(&t.term.name).unwrap_or(t.term.nominal)).collect()
+}
+
+/// Residuals (output − model, SI) of a fitted model, one run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunResiduals {
+    /// Run name.
+    pub run: String,
+    /// Time stamps, s.
+    pub t_s: Vec<f64>,
+    /// Cone phase θ (rad) per sample, for conic runs.
+    pub theta: Option<Vec<f64>>,
+    /// Six channels: gyro x, y, z, accel x, y, z.
+    pub r: Vec<Vec<f64>>,
+    /// Sum of squared outputs per channel (for the recording's numerical resolution).
+    pub output_ss: [f64; 6],
+}
+
+/// Residuals of a fitted model on every run (nonlinear effects applied).
+pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotions<'_>) -> Vec<RunResiduals> {
+    let mut out: Vec<RunResiduals> = runs
+        .iter()
+        .zip(motions.iter())
+        .map(|(run, m)| RunResiduals {
+            run: run.name.to_string(),
+            t_s: run.track.t_s.clone(),
+            theta: match m {
+                MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
+                    let c = crate::motion::Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
+                    Some(run.track.t_s.iter().map(|&t| c.theta(t).rem_euclid(std::f64::consts::TAU)).collect())
+                }
+                _ => None,
+            },
+            r: (0..6).map(|_| Vec::with_capacity(run.len())).collect(),
+            output_ss: [0.0; 6],
+        })
+        .collect();
+    for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
+        let terms = model.terms(sensor);
+        let values = values_of(f, model, sensor);
+        let seen = crate::estimate::seen_tracks(model, f, sensor, runs);
+        let moved: Vec<FitRun<'_>> = match &seen {
+            Some(tracks) => runs.iter().zip(tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect(),
+            None => runs.to_vec(),
+        };
+        for (run, o) in moved.iter().zip(out.iter_mut()) {
+            for k in 0..run.len() {
+                let u = forward(&terms, &values, &run.state(k));
+                let y = run.output(sensor, k);
+                for ch in 0..3 {
+                    o.r[3 * si + ch].push(y[ch] - u[ch]);
+                    o.output_ss[3 * si + ch] += y[ch] * y[ch];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Relative numerical resolution below which a residual is rounding, not physics.
+const RESOLUTION: f64 = 1e-10;
+
+/// Channel reports (residual RMS, noise floor, systematic part) from residuals.
+pub fn channel_reports(res: &[RunResiduals], motions: &RunMotions<'_>) -> Vec<ChannelReport> {
+    let mut out = Vec::with_capacity(6);
+    for c in 0..6 {
+        let sensor = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
+        let mut diffs = Vec::new();
+        let (mut ss, mut n, mut sys_ss) = (0.0, 0usize, 0.0);
+        let (mut chi, mut dof) = (0.0, 0usize);
+        let mut worst: Option<(String, Option<usize>, f64)> = None;
+        for (ri, run) in res.iter().enumerate() {
+            let r = &run.r[c];
+            diffs.extend(r.windows(2).map(|w| (w[1] - w[0]).abs()));
+            ss += r.iter().map(|v| v * v).sum::<f64>();
+            n += r.len();
+            let sys: Systematic = systematic(r, &run.t_s, crate::motion::cone_phase(motions[ri]), HARMONICS);
+            sys_ss += sys.curve.iter().map(|v| v * v).sum::<f64>();
+            if sys.sigma2 > 0.0 {
+                chi += sys.explained / sys.sigma2;
+                dof += sys.params;
+            }
+            let (h, amp) = if sys.amplitudes.is_empty() {
+                (None, sys.max_abs())
+            } else {
+                let (h, a) = sys
+                    .amplitudes
+                    .iter()
+                    .enumerate()
+                    .fold((0, 0.0), |acc, (h, &a)| if a > acc.1 { (h, a) } else { acc });
+                (Some(h), a)
+            };
+            if worst.as_ref().is_none_or(|w| amp > w.2) {
+                worst = Some((run.run.clone(), h, amp));
+            }
+        }
+        // One pooled test per channel over all runs, at 0.001 % (few false alarms even
+        // over many channels and sessions).
+        // Residuals below 1e-10 of the output RMS are rounding of the recording and of the
+        // arithmetic (no sensor resolves 1e-10 of its signal): never "systematic".
+        let out_ss: f64 = res.iter().map(|r| r.output_ss[c]).sum();
+        let resolution = RESOLUTION * (out_ss / n.max(1) as f64).sqrt();
+        let sys_rms = (sys_ss / n.max(1) as f64).sqrt();
+        let significant = dof > 0 && chi > chi2_upper(dof, SIGNIFICANCE_Z) && sys_rms > resolution;
+        let mad = crate::stats::median(&mut diffs).unwrap_or(0.0);
+        // For white noise, |Δr| has median 0.6745·√2·σ.
+        let noise_floor = mad / (0.674_489_75 * std::f64::consts::SQRT_2);
+        out.push(ChannelReport {
+            sensor,
+            axis: AXES[c % 3],
+            residual_rms: (ss / n.max(1) as f64).sqrt(),
+            noise_floor,
+            systematic_rms: sys_rms,
+            systematic: significant,
+            worst,
+        });
+    }
+    out
+}

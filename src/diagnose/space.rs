@@ -1,0 +1,621 @@
+//! The feature space of a diagnosis, built in one pass over the runs.
+//!
+//! The *universe* is the base model's free coefficients plus every catalogue effect the
+//! model lacks: linear effects by their regressors, nonlinear ones (time delay, dead zone)
+//! by the secant of the model's output in each parameter (a Gauss–Newton column). For each
+//! run and channel the pass:
+//!
+//! 1. takes the residual r of the base fit and removes its per-run *systematic basis*
+//!    (Legendre polynomials P0…P3 of time, and for conic runs cos/sin hθ, h = 1…6 of the
+//!    cone phase) to leave the noise;
+//! 2. fits the noise an AR(p) model (order by BIC, [`crate::stats::ArModel`]) and looks
+//!    for narrow-band lines in its Welch spectrum;
+//! 3. prewhitens the universe's columns, the basis and r with that AR filter, scales them
+//!    to unit innovation variance, and accumulates their Gram matrix.
+//!
+//! Every later question — does an effect reduce the residual, does it predict a left-out
+//! run, is its size the same in every run, what systematic part is left — is then linear
+//! algebra on these Grams (generalised least squares, honest under coloured noise), with
+//! no further pass over the samples.
+
+use crate::estimate::{seen_tracks, CoefStatus, Fit, FitRun};
+use crate::model::{catalog, scale_matrix, CatalogEffect, Model, Role, State, TermRef};
+use crate::motion::{cone_phase, Track};
+use crate::session::MotionSpec;
+use crate::stats::spectrum::{lines, refine_frequency, welch};
+use crate::stats::{ArModel, PhaseLine};
+use crate::units::SensorKind;
+use nalgebra::DMatrix;
+
+/// Cone harmonics in the per-run systematic basis.
+pub const HARMONICS: usize = 6;
+/// Legendre polynomials (degree 0…3) in the per-run systematic basis.
+const LEGENDRE: usize = 4;
+/// Samples per block of the Gram accumulation.
+const BLOCK: usize = 512;
+
+/// A coefficient of the universe.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Param {
+    /// Coefficient name (`gyro.c_xy`, `time_delay`, …).
+    pub name: String,
+    /// The catalogue effect it belongs to.
+    pub effect: &'static str,
+    /// Part of the base model (fitted there) rather than a candidate.
+    pub base: bool,
+    /// The base fit's value (0 or the effect's nominal for candidates).
+    pub value: f64,
+    /// The value it takes when its effect is absent.
+    pub nominal: f64,
+}
+
+/// Where a local column comes from.
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    /// Term `k` of the augmented model's terms of the channel's sensor.
+    Term(usize),
+    /// Parameter `p` of nonlinear candidate `e` (a secant column, precomputed per run).
+    Secant(usize, usize),
+}
+
+/// The universe: the augmented model (base plus every applicable linear candidate), the
+/// nonlinear candidates, and for each channel the global parameters that act on it.
+#[derive(Clone)]
+pub struct Universe {
+    /// Base model plus every applicable linear candidate effect.
+    pub augmented: Model,
+    /// Global parameters.
+    pub params: Vec<Param>,
+    /// Nonlinear candidates and the secant step of each of their parameters.
+    nonlinear: Vec<(crate::model::NonlinearEntry, Vec<f64>)>,
+    /// Per channel: (global parameter index, source) of each local column.
+    columns: [Vec<(usize, Source)>; 6],
+    /// Augmented term values per sensor (base fit values, candidates at nominal).
+    values: [Vec<f64>; 2],
+    /// Candidate effect ids, in catalogue order.
+    pub candidates: Vec<&'static str>,
+}
+
+impl Universe {
+    /// The universe around a fitted base model. Temperature effects only with `has_temp`.
+    pub fn new(base: &Model, fit: &Fit, has_temp: bool) -> Self {
+        let mut augmented = base.clone();
+        let mut nonlinear = Vec::new();
+        let mut candidates = Vec::new();
+        for e in catalog() {
+            if base.has(e.id()) || (e.needs_temperature() && !has_temp) {
+                continue;
+            }
+            match &e {
+                CatalogEffect::Linear(_) => {
+                    if augmented.add_effect(e.id()).is_ok() {
+                        candidates.push(e.id());
+                    }
+                }
+                CatalogEffect::Nonlinear(ne) => {
+                    let mut m = Model::from_effects("probe", Vec::new());
+                    if m.add_effect(e.id()).is_ok() {
+                        if let Some(entry) = m.nonlinear().first().cloned() {
+                            let steps = ne.params().iter().map(|d| d.scale).collect();
+                            nonlinear.push((entry, steps));
+                            candidates.push(e.id());
+                        }
+                    }
+                }
+            }
+        }
+        let mut params = Vec::new();
+        let mut columns: [Vec<(usize, Source)>; 6] = Default::default();
+        let mut values: [Vec<f64>; 2] = Default::default();
+        for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
+            let terms = augmented.terms(sensor);
+            let sf = fit.sensor(sensor);
+            for (k, t) in terms.iter().enumerate() {
+                let in_base = base.has(t.effect.id());
+                let fitted = sf.coefficients.iter().find(|c| c.name == t.term.name);
+                let value = if in_base {
+                    fitted.map_or(
+                        match t.status {
+                            crate::model::TermStatus::Fixed(v) => v,
+                            _ => t.term.nominal,
+                        },
+                        |c| c.value,
+                    )
+                } else {
+                    t.term.nominal
+                };
+                values[si].push(value);
+                let free = if in_base {
+                    fitted.is_some_and(|c| c.status == CoefStatus::Fitted)
+                } else {
+                    matches!(t.status, crate::model::TermStatus::Fitted)
+                };
+                if free {
+                    columns[3 * si + t.term.channel].push((params.len(), Source::Term(k)));
+                    params.push(Param {
+                        name: t.term.name.clone(),
+                        effect: t.effect.id(),
+                        base: in_base,
+                        value,
+                        nominal: t.term.nominal,
+                    });
+                }
+            }
+        }
+        for (ei, (entry, _)) in nonlinear.iter().enumerate() {
+            for (pi, d) in entry.effect.params().iter().enumerate() {
+                let g = params.len();
+                params.push(Param {
+                    name: d.name.clone(),
+                    effect: entry.effect.id(),
+                    base: false,
+                    value: d.nominal,
+                    nominal: d.nominal,
+                });
+                for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
+                    if entry.effect.sensor().is_none_or(|s| s == sensor) {
+                        for ch in 0..3 {
+                            columns[3 * si + ch].push((g, Source::Secant(ei, pi)));
+                        }
+                    }
+                }
+            }
+        }
+        Self { augmented, params, nonlinear, columns, values, candidates }
+    }
+
+    /// Global parameter indices of the local columns of channel `c`.
+    pub fn channel_params(&self, c: usize) -> impl Iterator<Item = usize> + '_ {
+        self.columns[c].iter().map(|x| x.0)
+    }
+
+    /// Whether global parameter `p` is a nonlinear candidate's (secant column).
+    pub fn is_secant(&self, p: usize) -> bool {
+        self.columns.iter().flatten().any(|&(g, src)| g == p && matches!(src, Source::Secant(..)))
+    }
+
+    /// Number of local columns of channel `c`.
+    pub fn width(&self, c: usize) -> usize {
+        self.columns[c].len()
+    }
+}
+
+/// The noise of one channel in one run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunNoise {
+    /// AR model of the residual after its systematic basis.
+    pub ar: ArModel,
+    /// Samples.
+    pub n: usize,
+}
+
+/// A narrow-band line found in one run and channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunLine {
+    /// Channel 0..6.
+    pub channel: usize,
+    /// Frequency, Hz.
+    pub frequency_hz: f64,
+    /// Amplitude of the fitted sinusoid, SI.
+    pub amplitude: f64,
+    /// Peak power over the continuum.
+    pub ratio: f64,
+}
+
+/// One run's contribution: per channel the whitened Gram of [local columns | basis | r].
+#[derive(Debug, Clone)]
+pub struct RunGram {
+    /// Per channel: the Gram (width + basis + 1 square).
+    pub gram: Vec<DMatrix<f64>>,
+    /// Basis size of this run.
+    pub basis: usize,
+    /// Lowest cone harmonic in the basis (harmonics first..=6 follow the Legendre part).
+    pub first_harmonic: usize,
+    /// Per channel noise model.
+    pub noise: Vec<RunNoise>,
+    /// Lines found.
+    pub lines: Vec<RunLine>,
+    /// The run's cone frequency, Hz (None unless conic).
+    pub cone_hz: Option<f64>,
+    /// Mean square of each channel's recorded output (for the recording's resolution).
+    pub output_ms: [f64; 6],
+    /// BᵀB / n of the basis over the run (unwhitened): the mean square of a fitted curve
+    /// with coefficients c is cᵀ (BᵀB/n) c.
+    pub basis_ms: DMatrix<f64>,
+}
+
+/// The basis functions at one sample: Legendre P0…P3 of s ∈ [−1, 1], then cos hθ, sin hθ.
+fn basis_row(s: f64, theta: Option<f64>, first: usize, out: &mut [f64]) {
+    out[0] = 1.0;
+    out[1] = s;
+    out[2] = 0.5 * (3.0 * s * s - 1.0);
+    out[3] = 0.5 * (5.0 * s * s * s - 3.0 * s);
+    if let Some(th) = theta {
+        for h in first..=HARMONICS {
+            let (sn, cs) = (h as f64 * th).sin_cos();
+            out[LEGENDRE + 2 * (h - first)] = cs;
+            out[LEGENDRE + 2 * (h - first) + 1] = sn;
+        }
+    }
+}
+
+/// The systematic basis of one run: Legendre P0…P3 of time scaled to [−1, 1], and for a
+/// conic run the cone harmonics that complete at least 0.9 cycles over it (fewer are slow
+/// variations there, which the Legendre part holds; keeping them would make the basis
+/// nearly singular).
+#[derive(Debug, Clone, Copy)]
+pub struct RunBasis {
+    t0: f64,
+    half: f64,
+    phase: Option<PhaseLine>,
+    /// Lowest harmonic.
+    pub first: usize,
+    /// Number of basis functions.
+    pub size: usize,
+}
+
+impl RunBasis {
+    /// The basis of a run with stamps `t` and declared motion.
+    pub fn new(t: &[f64], motion: &MotionSpec) -> Self {
+        let phase = cone_phase(motion);
+        let (t0, t1) = (t.first().copied().unwrap_or(0.0), t.last().copied().unwrap_or(0.0));
+        let revolutions = phase.map_or(0.0, |p| p.rate_rad_s.abs() * (t1 - t0) / std::f64::consts::TAU);
+        let first = (1..=HARMONICS).find(|&h| h as f64 * revolutions >= 0.9).unwrap_or(HARMONICS + 1);
+        let phase = phase.filter(|_| first <= HARMONICS);
+        let size = if phase.is_some() { LEGENDRE + 2 * (HARMONICS + 1 - first) } else { LEGENDRE };
+        Self { t0, half: 0.5 * (t1 - t0).max(f64::MIN_POSITIVE), phase, first, size }
+    }
+
+    /// The basis functions at time `t_s`.
+    #[inline]
+    pub fn row(&self, t_s: f64, out: &mut [f64]) {
+        basis_row((t_s - self.t0) / self.half - 1.0, self.phase.map(|p| p.theta(t_s)), self.first, out);
+    }
+
+    /// The cone frequency, Hz (None unless the basis has harmonics).
+    pub fn cone_hz(&self) -> Option<f64> {
+        self.phase.map(|p| p.rate_rad_s.abs() / std::f64::consts::TAU)
+    }
+}
+
+/// What the first look at one run's residual finds: per channel the autocovariances of
+/// its noise (the residual less its basis fit), the lines in its spectrum.
+#[derive(Debug, Clone)]
+pub struct RunNoiseStats {
+    /// The run's basis.
+    pub basis: RunBasis,
+    /// BᵀB / n.
+    pub basis_ms: DMatrix<f64>,
+    /// Per channel γ₀…γ_P of the noise.
+    pub acov: Vec<Vec<f64>>,
+    /// Samples.
+    pub n: usize,
+    /// Lines found.
+    pub lines: Vec<RunLine>,
+    /// Mean square of each channel's recorded output.
+    pub output_ms: [f64; 6],
+}
+
+/// The first look at one run (module documentation, steps 1–2): `r` is the base residual
+/// per channel.
+pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNoiseStats {
+    let n = run.len();
+    let t = &run.track.t_s[..n];
+    let basis = RunBasis::new(t, motion);
+    let nb = basis.size;
+    let mut bb = DMatrix::<f64>::zeros(nb, nb);
+    let mut br = DMatrix::<f64>::zeros(nb, 6);
+    let mut row = vec![0.0; nb];
+    for k in 0..n {
+        basis.row(t[k], &mut row);
+        for i in 0..nb {
+            for j in 0..=i {
+                bb[(i, j)] += row[i] * row[j];
+            }
+            for c in 0..6 {
+                br[(i, c)] += row[i] * r[c][k];
+            }
+        }
+    }
+    bb.fill_upper_triangle_with_lower_triangle();
+    let basis_ms = &bb / n.max(1) as f64;
+    let coef = crate::diagnose::algebra::solve_sym(&bb, &br);
+    let span = t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0);
+    let fs_hz = if n > 1 { (n - 1) as f64 / span.max(f64::MIN_POSITIVE) } else { 1.0 };
+    let mut acov = Vec::with_capacity(6);
+    let mut found = Vec::new();
+    let mut clean = vec![0.0; n];
+    for c in 0..6 {
+        for k in 0..n {
+            basis.row(t[k], &mut row);
+            clean[k] = r[c][k] - (0..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
+        }
+        acov.push(crate::stats::ar::autocovariances(&clean, crate::stats::ar::MAX_ORDER));
+        found.extend(run_lines(c, &clean, t, fs_hz));
+    }
+    let mut output_ms = [0.0; 6];
+    for k in 0..n {
+        for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
+            let y = run.output(sensor, k);
+            for ch in 0..3 {
+                output_ms[3 * si + ch] += y[ch] * y[ch] / n.max(1) as f64;
+            }
+        }
+    }
+    RunNoiseStats { basis, basis_ms, acov, n, lines: found, output_ms }
+}
+
+/// One AR model per channel for the whole session (the noise of a channel is one process
+/// in every run): orders by BIC on the autocovariances pooled over runs, so that short runs
+/// do not pick orders from the few samples they have.
+///
+/// Removing a run's basis (m smooth functions of n samples) takes about m/n of the noise's
+/// low-frequency power from every short-lag autocovariance: E γ̂_l ≈ γ_l − (m/n)·LRV, with
+/// LRV = σ²_e/(1 − Σφ)² the long-run variance. Uncorrected, that dip at low frequency makes
+/// BIC choose a long AR filter that amplifies exactly the slow variations the systematic
+/// test looks for; the bias is added back, the LRV taken from the model, three times.
+pub fn pooled_noise(stats: &[RunNoiseStats]) -> Vec<ArModel> {
+    (0..6)
+        .map(|c| {
+            let lags = stats.iter().map(|s| s.acov[c].len()).min().unwrap_or(0);
+            let n: usize = stats.iter().map(|s| s.n).sum();
+            let removed: usize = stats.iter().map(|s| s.basis.size).sum();
+            let gamma: Vec<f64> = (0..lags)
+                .map(|l| stats.iter().map(|s| s.acov[c][l] * s.n as f64).sum::<f64>() / n.max(1) as f64)
+                .collect();
+            let share = removed as f64 / n.max(1) as f64;
+            let mut ar = ArModel::from_autocov(&gamma, n);
+            for _ in 0..3 {
+                let lrv = long_run_variance(&ar).min(1e3 * ar.marginal_var.max(f64::MIN_POSITIVE));
+                let corrected: Vec<f64> = gamma.iter().map(|g| g + share * lrv).collect();
+                ar = ArModel::from_autocov(&corrected, n);
+            }
+            ar
+        })
+        .collect()
+}
+
+/// σ²_e / (1 − Σ φ)²: the spectral density at zero frequency times 2π (the variance of a
+/// mean scales as LRV/n).
+fn long_run_variance(ar: &ArModel) -> f64 {
+    let s = 1.0 - ar.phi.iter().sum::<f64>();
+    if s.abs() < 1e-6 {
+        ar.marginal_var
+    } else {
+        ar.innovation_var / (s * s)
+    }
+}
+
+/// The whitened Grams of one run (module documentation, step 3) with the session's noise
+/// models; each run keeps its own innovation variance.
+pub fn run_gram(
+    u: &Universe,
+    base: &Model,
+    fit: &Fit,
+    run: &FitRun<'_>,
+    stats: RunNoiseStats,
+    pooled: &[ArModel],
+    r: &[Vec<f64>],
+) -> RunGram {
+    let n = run.len();
+    let t = &run.track.t_s[..n];
+    let b = stats.basis;
+    let basis_at = |k: usize, out: &mut [f64]| b.row(t[k], out);
+    let noise: Vec<RunNoise> = (0..6)
+        .map(|c| {
+            // The run's own autocovariances, with its basis's share of the bias added back.
+            let share = b.size as f64 / n.max(1) as f64;
+            let lrv = long_run_variance(&pooled[c]);
+            let g: Vec<f64> = stats.acov[c].iter().map(|g| g + share * lrv).collect();
+            let ar = ArModel {
+                phi: pooled[c].phi.clone(),
+                innovation_var: pooled[c].innovation_of(&g),
+                marginal_var: g.first().copied().unwrap_or(0.0),
+            };
+            RunNoise { ar, n }
+        })
+        .collect();
+    let secants = secant_columns(u, base, fit, run);
+    let gram = (0..6).map(|c| channel_gram(u, run, c, &noise[c].ar, b.size, &basis_at, &r[c], &secants)).collect();
+    RunGram {
+        gram,
+        basis: b.size,
+        first_harmonic: b.first,
+        noise,
+        output_ms: stats.output_ms,
+        lines: stats.lines,
+        cone_hz: b.cone_hz(),
+        basis_ms: stats.basis_ms,
+    }
+}
+
+/// Lines in one channel's noise: Welch segments of about an eighth of the run (at most
+/// 8192 samples), continuum from ±24 bins, family-wise level 1e-4 per channel and run.
+fn run_lines(channel: usize, clean: &[f64], t: &[f64], fs_hz: f64) -> Vec<RunLine> {
+    let len = (clean.len() / 8).clamp(64, 8192);
+    let Some(psd) = welch(clean, fs_hz, len) else { return Vec::new() };
+    let span = t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0);
+    // Below a few cycles per run a "line" is the slow part of the residual.
+    let min_hz = (8.0 / span.max(f64::MIN_POSITIVE)).max(3.0 * psd.df_hz);
+    lines(&psd, 24, 1e-4, 4.0, min_hz)
+        .into_iter()
+        .take(8)
+        .map(|l| {
+            let (f, a) = refine_frequency(clean, t, l.frequency_hz, psd.df_hz);
+            RunLine { channel, frequency_hz: f, amplitude: a, ratio: l.ratio }
+        })
+        .collect()
+}
+
+/// The secant columns of the nonlinear candidates in one run: per candidate and parameter
+/// the change of each channel's model output per unit parameter, n × 6 values.
+fn secant_columns(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Vec<Vec<Vec<[f64; 6]>>> {
+    let seen: [Option<Track>; 2] =
+        SensorKind::BOTH.map(|s| seen_tracks(base, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
+    let n = run.len();
+    u.nonlinear
+        .iter()
+        .map(|(entry, steps)| {
+            (0..steps.len())
+                .map(|pi| {
+                    let mut p = entry.values.clone();
+                    p[pi] += steps[pi];
+                    let mut col = vec![[0.0; 6]; n];
+                    for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
+                        if entry.effect.sensor().is_some_and(|s| s != sensor) {
+                            continue;
+                        }
+                        let from = seen[si].as_ref().unwrap_or(run.track);
+                        let moved = entry.effect.transform(&p, from);
+                        let terms = u.augmented.terms(sensor);
+                        let a = FitRun { track: from, ..*run };
+                        let b = FitRun { track: &moved, ..*run };
+                        for (k, c) in col.iter_mut().enumerate() {
+                            let u0 = crate::model::forward(&terms, &u.values[si], &a.state(k));
+                            let u1 = crate::model::forward(&terms, &u.values[si], &b.state(k));
+                            for ch in 0..3 {
+                                c[3 * si + ch] = (u1[ch] - u0[ch]) / steps[pi];
+                            }
+                        }
+                    }
+                    col
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The whitened Gram of one channel in one run.
+#[allow(clippy::too_many_arguments)]
+fn channel_gram(
+    u: &Universe,
+    run: &FitRun<'_>,
+    c: usize,
+    ar: &ArModel,
+    nb: usize,
+    basis_at: &dyn Fn(usize, &mut [f64]),
+    r: &[f64],
+    secants: &[Vec<Vec<[f64; 6]>>],
+) -> DMatrix<f64> {
+    let n = run.len();
+    let (si, ch) = (c / 3, c % 3);
+    let sensor = SensorKind::BOTH[si];
+    let terms = u.augmented.terms(sensor);
+    let values = &u.values[si];
+    let k_matrix = scale_matrix(&terms, values);
+    let width = u.width(c);
+    let m = width + nb + 1;
+    let p = ar.order();
+    let scale = if ar.innovation_var > 0.0 { 1.0 / ar.innovation_var.sqrt() } else { 0.0 };
+    let mut gram = DMatrix::<f64>::zeros(m, m);
+    // Unwhitened rows of the block, with the previous block's last p rows ahead of them.
+    let mut raw = DMatrix::<f64>::zeros(BLOCK + p, m);
+    let mut white = DMatrix::<f64>::zeros(BLOCK, m);
+    let mut states: Vec<State> = Vec::with_capacity(BLOCK);
+    let mut phi = vec![0.0; BLOCK];
+    let mut brow = vec![0.0; nb];
+    let mut have = 0usize; // rows of history available
+    let mut k0 = 0;
+    while k0 < n {
+        let k1 = (k0 + BLOCK).min(n);
+        let len = k1 - k0;
+        states.clear();
+        states.extend((k0..k1).map(|k| run.state(k)));
+        for (j, &(_, src)) in u.columns[c].iter().enumerate() {
+            match src {
+                Source::Term(k) => {
+                    let t = &terms[k];
+                    term_column(t, &terms, values, &k_matrix, ch, &states, &mut phi[..len]);
+                }
+                Source::Secant(e, pi) => {
+                    for (o, s) in phi[..len].iter_mut().zip(&secants[e][pi][k0..k1]) {
+                        *o = s[c];
+                    }
+                }
+            }
+            for i in 0..len {
+                raw[(p + i, j)] = phi[i];
+            }
+        }
+        for i in 0..len {
+            basis_at(k0 + i, &mut brow);
+            for b in 0..nb {
+                raw[(p + i, width + b)] = brow[b];
+            }
+            raw[(p + i, m - 1)] = r[k0 + i];
+        }
+        // Prewhiten: row i ← (x_i − Σ φ_l x_{i−l}) / σ_e, only where the history is complete.
+        let mut rows = 0;
+        for i in 0..len {
+            if have + i < p {
+                continue;
+            }
+            for col in 0..m {
+                let mut v = raw[(p + i, col)];
+                for (l, f) in ar.phi.iter().enumerate() {
+                    v -= f * raw[(p + i - 1 - l, col)];
+                }
+                white[(rows, col)] = v * scale;
+            }
+            rows += 1;
+        }
+        if rows > 0 {
+            let w = white.rows(0, rows);
+            gram.gemm_tr(1.0, &w, &w, 1.0);
+        }
+        // Keep the last p rows as the next block's history.
+        if p > 0 {
+            for l in 0..p {
+                let src = p + len - p + l;
+                for col in 0..m {
+                    raw[(l, col)] = raw[(src, col)];
+                }
+            }
+        }
+        have += len;
+        k0 = k1;
+    }
+    gram
+}
+
+/// The Gauss–Newton column of term `t` in output channel `ch`: its regressor for an
+/// output-side term; K_i·(its input perturbation) for an input-side term (eq. u = K(x+Δ));
+/// for an entry K_ij of the scale matrix, x_j plus the input perturbation Δ_j the model's
+/// input-side terms put on axis j.
+fn term_column(
+    t: &TermRef<'_>,
+    terms: &[TermRef<'_>],
+    values: &[f64],
+    k: &[[f64; 3]; 3],
+    ch: usize,
+    states: &[State],
+    out: &mut [f64],
+) {
+    let comps = t.input_components();
+    if comps.is_empty() {
+        t.regressors(states, out);
+    } else {
+        out.iter_mut().for_each(|o| *o = 0.0);
+        let mut tmp = vec![0.0; states.len()];
+        for (j, kj) in comps {
+            t.effect.regressors(kj, states, &mut tmp);
+            for (o, v) in out.iter_mut().zip(&tmp) {
+                *o += k[ch][j] * v;
+            }
+        }
+    }
+    if let Role::Scale(j) = t.term.role {
+        for (o_t, v) in terms.iter().zip(values) {
+            if *v == 0.0 || o_t.term.channel != ch {
+                continue;
+            }
+            for (jj, kj) in o_t.input_components() {
+                if jj == j {
+                    for (out_k, s) in out.iter_mut().zip(states) {
+                        *out_k += v * o_t.effect.regressor(kj, s);
+                    }
+                }
+            }
+        }
+    }
+}
