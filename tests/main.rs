@@ -7,6 +7,7 @@ mod batch;
 mod cli;
 mod common;
 mod diagnose;
+mod diagnose_hard;
 mod exit_codes;
 mod fixtures;
 mod fuzz;

@@ -47,6 +47,9 @@ impl Line {
     }
 }
 
+/// Highest cone harmonic a line can be locked to.
+const MAX_LOCKED_HARMONIC: f64 = 40.0;
+
 /// Groups the runs' lines. Two lines in different runs are one when their frequencies
 /// differ by less than `tol_hz` (unlocked) or they sit on the same cone harmonic.
 pub fn group(runs: &[RunGram], names: &[&str], tol_hz: f64) -> Vec<Line> {
@@ -55,10 +58,13 @@ pub fn group(runs: &[RunGram], names: &[&str], tol_hz: f64) -> Vec<Line> {
         for l in &rg.lines {
             let sensor = if l.channel < 3 { SensorKind::Gyro } else { SensorKind::Accel };
             let axis = AXES[l.channel % 3];
-            // Locked when within the run's frequency resolution of a cone harmonic.
+            // Locked when within a quarter of the cone frequency (and the record's
+            // resolution) of a low cone harmonic: any frequency is near some high harmonic
+            // of a slow cone.
             let harmonic = rg.cone_hz.and_then(|fc| {
                 let h = (l.frequency_hz / fc).round();
-                (h >= 1.0 && (l.frequency_hz - h * fc).abs() < tol_hz.max(0.02 * fc)).then_some(h as usize)
+                let near = (l.frequency_hz - h * fc).abs() < (0.25 * fc).min(tol_hz);
+                ((1.0..=MAX_LOCKED_HARMONIC).contains(&h) && near).then_some(h as usize)
             });
             let same = out.iter_mut().find(|(g, _)| {
                 g.sensor == sensor

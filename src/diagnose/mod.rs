@@ -416,9 +416,42 @@ fn conclude(
         Vec::new()
     };
     let base_fit = a.base_fit.clone();
-    let (steps, first_round, final_model, a) = climb(a, model, runs, motions, opts, has_temp, &mut warnings)?;
-    let final_fit = a.base_fit.clone();
+    let (mut steps, first_round, mut final_model, mut a) =
+        climb(a, model, runs, motions, opts, has_temp, &mut warnings)?;
     let _ = base_fit;
+    // A sensor still systematic after its effects: only the first of them is the closest
+    // catalogued match; the later ones chased what no catalogued effect explains.
+    if let Some(last) = steps.last() {
+        let chasing: Vec<bool> = (0..2).map(|s| last.channels[3 * s..3 * s + 3].iter().any(|c| c.systematic)).collect();
+        let mut seen = [false; 2];
+        let mut dropped = Vec::new();
+        steps.retain(|st| {
+            let s = usize::from(st.score.sensor == SensorKind::Accel);
+            let keep = !(chasing[s] && seen[s]);
+            seen[s] = true;
+            if !keep {
+                dropped.push(st.effect.clone());
+            }
+            keep
+        });
+        if !dropped.is_empty() {
+            warnings.push(format!(
+                "also tried and left out: {} (each reduced the residual a little, none explains it)",
+                dropped.join(", ")
+            ));
+            let mut m = model.clone();
+            for st in &steps {
+                let _ = m.add_effect(&st.effect);
+            }
+            a = analyse(&m, refit(&m, runs, opts)?, runs, motions, has_temp);
+            let noise = noise_reports(&a.space);
+            if let Some(st) = steps.last_mut() {
+                st.channels = pictures(&a, &a.space.base_set(), &a.base_fit, &noise);
+            }
+            final_model = m;
+        }
+    }
+    let final_fit = a.base_fit.clone();
     let picture_now = steps.last().map_or_else(|| channels.clone(), |s| s.channels.clone());
     let names: Vec<&str> = a.names.iter().map(String::as_str).collect();
     let tol = runs.iter().map(|r| run_span(r)).fold(0.0, f64::max);

@@ -200,6 +200,10 @@ pub struct RunLine {
     pub amplitude: f64,
     /// Peak power over the continuum.
     pub ratio: f64,
+    /// Peak power spectral density, unit²/Hz.
+    pub power: f64,
+    /// Sampling rate of the run, Hz.
+    pub fs_hz: f64,
 }
 
 /// One run's contribution: per channel the whitened Gram of [local columns | basis | r].
@@ -330,8 +334,13 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
             basis.row(t[k], &mut row);
             clean[k] = r[c][k] - (0..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
         }
+        // Lines are not noise: their sinusoids leave before the noise is modelled.
+        let here = run_lines(c, &clean, t, fs_hz);
+        for l in &here {
+            crate::stats::spectrum::remove_sinusoid(&mut clean, t, l.frequency_hz);
+        }
         acov.push(crate::stats::ar::autocovariances(&clean, crate::stats::ar::MAX_ORDER));
-        found.extend(run_lines(c, &clean, t, fs_hz));
+        found.extend(here);
     }
     let mut output_ms = [0.0; 6];
     for k in 0..n {
@@ -423,26 +432,43 @@ pub fn run_gram(
         first_harmonic: b.first,
         noise,
         output_ms: stats.output_ms,
-        lines: stats.lines,
+        // A line must also stand out of the noise model's spectrum: a steep continuum (AR
+        // noise at low frequency) fools a running median, not the model.
+        lines: stats
+            .lines
+            .into_iter()
+            .filter_map(|mut l| {
+                let model = pooled[l.channel].psd(l.frequency_hz, l.fs_hz);
+                let ratio = if model > 0.0 { l.power / model } else { f64::INFINITY };
+                l.ratio = l.ratio.min(ratio);
+                (ratio >= LINE_RATIO).then_some(l)
+            })
+            .collect(),
         cone_hz: b.cone_hz(),
         basis_ms: stats.basis_ms,
     }
 }
 
+/// Peak power over the continuum a line must reach (against the running median of its
+/// neighbours and against the session's noise model).
+const LINE_RATIO: f64 = 4.0;
+/// Family-wise false-line probability per channel and run (a lot of 50 units has ~3000).
+const LINE_ALPHA: f64 = 1e-6;
+
 /// Lines in one channel's noise: Welch segments of about an eighth of the run (at most
-/// 8192 samples), continuum from ±24 bins, family-wise level 1e-4 per channel and run.
+/// 8192 samples), continuum from ±8 bins, family-wise level [`LINE_ALPHA`] per channel and run.
 fn run_lines(channel: usize, clean: &[f64], t: &[f64], fs_hz: f64) -> Vec<RunLine> {
     let len = (clean.len() / 8).clamp(64, 8192);
     let Some(psd) = welch(clean, fs_hz, len) else { return Vec::new() };
     let span = t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0);
     // Below a few cycles per run a "line" is the slow part of the residual.
     let min_hz = (8.0 / span.max(f64::MIN_POSITIVE)).max(3.0 * psd.df_hz);
-    lines(&psd, 24, 1e-4, 4.0, min_hz)
+    lines(&psd, 8, LINE_ALPHA, LINE_RATIO, min_hz)
         .into_iter()
         .take(8)
         .map(|l| {
             let (f, a) = refine_frequency(clean, t, l.frequency_hz, psd.df_hz);
-            RunLine { channel, frequency_hz: f, amplitude: a, ratio: l.ratio }
+            RunLine { channel, frequency_hz: f, amplitude: a, ratio: l.ratio, power: psd.power[l.bin], fs_hz }
         })
         .collect()
 }

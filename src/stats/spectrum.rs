@@ -111,13 +111,31 @@ pub fn lines(psd: &Psd, half_width: usize, alpha: f64, min_ratio: f64, min_hz: f
     out
 }
 
+/// Removes the least-squares sinusoid at `f_hz` (phase from the first stamp) from `x`.
+pub fn remove_sinusoid(x: &mut [f64], t_s: &[f64], f_hz: f64) {
+    let (a, b) = sinusoid_fit(x, t_s, f_hz);
+    let w = std::f64::consts::TAU * f_hz;
+    let t0 = t_s.first().copied().unwrap_or(0.0);
+    for (v, t) in x.iter_mut().zip(t_s) {
+        let (s, c) = (w * (t - t0)).sin_cos();
+        *v -= a * c + b * s;
+    }
+}
+
 /// Amplitude of the sinusoid at `f_hz` in `x` (stamps `t_s`): the least-squares fit of
 /// a cos + b sin (after removing the mean), returning √(a² + b²).
 pub fn sinusoid_amplitude(x: &[f64], t_s: &[f64], f_hz: f64) -> f64 {
+    let (a, b) = sinusoid_fit(x, t_s, f_hz);
+    a.hypot(b)
+}
+
+/// The least-squares (a, b) of a cos + b sin at `f_hz` (phase from the first stamp),
+/// after removing the mean.
+fn sinusoid_fit(x: &[f64], t_s: &[f64], f_hz: f64) -> (f64, f64) {
     let w = std::f64::consts::TAU * f_hz;
     let n = x.len().min(t_s.len());
     if n < 3 {
-        return 0.0;
+        return (0.0, 0.0);
     }
     let mean = x[..n].iter().sum::<f64>() / n as f64;
     let (mut cc, mut ss, mut cs, mut xc, mut xs) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -132,11 +150,9 @@ pub fn sinusoid_amplitude(x: &[f64], t_s: &[f64], f_hz: f64) -> f64 {
     }
     let det = cc * ss - cs * cs;
     if det.abs() < f64::MIN_POSITIVE {
-        return 0.0;
+        return (0.0, 0.0);
     }
-    let a = (xc * ss - xs * cs) / det;
-    let b = (xs * cc - xc * cs) / det;
-    a.hypot(b)
+    ((xc * ss - xs * cs) / det, (xs * cc - xc * cs) / det)
 }
 
 /// The frequency near `f0_hz` (within ±`half_range_hz`) whose fitted sinusoid in `x` is
