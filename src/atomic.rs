@@ -166,8 +166,13 @@ pub fn write_new(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 mod tests {
     use super::*;
 
+    /// The in-progress registry is global: tests that write must not run at once, or one's
+    /// `remove_in_progress` removes the other's temporary file.
+    static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
     #[test]
     fn stale_temporaries_of_dead_processes_are_removed_and_live_ones_kept() {
+        let _one = SERIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         let dir = tempfile::tempdir().unwrap();
         // A pid that cannot run (above the kernel's maximum), and this process's.
         let dead = dir.path().join(".crosscal-4194305-abc.tmp");
@@ -183,6 +188,7 @@ mod tests {
 
     #[test]
     fn a_failed_write_leaves_nothing_and_remove_in_progress_forgets_it() {
+        let _one = SERIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         let dir = tempfile::tempdir().unwrap();
         let target = dir.path().join("out.csv");
         let e = write_atomic(&target, false, |_| Err(std::io::Error::other("disk full"))).unwrap_err();

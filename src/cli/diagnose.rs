@@ -95,21 +95,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     );
     outln!("\nresidual per channel (units: gyro deg/s, accel m/s^2):");
     out!("{}", channel_table(&d.channels));
-    if !d.candidates.is_empty() {
-        outln!("\ncandidate effects, best first (ΔBIC < {} is strong evidence):", crosscal::diagnose::BIC_EVIDENCE);
-        outln!("  {:<28} {:>6} {:>12} {:>11} {:>12}", "effect", "params", "rss change", "p-value", "ΔBIC");
-        for c in d.candidates.iter().take(10) {
-            let change = if c.rss_before > 0.0 { 100.0 * (c.rss_after / c.rss_before - 1.0) } else { 0.0 };
-            outln!(
-                "  {:<28} {:>6} {:>11.2}% {:>11.2e} {:>12.1}",
-                c.effect,
-                c.added_params,
-                change,
-                c.p_value,
-                c.delta_bic
-            );
-        }
-    }
+    print_noise_lines_candidates(&d)?;
     if !d.disagreements.is_empty() {
         outln!("\ncoefficients that differ between runs (single-run fit vs all runs; something depends on rate, direction, cone angle or mount):");
         for x in d.disagreements.iter().take(12) {
@@ -251,4 +237,68 @@ fn start_model(a: &Args, session: &Session) -> anyhow::Result<crosscal::model::M
             Ok(a.model.spec(&[]).build_with_default(default)?)
         }
     }
+}
+
+/// The noise model, the spectrum's lines, the candidates and what cannot be identified.
+fn print_noise_lines_candidates(d: &crosscal::diagnose::Diagnosis) -> anyhow::Result<()> {
+    outln!("\nnoise model per channel (from the residual, after its systematic part):");
+    for n in &d.noise {
+        let (u, k) = n.sensor.display_unit();
+        outln!(
+            "  {:<6} {:<4} σ {} {u}, lag-1 correlation {:.3}, AR order {}{}",
+            n.sensor.as_str(),
+            n.axis,
+            format::num(n.sigma * k),
+            n.lag1,
+            n.ar_order,
+            if n.colour > 1.5 {
+                format!(" (coloured: variance {:.1}× the white part)", n.colour)
+            } else {
+                String::new()
+            }
+        );
+    }
+    if !d.lines.is_empty() {
+        outln!("\nnarrow lines in the residual spectrum:");
+        for l in d.lines.iter().take(12) {
+            outln!("  {}", l.describe());
+        }
+    }
+    if !d.candidates.is_empty() {
+        outln!(
+            "\ncandidate effects, best first (generalised least squares under the noise model; an effect needs p < {:.0e}, ΔBIC < {}, a gain on left-out runs and one size in every run):",
+            crosscal::diagnose::select::P_ACCEPT,
+            crosscal::diagnose::BIC_EVIDENCE
+        );
+        outln!(
+            "  {:<28} {:>6} {:>12} {:>11} {:>12} {:>14}  {}",
+            "effect",
+            "params",
+            "χ² change",
+            "p-value",
+            "ΔBIC",
+            "left-out gain",
+            ""
+        );
+        for c in d.candidates.iter().take(10) {
+            let change = if c.rss_before > 0.0 { 100.0 * (c.rss_after / c.rss_before - 1.0) } else { 0.0 };
+            outln!(
+                "  {:<28} {:>6} {:>11.2}% {:>11.2e} {:>12.1} {:>14.1}  {}",
+                c.effect,
+                c.added_params,
+                change,
+                c.p_value,
+                c.delta_bic,
+                c.evidence.heldout_gain,
+                c.rejected.as_deref().unwrap_or("qualifies")
+            );
+        }
+    }
+    if !d.unidentifiable.is_empty() {
+        outln!("\nwhat these runs cannot identify:");
+        for u in &d.unidentifiable {
+            outln!("  {u}");
+        }
+    }
+    Ok(())
 }

@@ -498,6 +498,61 @@ fn run_span(r: &FitRun<'_>) -> f64 {
     t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0)
 }
 
+/// Samples above which a nonlinear search runs on every k-th sample.
+const REDUCED_SAMPLES: usize = 200_000;
+
+/// Fits `model`; with nonlinear effects on a large session, their parameters are searched
+/// on every k-th sample (the motion is slow against the sampling) and then held while the
+/// linear coefficients are fitted on all samples.
+fn refit_reduced(
+    model: &Model,
+    runs: &[FitRun<'_>],
+    opts: &FitOptions,
+    warnings: &mut Vec<String>,
+) -> Result<Fit, EstimateError> {
+    let total: usize = runs.iter().map(FitRun::len).sum();
+    if model.nonlinear().is_empty() || total <= REDUCED_SAMPLES {
+        return refit(model, runs, opts);
+    }
+    let k = total.div_ceil(REDUCED_SAMPLES);
+    let every = |v: &[[f64; 3]]| v.iter().step_by(k).copied().collect::<Vec<_>>();
+    let tracks: Vec<crate::motion::Track> = runs
+        .iter()
+        .map(|r| crate::motion::Track {
+            t_s: r.track.t_s.iter().step_by(k).copied().collect(),
+            w_rad_s: r.track.w_rad_s.iter().step_by(k).copied().collect(),
+            e_rad_s2: r.track.e_rad_s2.iter().step_by(k).copied().collect(),
+            a_m_s2: r.track.a_m_s2.iter().step_by(k).copied().collect(),
+            epsilon_source: r.track.epsilon_source.clone(),
+        })
+        .collect();
+    type Outputs = (Vec<[f64; 3]>, Vec<[f64; 3]>, Option<Vec<f64>>);
+    let outputs: Vec<Outputs> = runs
+        .iter()
+        .map(|r| (every(r.gyro), every(r.accel), r.temp_c.map(|t| t.iter().step_by(k).copied().collect())))
+        .collect();
+    let reduced: Vec<FitRun<'_>> = runs
+        .iter()
+        .zip(&tracks)
+        .zip(&outputs)
+        .map(|((r, tr), (g, a, temp))| FitRun { track: tr, gyro: g, accel: a, temp_c: temp.as_deref(), ..*r })
+        .collect();
+    let searched = refit(model, &reduced, opts)?;
+    let mut held = model.clone();
+    for e in model.nonlinear() {
+        let values: Vec<f64> =
+            searched.nonlinear.iter().filter(|p| p.effect == e.effect.id()).map(|p| p.value).collect();
+        let _ = held.fix_nonlinear(e.effect.id(), values);
+    }
+    let mut f = refit(&held, runs, opts)?;
+    f.nonlinear = searched.nonlinear;
+    warnings.push(format!(
+        "nonlinear parameters searched on every {k}th sample ({} of {total}), then held while the rest was fitted on all; `crosscal fit` refines them on all samples",
+        total.div_ceil(k)
+    ));
+    Ok(f)
+}
+
 type Climb = (Vec<Step>, Vec<Candidate>, Model, Analysis);
 
 /// The greedy climb over candidate effects (module documentation, step 3). After each
@@ -561,7 +616,7 @@ fn climb(
         if m.add_effect(&best.0.effect).is_err() {
             break;
         }
-        let f = refit(&m, runs, opts)?;
+        let f = refit_reduced(&m, runs, opts, warnings)?;
         let next = analyse(&m, f, runs, motions, has_temp);
         let noise = noise_reports(&next.space);
         let channels = pictures(&next, &next.space.base_set(), &next.base_fit, &noise);

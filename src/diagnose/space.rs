@@ -328,12 +328,14 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
     let fs_hz = if n > 1 { (n - 1) as f64 / span.max(f64::MIN_POSITIVE) } else { 1.0 };
     let mut acov = Vec::with_capacity(6);
     let mut found = Vec::new();
-    let mut clean = vec![0.0; n];
-    for c in 0..6 {
-        for k in 0..n {
-            basis.row(t[k], &mut row);
-            clean[k] = r[c][k] - (0..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
+    let mut cleaned: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
+    for k in 0..n {
+        basis.row(t[k], &mut row);
+        for (c, cl) in cleaned.iter_mut().enumerate() {
+            cl[k] = r[c][k] - (0..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
         }
+    }
+    for (c, mut clean) in cleaned.into_iter().enumerate() {
         // Lines are not noise: their sinusoids leave before the noise is modelled.
         let here = run_lines(c, &clean, t, fs_hz);
         for l in &here {
@@ -407,9 +409,7 @@ pub fn run_gram(
     r: &[Vec<f64>],
 ) -> RunGram {
     let n = run.len();
-    let t = &run.track.t_s[..n];
     let b = stats.basis;
-    let basis_at = |k: usize, out: &mut [f64]| b.row(t[k], out);
     let noise: Vec<RunNoise> = (0..6)
         .map(|c| {
             // The run's own autocovariances, with its basis's share of the bias added back.
@@ -425,7 +425,7 @@ pub fn run_gram(
         })
         .collect();
     let secants = secant_columns(u, base, fit, run);
-    let gram = (0..6).map(|c| channel_gram(u, run, c, &noise[c].ar, b.size, &basis_at, &r[c], &secants)).collect();
+    let gram = channel_grams(u, run, &noise, &b, r, &secants);
     RunGram {
         gram,
         basis: b.size,
@@ -463,9 +463,11 @@ fn run_lines(channel: usize, clean: &[f64], t: &[f64], fs_hz: f64) -> Vec<RunLin
     let span = t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0);
     // Below a few cycles per run a "line" is the slow part of the residual.
     let min_hz = (8.0 / span.max(f64::MIN_POSITIVE)).max(3.0 * psd.df_hz);
-    lines(&psd, 8, LINE_ALPHA, LINE_RATIO, min_hz)
+    let mut found = lines(&psd, 8, LINE_ALPHA, LINE_RATIO, min_hz);
+    found.sort_by(|a, b| b.ratio.total_cmp(&a.ratio));
+    found
         .into_iter()
-        .take(8)
+        .take(4)
         .map(|l| {
             let (f, a) = refine_frequency(clean, t, l.frequency_hz, psd.df_hz);
             RunLine { channel, frequency_hz: f, amplitude: a, ratio: l.ratio, power: psd.power[l.bin], fs_hz }
@@ -511,97 +513,123 @@ fn secant_columns(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Ve
         .collect()
 }
 
-/// The whitened Gram of one channel in one run.
+/// The whitened Grams of the six channels of one run, built block by block: the states
+/// and the basis rows of a block are evaluated once for all channels; each channel's block
+/// of unwhitened columns (with its last p rows of history ahead of it) is prewhitened a
+/// column at a time and its Gram updated by one matrix product.
 #[allow(clippy::too_many_arguments)]
-fn channel_gram(
+fn channel_grams(
     u: &Universe,
     run: &FitRun<'_>,
-    c: usize,
-    ar: &ArModel,
-    nb: usize,
-    basis_at: &dyn Fn(usize, &mut [f64]),
-    r: &[f64],
+    noise: &[RunNoise],
+    basis: &RunBasis,
+    r: &[Vec<f64>],
     secants: &[Vec<Vec<[f64; 6]>>],
-) -> DMatrix<f64> {
+) -> Vec<DMatrix<f64>> {
     let n = run.len();
-    let (si, ch) = (c / 3, c % 3);
-    let sensor = SensorKind::BOTH[si];
-    let terms = u.augmented.terms(sensor);
-    let values = &u.values[si];
-    let k_matrix = scale_matrix(&terms, values);
-    let width = u.width(c);
-    let m = width + nb + 1;
-    let p = ar.order();
-    let scale = if ar.innovation_var > 0.0 { 1.0 / ar.innovation_var.sqrt() } else { 0.0 };
-    let mut gram = DMatrix::<f64>::zeros(m, m);
-    // Unwhitened rows of the block, with the previous block's last p rows ahead of them.
-    let mut raw = DMatrix::<f64>::zeros(BLOCK + p, m);
-    let mut white = DMatrix::<f64>::zeros(BLOCK, m);
+    let nb = basis.size;
+    let terms: [Vec<TermRef<'_>>; 2] = SensorKind::BOTH.map(|s| u.augmented.terms(s));
+    let k_matrix: [[[f64; 3]; 3]; 2] = [0, 1].map(|si| scale_matrix(&terms[si], &u.values[si]));
+    struct Channel {
+        m: usize,
+        p: usize,
+        raw: DMatrix<f64>,
+        white: DMatrix<f64>,
+        gram: DMatrix<f64>,
+    }
+    let mut chans: Vec<Channel> = (0..6)
+        .map(|c| {
+            let m = u.width(c) + nb + 1;
+            let p = noise[c].ar.order();
+            Channel {
+                m,
+                p,
+                raw: DMatrix::zeros(BLOCK + p, m),
+                white: DMatrix::zeros(BLOCK, m),
+                gram: DMatrix::zeros(m, m),
+            }
+        })
+        .collect();
     let mut states: Vec<State> = Vec::with_capacity(BLOCK);
+    let mut basis_rows = DMatrix::<f64>::zeros(BLOCK, nb);
+    let mut row = vec![0.0; nb];
     let mut phi = vec![0.0; BLOCK];
-    let mut brow = vec![0.0; nb];
-    let mut have = 0usize; // rows of history available
+    let t = &run.track.t_s;
     let mut k0 = 0;
     while k0 < n {
         let k1 = (k0 + BLOCK).min(n);
         let len = k1 - k0;
         states.clear();
         states.extend((k0..k1).map(|k| run.state(k)));
-        for (j, &(_, src)) in u.columns[c].iter().enumerate() {
-            match src {
-                Source::Term(k) => {
-                    let t = &terms[k];
-                    term_column(t, &terms, values, &k_matrix, ch, &states, &mut phi[..len]);
-                }
-                Source::Secant(e, pi) => {
-                    for (o, s) in phi[..len].iter_mut().zip(&secants[e][pi][k0..k1]) {
-                        *o = s[c];
+        for i in 0..len {
+            basis.row(t[k0 + i], &mut row);
+            for (b, v) in row.iter().enumerate() {
+                basis_rows[(i, b)] = *v;
+            }
+        }
+        for (c, chn) in chans.iter_mut().enumerate() {
+            let (si, ch) = (c / 3, c % 3);
+            let (p, m) = (chn.p, chn.m);
+            let width = m - nb - 1;
+            for (j, &(_, src)) in u.columns[c].iter().enumerate() {
+                let col = &mut chn.raw.column_mut(j);
+                match src {
+                    Source::Term(k) => {
+                        term_column(
+                            &terms[si][k],
+                            &terms[si],
+                            &u.values[si],
+                            &k_matrix[si],
+                            ch,
+                            &states,
+                            &mut phi[..len],
+                        );
+                        col.rows_mut(p, len).copy_from_slice(&phi[..len]);
+                    }
+                    Source::Secant(e, pi) => {
+                        for (i, s) in secants[e][pi][k0..k1].iter().enumerate() {
+                            col[p + i] = s[c];
+                        }
                     }
                 }
             }
-            for i in 0..len {
-                raw[(p + i, j)] = phi[i];
-            }
-        }
-        for i in 0..len {
-            basis_at(k0 + i, &mut brow);
             for b in 0..nb {
-                raw[(p + i, width + b)] = brow[b];
+                chn.raw.column_mut(width + b).rows_mut(p, len).copy_from(&basis_rows.column(b).rows(0, len));
             }
-            raw[(p + i, m - 1)] = r[k0 + i];
-        }
-        // Prewhiten: row i ← (x_i − Σ φ_l x_{i−l}) / σ_e, only where the history is complete.
-        let mut rows = 0;
-        for i in 0..len {
-            if have + i < p {
-                continue;
-            }
+            chn.raw.column_mut(m - 1).rows_mut(p, len).copy_from_slice(&r[c][k0..k1]);
+            // Prewhiten a column at a time: x_i − Σ φ_l x_{i−l}, scaled to unit innovation
+            // variance; the run's first p rows (no history) are left out.
+            let ar = &noise[c].ar;
+            let scale = if ar.innovation_var > 0.0 { 1.0 / ar.innovation_var.sqrt() } else { 0.0 };
+            let skip = p.saturating_sub(k0).min(len);
+            let rows = len - skip;
             for col in 0..m {
-                let mut v = raw[(p + i, col)];
-                for (l, f) in ar.phi.iter().enumerate() {
-                    v -= f * raw[(p + i - 1 - l, col)];
-                }
-                white[(rows, col)] = v * scale;
-            }
-            rows += 1;
-        }
-        if rows > 0 {
-            let w = white.rows(0, rows);
-            gram.gemm_tr(1.0, &w, &w, 1.0);
-        }
-        // Keep the last p rows as the next block's history.
-        if p > 0 {
-            for l in 0..p {
-                let src = p + len - p + l;
-                for col in 0..m {
-                    raw[(l, col)] = raw[(src, col)];
+                let x = chn.raw.column(col);
+                let x = x.as_slice();
+                let w = &mut chn.white.column_mut(col);
+                for i in skip..len {
+                    let mut v = x[p + i];
+                    for (l, f) in ar.phi.iter().enumerate() {
+                        v -= f * x[p + i - 1 - l];
+                    }
+                    w[i - skip] = v * scale;
                 }
             }
+            if rows > 0 {
+                let w = chn.white.rows(0, rows);
+                chn.gram.gemm_tr(1.0, &w, &w, 1.0);
+            }
+            // The block's last p rows become the next block's history.
+            for col in 0..m {
+                let mut x = chn.raw.column_mut(col);
+                for l in 0..p.min(len) {
+                    x[p - p.min(len) + l] = x[p + len - p.min(len) + l];
+                }
+            }
         }
-        have += len;
         k0 = k1;
     }
-    gram
+    chans.into_iter().map(|c| c.gram).collect()
 }
 
 /// The Gauss–Newton column of term `t` in output channel `ch`: its regressor for an
