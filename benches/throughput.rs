@@ -155,6 +155,34 @@ fn fit_vs_peer(table: &mut Table, sizes: &[usize]) {
     }
 }
 
+/// `diagnose` and `compare` on the 18-run, 1e6-sample session with a hidden gyro
+/// dead zone, beside the plain `fit` of the same session.
+fn diagnose_at_scale(table: &mut Table) {
+    use crosscal::simulate::{write_session, SimConfig};
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let mut c = SimConfig::paper();
+    for r in &mut c.runs {
+        r.duration_s = 1e6 / 100.0 / 18.0;
+    }
+    c.gyro_noise_deg_s = 0.002;
+    c.accel_noise_g = 2e-5;
+    c.truth.model.add_effect("gyro-dead-zone").expect("catalogue effect");
+    for (n, v) in [("gyro.dz_x", 9e-4), ("gyro.dz_y", 5e-4), ("gyro.dz_z", 7e-4)] {
+        c.truth.values.insert(n.into(), v);
+    }
+    let manifest = write_session(&c.generate(), &tmp.path().join("s")).expect("write session");
+    let run =
+        |args: &[&str]| measure(std::process::Command::new(env!("CARGO_BIN_EXE_crosscal")).args(args).arg(&manifest));
+    let (tf, mf) = run(&["fit", "--dry-run"]);
+    let (td, md) = run(&["diagnose"]);
+    let (tc, mc) = run(&["compare"]);
+    report(
+        table,
+        "`diagnose` / `compare` / `fit`, 18 runs, 1e6 samples, hidden gyro dead zone (found)".into(),
+        format!("{td:.2} s / {md:.0} MB; {tc:.2} s / {mc:.0} MB; fit {tf:.2} s / {mf:.0} MB"),
+    );
+}
+
 /// Peak resident set of this process so far, MB.
 fn own_peak_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
@@ -419,6 +447,9 @@ fn main() {
     if only.as_deref().is_none_or(|o| "csv correct".contains(o)) {
         parse_and_correct(&mut table);
         correct_csv(&mut table);
+    }
+    if only.as_deref().is_none_or(|o| "diagnose compare".contains(o)) {
+        diagnose_at_scale(&mut table);
     }
     if only.as_deref().is_none_or(|o| "fit".contains(o)) {
         let big = readme || std::env::var("CROSSCAL_BENCH_1E7").is_ok();

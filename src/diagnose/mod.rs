@@ -161,7 +161,8 @@ pub struct Diagnosis {
     pub model: String,
     /// Channel picture of the model as given.
     pub channels: Vec<ChannelReport>,
-    /// The noise model per channel.
+    /// The noise model per channel, around the model at the end of the ladder (what the
+    /// added effects do not explain).
     pub noise: Vec<NoiseReport>,
     /// Narrow-band lines in the residual's spectrum.
     pub lines: Vec<Line>,
@@ -479,7 +480,7 @@ fn conclude(
     Ok(Diagnosis {
         model: model.name.clone(),
         channels,
-        noise,
+        noise: noise_reports(&a.space),
         lines: found,
         candidates: first_round,
         steps,
@@ -819,8 +820,9 @@ pub fn compare(
         models.push((format!("+ {}", effects.join(" + ")), m.clone()));
     }
     let mut rungs = Vec::with_capacity(models.len());
+    let mut notes = Vec::new();
     for (name, model) in &models {
-        let f = refit(model, runs, opts)?;
+        let f = refit_reduced(model, runs, opts, &mut notes)?;
         let mut r = rung(name, &f, &d.noise);
         if runs.len() > 1 {
             r.heldout_rms = heldout_of(&space, model, &d.noise).unwrap_or_else(|| r.rms.clone());
