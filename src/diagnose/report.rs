@@ -2,7 +2,7 @@
 //! residual versus time, versus cone phase (binned) and harmonic amplitudes per channel.
 
 use super::{ChannelReport, Diagnosis, RunResiduals, Verdict, HARMONICS};
-use crate::html::plot::{bars, lines};
+use crate::html::plot::{bars, lines, loglog};
 use crate::html::{esc, page_start};
 use crate::session::MotionSpec;
 use crate::stats::systematic;
@@ -32,6 +32,46 @@ fn vs_time(res: &[RunResiduals], c: usize) -> Vec<(f64, f64)> {
         offset += r.t_s.last().copied().unwrap_or(t0) - t0;
     }
     out
+}
+
+/// Welch PSD of channel `c`'s residual averaged over the runs that share the first run's
+/// sampling and length (display units²/Hz), and the white-noise level of the same
+/// variance (2σ²/fs).
+fn spectrum(res: &[RunResiduals], c: usize) -> Vec<(String, Vec<(f64, f64)>)> {
+    let (_, k) = unit(c);
+    let mut acc: Option<crate::stats::spectrum::Psd> = None;
+    let (mut count, mut var, mut fs_first) = (0usize, 0.0, 0.0);
+    for r in res {
+        let n = r.r[c].len();
+        let span = r.t_s.last().copied().unwrap_or(0.0) - r.t_s.first().copied().unwrap_or(0.0);
+        if n < 128 || span <= 0.0 {
+            continue;
+        }
+        let fs = (n - 1) as f64 / span;
+        let x: Vec<f64> = r.r[c].iter().map(|v| v * k).collect();
+        let Some(p) = crate::stats::spectrum::welch(&x, fs, (n / 8).clamp(64, 8192)) else { continue };
+        match &mut acc {
+            None => {
+                fs_first = fs;
+                acc = Some(p);
+            }
+            Some(a) if a.power.len() == p.power.len() && (a.df_hz / p.df_hz - 1.0).abs() < 1e-3 => {
+                a.power.iter_mut().zip(&p.power).for_each(|(s, v)| *s += v);
+            }
+            Some(_) => continue,
+        }
+        count += 1;
+        var += x.iter().map(|v| v * v).sum::<f64>() / n as f64;
+    }
+    let Some(a) = acc else { return Vec::new() };
+    let pts: Vec<(f64, f64)> =
+        a.power.iter().enumerate().skip(1).map(|(i, p)| (i as f64 * a.df_hz, p / count as f64)).collect();
+    let white = 2.0 * var / count as f64 / fs_first;
+    let fmax = pts.last().map_or(1.0, |p| p.0);
+    vec![
+        ("residual (Welch, mean over runs)".to_string(), pts),
+        ("white noise of the same variance".to_string(), vec![(a.df_hz, white), (fmax, white)]),
+    ]
 }
 
 /// Mean residual of channel `c` in 36 cone-phase bins over all conic runs.
@@ -129,6 +169,13 @@ pub fn html(
         }
         s.push_str("</table>");
     }
+    if !d.lines.is_empty() {
+        s.push_str("<h3>narrow lines in the residual spectrum</h3><ul>");
+        for l in &d.lines {
+            let _ = write!(s, "<li>{}</li>", esc(&l.describe()));
+        }
+        s.push_str("</ul>");
+    }
     for (i, st) in d.steps.iter().enumerate() {
         s.push_str(&channel_table(
             &format!("step {}: add {} (ΔBIC {:.1})", i + 1, st.effect, st.score.delta_bic),
@@ -156,6 +203,16 @@ pub fn html(
             u,
             &p,
         ));
+        let spec = spectrum(after.unwrap_or(before), c);
+        if !spec.is_empty() {
+            s.push_str(&loglog(
+                &format!("{}: residual spectrum (lines stand out of the continuum)", CHANNELS[c]),
+                "frequency (Hz)",
+                &format!("PSD (({u})²/Hz)"),
+                &[],
+                &spec,
+            ));
+        }
         s.push_str(&bars(
             &format!("{}: residual cone harmonics (RMS over runs)", CHANNELS[c]),
             "harmonic of the cone frequency",
