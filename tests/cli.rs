@@ -188,8 +188,9 @@ fn diagnose_names_a_hidden_lever_arm_and_fit_then_corrects_with_it() {
     let (code, _, err) = run_in(dir, &["diagnose", "demo/session.json", "--report", "report.html"]);
     assert_eq!(code, 0, "{err}");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    assert!(html.starts_with("<!DOCTYPE html>") && html.matches("<svg").count() == 18, "6 channels × 3 plots");
+    assert!(html.starts_with("<!DOCTYPE html>") && html.matches("<svg").count() == 24, "6 channels × 4 plots");
     assert!(html.contains("residual vs cone phase") && html.contains("accel-lever-arm"));
+    assert!(html.matches("residual spectrum").count() == 6 && html.contains("PSD"), "a spectrum per channel");
     assert!(!html.contains("<script") && !html.contains("src=\"http"), "self-contained");
     let (code, out, err) = run_in(dir, &["compare", "demo/session.json", "--svg", "ladder.svg"]);
     assert_eq!(code, 0, "{out}{err}");
