@@ -140,20 +140,8 @@ impl Space {
         for rg in &runs {
             let mut fold = System::zeros(p);
             for c in 0..6 {
-                let idx: Vec<usize> = universe.channel_params(c).collect();
-                let w = idx.len();
-                let g = &rg.gram[c];
-                let m = g.nrows();
-                let mut one = System::zeros(p);
-                for (i, &gi) in idx.iter().enumerate() {
-                    for (j, &gj) in idx.iter().enumerate() {
-                        one.g[(gi, gj)] += g[(i, j)];
-                    }
-                    one.b[gi] += g[(i, m - 1)];
-                }
-                one.yy = g[(m - 1, m - 1)];
+                let mut one = scatter(&universe, rg, c);
                 one.n = rg.noise[c].n;
-                let _ = w;
                 fold.add(&one);
                 channel_total[c].add(&one);
             }
@@ -222,19 +210,7 @@ impl Space {
     }
 
     fn local_system(&self, run: usize, c: usize) -> System {
-        let p = self.universe.params.len();
-        let idx: Vec<usize> = self.universe.channel_params(c).collect();
-        let g = &self.runs[run].gram[c];
-        let m = g.nrows();
-        let mut one = System::zeros(p);
-        for (i, &gi) in idx.iter().enumerate() {
-            for (j, &gj) in idx.iter().enumerate() {
-                one.g[(gi, gj)] += g[(i, j)];
-            }
-            one.b[gi] += g[(i, m - 1)];
-        }
-        one.yy = g[(m - 1, m - 1)];
-        one
+        scatter(&self.universe, &self.runs[run], c)
     }
 
     /// The evidence for adding `cand` to `set` (whose all-run solution and held-out χ² are
@@ -377,6 +353,23 @@ pub struct Leftover {
     pub n: f64,
     /// Largest feature: (run index, feature, amplitude SI, χ² it carries).
     pub worst: Option<(usize, Option<usize>, f64, f64)>,
+}
+
+/// One run's channel as a global system: its local Gram scattered onto the global
+/// parameters (the basis rows and columns left out).
+fn scatter(u: &Universe, rg: &RunGram, c: usize) -> System {
+    let idx: Vec<usize> = u.channel_params(c).collect();
+    let g = &rg.gram[c];
+    let m = g.nrows();
+    let mut one = System::zeros(u.params.len());
+    for (i, &gi) in idx.iter().enumerate() {
+        for (j, &gj) in idx.iter().enumerate() {
+            one.g[(gi, gj)] += g[(i, j)];
+        }
+        one.b[gi] += g[(i, m - 1)];
+    }
+    one.yy = g[(m - 1, m - 1)];
+    one
 }
 
 fn shifted(s: &System, shift: &[(usize, f64)]) -> (DVector<f64>, f64) {
