@@ -686,7 +686,11 @@ fn unidentifiable(model: &Model, f: &Fit, candidates: &[Candidate]) -> Vec<Strin
             format!("{} ({}): {}; held at {}; {}", u.held, u.axis, u.reason, crate::units::show(u.held_at), u.remedy)
         })
         .collect();
-    for c in candidates {
+    let none: Vec<&str> = candidates.iter().filter(|c| c.added_params == 0).map(|c| c.effect.as_str()).collect();
+    if !none.is_empty() {
+        out.push(format!("not seen at all by these runs (tried, nothing to estimate): {}", none.join(", ")));
+    }
+    for c in candidates.iter().filter(|c| c.added_params > 0) {
         let total = find(&c.effect).map_or(0, |e| e.coefficients().len());
         if c.added_params < total {
             out.push(format!(
