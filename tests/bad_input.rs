@@ -1,33 +1,8 @@
 //! Every kind of bad input: a clear message naming file, line and column where there is
 //! one, the word for the problem, and the kind's own exit code. Nothing is written.
 
-use crate::common::run_in;
+use crate::common::{run_in, small_session};
 use std::path::Path;
-
-/// A one-run session (40 samples) in `dir/s`.
-fn session(dir: &Path) {
-    let (code, out, err) = run_in(
-        dir,
-        &[
-            "simulate",
-            "-o",
-            "s",
-            "--duration",
-            "2",
-            "--rate-hz",
-            "20",
-            "--mounts",
-            "1",
-            "--rates",
-            "10",
-            "--cone-angles",
-            "10",
-            "--gyro-noise",
-            "0.002",
-        ],
-    );
-    assert_eq!(code, 0, "{out}{err}");
-}
 
 fn csv_path(dir: &Path) -> std::path::PathBuf {
     dir.join("s/cone+10.csv")
@@ -71,7 +46,7 @@ macro_rules! bad_csv_case {
         #[test]
         fn $name() {
             let d = tempfile::tempdir().unwrap();
-            session(d.path());
+            small_session(d.path(), false);
             let setup: &dyn Fn(&Path) = &$setup;
             setup(d.path());
             expect_fit_error(d.path(), &[], $code, &$words);
@@ -123,7 +98,7 @@ bad_csv_case!(decreasing_t, |d| set_field(d, 12, 0, "0.3"), 8, ["cone+10.csv:14:
 #[test]
 fn gap_is_a_warning_or_with_strict_an_error() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path());
+    small_session(d.path(), false);
     // Samples 20.. shifted by 1 s: one gap of 21 sample periods before sample 21 (line 22).
     edit_csv(d.path(), |t| {
         let mut lines: Vec<String> = t.lines().map(str::to_string).collect();
@@ -160,7 +135,7 @@ fn gap_is_a_warning_or_with_strict_an_error() {
 #[test]
 fn unknown_unit() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path());
+    small_session(d.path(), false);
     edit_manifest(d.path(), |t| t.replace("\"deg/s\"", "\"dps\""));
     expect_fit_error(d.path(), &[], 10, &["session.json:", "'dps'", "deg/s, rad/s, raw"]);
 }
@@ -168,7 +143,7 @@ fn unknown_unit() {
 #[test]
 fn manifest_not_json() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path());
+    small_session(d.path(), false);
     edit_manifest(d.path(), |t| t.replacen("{", "{{", 1));
     expect_fit_error(d.path(), &[], 11, &["session.json:1:", "not valid JSON"]);
 }
@@ -176,7 +151,7 @@ fn manifest_not_json() {
 #[test]
 fn unknown_session_format() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path());
+    small_session(d.path(), false);
     edit_manifest(d.path(), |t| t.replace("crosscal-session/1", "crosscal-session/7"));
     expect_fit_error(d.path(), &[], 12, &["session.json", "crosscal-session/7", "unknown session format"]);
 }
@@ -184,7 +159,7 @@ fn unknown_session_format() {
 #[test]
 fn missing_run_file() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path());
+    small_session(d.path(), false);
     std::fs::remove_file(csv_path(d.path())).unwrap();
     expect_fit_error(d.path(), &[], 13, &["session.json:", "cone+10.csv", "does not exist"]);
 }
@@ -192,7 +167,7 @@ fn missing_run_file() {
 #[test]
 fn mount_not_a_rotation() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path());
+    small_session(d.path(), false);
     edit_manifest(d.path(), |t| t.replacen("\"+y\"", "\"-y\"", 1));
     expect_fit_error(d.path(), &[], 14, &["session.json:", "not a rotation", "mirror"]);
 }
@@ -200,14 +175,14 @@ fn mount_not_a_rotation() {
 #[test]
 fn unidentifiable_model_with_strict() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path());
+    small_session(d.path(), false);
     expect_fit_error(d.path(), &["--strict"], 17, &["cannot identify", "gyro.e_xz", "re-mount"]);
 }
 
 #[test]
 fn profile_of_unknown_version_or_other_unit() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path());
+    small_session(d.path(), false);
     let (c, out, err) = run_in(d.path(), &["fit", "s/session.json", "--out", "p"]);
     assert_eq!(c, 0, "{out}{err}");
     let prof = std::fs::read_dir(d.path().join("p/I1426-0042")).unwrap().next().unwrap().unwrap().path();

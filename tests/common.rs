@@ -102,3 +102,37 @@ pub fn sh_in(dir: &std::path::Path, script: &str) -> (i32, String, String) {
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
+
+/// A one-run, 40-sample session in `dir/s` (conic, 10 °/s, noisy gyro) and, with `fit`, its
+/// profile in `dir/store`: the small fixture the refusal and exit-code tests edit.
+pub fn small_session(dir: &std::path::Path, fit: bool) {
+    let args = [
+        "simulate",
+        "-o",
+        "s",
+        "--duration",
+        "2",
+        "--rate-hz",
+        "20",
+        "--mounts",
+        "1",
+        "--rates",
+        "10",
+        "--cone-angles",
+        "10",
+        "--gyro-noise",
+        "0.002",
+    ];
+    let (code, out, err) = run_timed(dir, &args, 60);
+    assert_eq!(code, 0, "{out}{err}");
+    if fit {
+        let (code, out, err) = run_timed(dir, &["fit", "s/session.json", "--out", "store"], 60);
+        assert_eq!(code, 0, "{out}{err}");
+    }
+}
+
+/// Rewrites a text file through `f`.
+pub fn edit(path: &std::path::Path, f: impl Fn(String) -> String) {
+    let text = std::fs::read_to_string(path).unwrap();
+    std::fs::write(path, f(text)).unwrap();
+}

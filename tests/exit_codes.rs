@@ -1,40 +1,8 @@
 //! Every exit code the README documents is produced by a real case, and the README's table
 //! is the one the binary prints (`crosscal exit-codes`).
 
-use crate::common::run_in;
+use crate::common::{edit, run_in, small_session};
 use std::path::Path;
-
-/// A one-run, 40-sample session in `dir/s`, and (with `fit`) its profile in `dir/store`.
-fn session(dir: &Path, fit: bool) {
-    let args = [
-        "simulate",
-        "-o",
-        "s",
-        "--duration",
-        "2",
-        "--rate-hz",
-        "20",
-        "--mounts",
-        "1",
-        "--rates",
-        "10",
-        "--cone-angles",
-        "10",
-        "--gyro-noise",
-        "0.002",
-    ];
-    let (code, out, err) = run_in(dir, &args);
-    assert_eq!(code, 0, "{out}{err}");
-    if fit {
-        let (code, out, err) = run_in(dir, &["fit", "s/session.json", "--out", "store"]);
-        assert_eq!(code, 0, "{out}{err}");
-    }
-}
-
-fn edit(path: &Path, f: impl Fn(String) -> String) {
-    let text = std::fs::read_to_string(path).unwrap();
-    std::fs::write(path, f(text)).unwrap();
-}
 
 fn csv(dir: &Path) -> std::path::PathBuf {
     dir.join("s/cone+10.csv")
@@ -57,44 +25,44 @@ fn case(code: u8, dir: &Path) -> Vec<String> {
     match code {
         0 => s(&["effects", "gyro-bias"]),
         1 => {
-            session(dir, true);
+            small_session(dir, true);
             let rules =
                 r#"{"format": "crosscal-rules/1", "rules": [{"kind": "std_error", "select": "*", "max": 1e-30}]}"#;
             std::fs::write(dir.join("rules.json"), rules).unwrap();
             s(&["accept", &p(dir), "--rules", "rules.json"])
         }
         2 => {
-            session(dir, false);
+            small_session(dir, false);
             s(&["fit", "s/session.json", "--effect", "no-such-effect"])
         }
         3 => s(&["fit", "no/such/session.json"]),
         4 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&csv(dir), |t| t.lines().next().unwrap().to_string() + "\n");
             fit
         }
         5 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&csv(dir), |t| t.replacen("t,gx,gy,gz,ax,ay,az", "t,gx,gy,gz,ax,ay,gx", 1));
             fit
         }
         6 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&csv(dir), |t| t.replacen("\n0.1,", "\n1e400,", 1));
             fit
         }
         7 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&csv(dir), |t| t.replacen("\n0.1,", "\n0.1,1,", 1));
             fit
         }
         8 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&csv(dir), |t| t.replacen("\n0.1,", "\n0.05,", 1));
             fit
         }
         9 => {
-            session(dir, false);
+            small_session(dir, false);
             // A gap of 5 s before the 21st sample.
             edit(&csv(dir), |t| {
                 let mut lines: Vec<String> = t.lines().map(str::to_string).collect();
@@ -107,61 +75,61 @@ fn case(code: u8, dir: &Path) -> Vec<String> {
             s(&["fit", "s/session.json", "--dry-run", "--strict"])
         }
         10 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&manifest(dir), |t| t.replace("\"deg/s\"", "\"deg/sec\""));
             fit
         }
         11 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&manifest(dir), |t| t.replacen('{', "{\"serial\": \"A\",", 1));
             fit
         }
         12 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&manifest(dir), |t| t.replace("crosscal-session/1", "crosscal-session/9"));
             fit
         }
         13 => {
-            session(dir, false);
+            small_session(dir, false);
             std::fs::remove_file(csv(dir)).unwrap();
             fit
         }
         14 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&manifest(dir), |t| t.replacen("\"+y\"", "\"+x\"", 1));
             fit
         }
         15 => {
-            session(dir, true);
+            small_session(dir, true);
             edit(&profile(dir), |t| t.replace("crosscal-profile/1", "crosscal-profile/9"));
             s(&["check", "s/session.json", "--profile", &p(dir)])
         }
         16 => {
-            session(dir, true);
+            small_session(dir, true);
             edit(&manifest(dir), |t| t.replacen("\"serial\": \"", "\"serial\": \"OTHER-", 1));
             s(&["check", "s/session.json", "--profile", &p(dir)])
         }
         17 => {
-            session(dir, false);
+            small_session(dir, false);
             s(&["fit", "s/session.json", "--dry-run", "--strict"])
         }
         18 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&manifest(dir), |t| t.replacen("\"rate_deg_s\": 10.0", "\"rate_deg_s\": 1e200", 1));
             fit
         }
         19 => {
-            session(dir, false);
+            small_session(dir, false);
             edit(&csv(dir), |t| t.replacen("\n0.1,", &format!("\n{}", "9".repeat(2 << 20)), 1));
             fit
         }
         20 => {
-            session(dir, true);
+            small_session(dir, true);
             std::fs::write(dir.join("rules.json"), r#"{"format": "crosscal-rules/9", "rules": []}"#).unwrap();
             s(&["accept", &p(dir), "--rules", "rules.json"])
         }
         21 => {
-            session(dir, true);
+            small_session(dir, true);
             let path = profile(dir);
             let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
             v["gyro"]["coefficients"].as_array_mut().unwrap().remove(0);
@@ -169,7 +137,7 @@ fn case(code: u8, dir: &Path) -> Vec<String> {
             s(&["check", "s/session.json", "--profile", &p(dir)])
         }
         22 => {
-            session(dir, false);
+            small_session(dir, false);
             // Outputs whose squares overflow: no estimate can be made of them.
             edit(&csv(dir), |t| {
                 let mut lines: Vec<String> = t.lines().map(str::to_string).collect();
@@ -208,7 +176,7 @@ fn case(code: u8, dir: &Path) -> Vec<String> {
             s(&["correct", "--profile", &p(dir), "s/cone+10.csv", "-o", "out.csv"])
         }
         24 => {
-            session(dir, true);
+            small_session(dir, true);
             std::fs::write(dir.join("out.csv"), "keep me").unwrap();
             s(&["correct", "--profile", &p(dir), "s/cone+10.csv", "-o", "out.csv"])
         }

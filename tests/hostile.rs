@@ -1,44 +1,12 @@
 //! Hostile and careless input (issue 22): each case gives a clear refusal with its exit
 //! code, or the right result; none panics, aborts, hangs or leaks a temporary file.
 
-use crate::common::{run_timed, sh_in};
+use crate::common::{edit, run_timed, sh_in, small_session};
 use std::path::Path;
-
-/// A one-run, 40-sample session in `dir/s` and (with `fit`) its profile in `dir/store`.
-fn session(dir: &Path, fit: bool) {
-    let args = [
-        "simulate",
-        "-o",
-        "s",
-        "--duration",
-        "2",
-        "--rate-hz",
-        "20",
-        "--mounts",
-        "1",
-        "--rates",
-        "10",
-        "--cone-angles",
-        "10",
-        "--gyro-noise",
-        "0.002",
-    ];
-    let (code, out, err) = run_timed(dir, &args, 60);
-    assert_eq!(code, 0, "{out}{err}");
-    if fit {
-        let (code, out, err) = run_timed(dir, &["fit", "s/session.json", "--out", "store"], 60);
-        assert_eq!(code, 0, "{out}{err}");
-    }
-}
 
 fn profile(dir: &Path) -> std::path::PathBuf {
     let unit = std::fs::read_dir(dir.join("store")).unwrap().next().unwrap().unwrap().path();
     std::fs::read_dir(unit).unwrap().next().unwrap().unwrap().path()
-}
-
-fn edit(path: &Path, f: impl Fn(String) -> String) {
-    let text = std::fs::read_to_string(path).unwrap();
-    std::fs::write(path, f(text)).unwrap();
 }
 
 fn edit_json(path: &Path, f: impl Fn(&mut serde_json::Value)) {
@@ -59,7 +27,7 @@ fn temporaries(dir: &Path) -> Vec<String> {
 #[test]
 fn a_row_with_an_extra_field_is_refused_not_shifted() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), false);
+    small_session(d.path(), false);
     edit(&d.path().join("s/cone+10.csv"), |t| t.replacen("\n0.1,", "\n0.1,1,", 1));
     let (code, _, err) = run_timed(d.path(), &["fit", "s/session.json", "--dry-run"], 60);
     assert_eq!(code, 7, "{err}");
@@ -69,7 +37,7 @@ fn a_row_with_an_extra_field_is_refused_not_shifted() {
 #[test]
 fn a_column_named_twice_is_refused() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), false);
+    small_session(d.path(), false);
     edit(&d.path().join("s/cone+10.csv"), |t| t.replacen("t,gx,gy", "gx,t,gx", 1));
     let (code, _, err) = run_timed(d.path(), &["fit", "s/session.json", "--dry-run"], 60);
     assert_eq!(code, 5, "{err}");
@@ -79,7 +47,7 @@ fn a_column_named_twice_is_refused() {
 #[test]
 fn an_overflowing_value_is_named_as_such_and_long_values_are_cut() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), false);
+    small_session(d.path(), false);
     let csv = d.path().join("s/cone+10.csv");
     edit(&csv, |t| t.replacen("\n0.1,", "\n0.1,1e400x,", 1).replacen("1e400x,", "", 0));
     edit(&csv, |t| {
@@ -101,7 +69,7 @@ fn an_overflowing_value_is_named_as_such_and_long_values_are_cut() {
 #[test]
 fn a_profile_whose_numbers_cannot_be_used_is_refused_on_load() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), true);
+    small_session(d.path(), true);
     let p = profile(d.path());
     let original = std::fs::read_to_string(&p).unwrap();
     let check = |dir: &Path| run_timed(dir, &["check", "s/session.json", "--profile", &p.display().to_string()], 60);
@@ -158,7 +126,7 @@ fn a_profile_whose_numbers_cannot_be_used_is_refused_on_load() {
 #[test]
 fn the_store_refuses_future_and_misplaced_profiles() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), true);
+    small_session(d.path(), true);
     let p = profile(d.path());
     let unit = p.parent().unwrap().to_path_buf();
     // A profile dated in the future is not in force without --at.
@@ -202,7 +170,7 @@ fn the_store_refuses_future_and_misplaced_profiles() {
 #[test]
 fn a_closed_or_full_stdout_neither_panics_nor_loses_the_profile() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), true);
+    small_session(d.path(), true);
     for script in ["\"$CROSSCAL\" profile list --store store | head -c 1", "\"$CROSSCAL\" effects | head -1"] {
         let (c, _, err) = sh_in(d.path(), &format!("{script}; echo \"status ${{PIPESTATUS:-?}}\" >&2"));
         assert_eq!(c, 0, "{err}");
@@ -241,7 +209,7 @@ fn absurd_sizes_and_rates_are_refused_before_any_work() {
         assert_eq!(c, 2, "{args:?}: {err}");
         assert!(err.contains("at most") || err.contains("expected"), "{args:?}: {err}");
     }
-    session(d.path(), false);
+    small_session(d.path(), false);
     edit(&d.path().join("s/session.json"), |t| t.replacen("\"rate_deg_s\": 10.0", "\"rate_deg_s\": 1e200", 1));
     let (c, _, err) = run_timed(d.path(), &["fit", "s/session.json", "--dry-run"], 30);
     assert_eq!(c, 18, "{err}");
@@ -283,7 +251,7 @@ fn a_batch_with_a_hostile_unit_finishes_and_reports_it() {
 #[test]
 fn special_files_are_named_for_what_they_are() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), true);
+    small_session(d.path(), true);
     let csv = d.path().join("s/cone+10.csv");
     std::fs::remove_file(&csv).unwrap();
     std::fs::create_dir(&csv).unwrap();
@@ -322,7 +290,7 @@ fn special_files_are_named_for_what_they_are() {
 #[test]
 fn a_line_without_newline_costs_bounded_memory() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), true);
+    small_session(d.path(), true);
     // 64 MB of digits without a newline, after the header.
     let csv = d.path().join("s/cone+10.csv");
     let mut text = String::from("t,gx,gy,gz,ax,ay,az\n");
@@ -344,7 +312,7 @@ fn a_line_without_newline_costs_bounded_memory() {
 #[test]
 fn a_thousand_runs_are_fitted_under_a_low_open_file_limit() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), false);
+    small_session(d.path(), false);
     let s = d.path().join("s");
     let data = std::fs::read_to_string(s.join("cone+10.csv")).unwrap();
     let mut m: serde_json::Value =
@@ -468,7 +436,7 @@ fn identical_units_are_not_batch_outliers() {
 #[test]
 fn profile_diff_of_a_session_says_what_the_file_is() {
     let d = tempfile::tempdir().unwrap();
-    session(d.path(), true);
+    small_session(d.path(), true);
     let p = profile(d.path()).display().to_string();
     let (c, _, err) = run_timed(d.path(), &["profile", "diff", &p, "s/session.json"], 30);
     assert_eq!(c, 15, "{err}");
