@@ -67,7 +67,7 @@ pub struct Universe {
     /// Global parameters.
     pub params: Vec<Param>,
     /// Nonlinear candidates and the secant step of each of their parameters.
-    nonlinear: Vec<(crate::model::NonlinearEntry, Vec<f64>)>,
+    nonlinear: Vec<(crate::model::NonlinearEntry, Vec<f64>, bool)>,
     /// Per channel: (global parameter index, source) of each local column.
     columns: [Vec<(usize, Source)>; 6],
     /// Augmented term values per sensor (base fit values, candidates at nominal).
@@ -97,7 +97,7 @@ impl Universe {
                     if m.add_effect(e.id()).is_ok() {
                         if let Some(entry) = m.nonlinear().first().cloned() {
                             let steps = ne.params().iter().map(|d| d.scale).collect();
-                            nonlinear.push((entry, steps));
+                            nonlinear.push((entry, steps, false));
                             candidates.push(e.id());
                         }
                     }
@@ -142,14 +142,27 @@ impl Universe {
                 }
             }
         }
-        for (ei, (entry, _)) in nonlinear.iter().enumerate() {
+        // The model's own nonlinear parameters, free around their fitted values: the Grams'
+        // solution then carries a Gauss–Newton step on them over all samples (a search on
+        // reduced data is refined here).
+        for e in base.nonlinear().iter().filter(|e| e.fitted) {
+            let mut entry = e.clone();
+            let fitted: Vec<f64> =
+                fit.nonlinear.iter().filter(|p| p.effect == e.effect.id()).map(|p| p.value).collect();
+            if fitted.len() == entry.values.len() {
+                entry.values = fitted;
+            }
+            let steps = e.effect.params().iter().map(|d| 0.01 * d.scale).collect();
+            nonlinear.push((entry, steps, true));
+        }
+        for (ei, (entry, _, in_base)) in nonlinear.iter().enumerate() {
             for (pi, d) in entry.effect.params().iter().enumerate() {
                 let g = params.len();
                 params.push(Param {
                     name: d.name.clone(),
                     effect: entry.effect.id(),
-                    base: false,
-                    value: d.nominal,
+                    base: *in_base,
+                    value: entry.values[pi],
                     nominal: d.nominal,
                 });
                 for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
@@ -483,18 +496,34 @@ fn secant_columns(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Ve
     let n = run.len();
     u.nonlinear
         .iter()
-        .map(|(entry, steps)| {
+        .map(|(entry, steps, in_base)| {
             (0..steps.len())
                 .map(|pi| {
                     let mut p = entry.values.clone();
                     p[pi] += steps[pi];
+                    // A base parameter moves inside the model's own chain of nonlinear
+                    // effects; a candidate's acts on the motion the model already sees.
+                    let shifted = in_base.then(|| {
+                        let mut f = fit.clone();
+                        for q in f.nonlinear.iter_mut().filter(|q| q.effect == entry.effect.id()) {
+                            if let Some(i) = entry.effect.params().iter().position(|d| d.name == q.name) {
+                                q.value = p[i];
+                            }
+                        }
+                        f
+                    });
                     let mut col = vec![[0.0; 6]; n];
                     for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
                         if entry.effect.sensor().is_some_and(|s| s != sensor) {
                             continue;
                         }
                         let from = seen[si].as_ref().unwrap_or(run.track);
-                        let moved = entry.effect.transform(&p, from);
+                        let moved = match &shifted {
+                            Some(f) => seen_tracks(base, f, sensor, std::slice::from_ref(run))
+                                .and_then(|mut v| v.pop())
+                                .unwrap_or_else(|| from.clone()),
+                            None => entry.effect.transform(&p, from),
+                        };
                         let terms = u.augmented.terms(sensor);
                         let a = FitRun { track: from, ..*run };
                         let b = FitRun { track: &moved, ..*run };
