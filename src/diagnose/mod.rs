@@ -277,16 +277,6 @@ fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotio
     Analysis { base_fit, space: Space::new(universe, grams), names }
 }
 
-/// Pooled standard deviation of a channel's noise.
-fn noise_sigma(space: &Space, c: usize) -> f64 {
-    let (mut v, mut n) = (0.0, 0.0);
-    for rg in &space.runs {
-        v += rg.noise[c].ar.marginal_var * rg.noise[c].n as f64;
-        n += rg.noise[c].n as f64;
-    }
-    (v / n.max(1.0)).sqrt()
-}
-
 /// The noise model per channel, pooled over runs.
 fn noise_reports(space: &Space) -> Vec<NoiseReport> {
     (0..6)
@@ -298,9 +288,7 @@ fn noise_reports(space: &Space) -> Vec<NoiseReport> {
                 n += w;
                 var += w * rn.ar.marginal_var;
                 innov += w * rn.ar.innovation_var;
-                // ρ₁ of an AR model from its first Yule–Walker equation.
-                let r1 = if rn.ar.phi.len() == 1 { rn.ar.phi[0] } else { lag_one(&rn.ar) };
-                lag1 += w * r1;
+                lag1 += w * lag_one(&rn.ar);
                 order = order.max(rn.ar.order());
             }
             let n = n.max(1.0);
@@ -338,7 +326,7 @@ fn lag_one(ar: &crate::stats::ArModel) -> f64 {
 /// The channel picture of a set of effects: residual RMS from its fit, the systematic
 /// part from the Grams.
 fn picture(
-    space: &Space,
+    resolution: f64,
     l: &select::Leftover,
     fit: &Fit,
     noise: &[NoiseReport],
@@ -348,8 +336,7 @@ fn picture(
     let sensor = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
     let ch = &fit.sensor(sensor).channels[c % 3];
     let sys_rms = (l.ss / l.n.max(1.0)).sqrt();
-    let significant =
-        l.dof > 0 && l.chi2 > crate::stats::chi2_upper(l.dof, SIGNIFICANCE_Z) && sys_rms > resolution(space)[c];
+    let significant = l.dof > 0 && l.chi2 > crate::stats::chi2_upper(l.dof, SIGNIFICANCE_Z) && sys_rms > resolution;
     ChannelReport {
         sensor,
         axis: AXES[c % 3],
@@ -363,7 +350,8 @@ fn picture(
 
 fn pictures(a: &Analysis, set: &[usize], fit: &Fit, noise: &[NoiseReport]) -> Vec<ChannelReport> {
     let left: Vec<Leftover> = a.space.systematic(&a.space.solve(set));
-    (0..6).map(|c| picture(&a.space, &left[c], fit, noise, &a.names, c)).collect()
+    let res = resolution(&a.space);
+    (0..6).map(|c| picture(res[c], &left[c], fit, noise, &a.names, c)).collect()
 }
 
 fn candidate(id: &str, ev: Evidence, base_q: &[f64]) -> Candidate {
@@ -416,10 +404,7 @@ fn conclude(
     } else {
         Vec::new()
     };
-    let base_fit = a.base_fit.clone();
-    let (mut steps, first_round, mut final_model, mut a) =
-        climb(a, model, runs, motions, opts, has_temp, &mut warnings)?;
-    let _ = base_fit;
+    let (mut steps, first_round, mut a) = climb(a, model, runs, motions, opts, has_temp, &mut warnings)?;
     // A sensor still systematic after its effects: only the first of them is the closest
     // catalogued match; the later ones chased what no catalogued effect explains.
     if let Some(last) = steps.last() {
@@ -449,7 +434,6 @@ fn conclude(
             if let Some(st) = steps.last_mut() {
                 st.channels = pictures(&a, &a.space.base_set(), &a.base_fit, &noise);
             }
-            final_model = m;
         }
     }
     let final_fit = a.base_fit.clone();
@@ -474,7 +458,7 @@ fn conclude(
             steps.iter().map(|s| s.effect.as_str()).collect::<Vec<_>>().join(", ")
         ));
     }
-    let unidentifiable = unidentifiable(&final_model, &final_fit, &first_round);
+    let unidentifiable = unidentifiable(&final_fit, &first_round);
     let proposal =
         if verdict == Verdict::Explained { steps.iter().map(|s| s.effect.clone()).collect() } else { Vec::new() };
     Ok(Diagnosis {
@@ -554,7 +538,7 @@ fn refit_reduced(
     Ok(f)
 }
 
-type Climb = (Vec<Step>, Vec<Candidate>, Model, Analysis);
+type Climb = (Vec<Step>, Vec<Candidate>, Analysis);
 
 /// The greedy climb over candidate effects (module documentation, step 3). After each
 /// effect is added the model is refitted (nonlinear parameters by variable projection on
@@ -591,8 +575,8 @@ fn climb(
         scored.sort_by(|x, y| x.0.delta_bic.total_cmp(&y.0.delta_bic));
         // A sensor whose noise is rounding (a noiseless recording) has nothing to explain.
         let res = resolution(space);
-        let exact: Vec<bool> =
-            (0..2).map(|s| (3 * s..3 * s + 3).all(|c| noise_sigma(space, c) <= 10.0 * res[c])).collect();
+        let sigma = noise_reports(space);
+        let exact: Vec<bool> = (0..2).map(|s| (3 * s..3 * s + 3).all(|c| sigma[c].sigma <= 10.0 * res[c])).collect();
         for (c, _) in &mut scored {
             if c.rejected.is_none() && exact[usize::from(c.sensor == SensorKind::Accel)] {
                 c.rejected = Some("the residual is at the recording's numerical resolution".into());
@@ -625,7 +609,7 @@ fn climb(
         current = m;
         a = next;
     }
-    Ok((steps, first_round.unwrap_or_default(), current, a))
+    Ok((steps, first_round.unwrap_or_default(), a))
 }
 
 /// The passing candidates that explain the same residual feature as `best`: each adds less
@@ -675,8 +659,7 @@ fn describe_leftover(c: &ChannelReport) -> String {
 
 /// What the runs cannot identify: the final fit's lost combinations (with the run that
 /// would identify each) and candidate effects the runs see only in part.
-fn unidentifiable(model: &Model, f: &Fit, candidates: &[Candidate]) -> Vec<String> {
-    let _ = model;
+fn unidentifiable(f: &Fit, candidates: &[Candidate]) -> Vec<String> {
     let mut out: Vec<String> = f
         .gyro
         .unidentifiable

@@ -10,7 +10,7 @@ use crate::session::MotionSpec;
 use crate::stats::{chi2_upper, systematic, Systematic};
 use crate::units::{SensorKind, AXES};
 
-use super::{ChannelReport, HARMONICS, SIGNIFICANCE_Z};
+use super::{ChannelReport, HARMONICS, RESOLUTION, SIGNIFICANCE_Z};
 
 /// Motion of each run (for the cone phase).
 pub type RunMotions<'a> = [&'a MotionSpec];
@@ -75,9 +75,6 @@ pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotio
     }
     out
 }
-
-/// Relative numerical resolution below which a residual is rounding, not physics.
-const RESOLUTION: f64 = 1e-10;
 
 /// Channel reports (residual RMS, noise floor, systematic part) from residuals.
 pub fn channel_reports(res: &[RunResiduals], motions: &RunMotions<'_>) -> Vec<ChannelReport> {

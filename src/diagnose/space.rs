@@ -494,6 +494,15 @@ fn secant_columns(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Ve
     let seen: [Option<Track>; 2] =
         SensorKind::BOTH.map(|s| seen_tracks(base, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
     let n = run.len();
+    if u.nonlinear.is_empty() {
+        return Vec::new();
+    }
+    // The model's output on the motion it sees, once per sensor (every secant starts there).
+    let start: [Vec<[f64; 3]>; 2] = [0, 1].map(|si| {
+        let terms = u.augmented.terms(SensorKind::BOTH[si]);
+        let a = FitRun { track: seen[si].as_ref().unwrap_or(run.track), ..*run };
+        (0..n).map(|k| crate::model::forward(&terms, &u.values[si], &a.state(k))).collect()
+    });
     u.nonlinear
         .iter()
         .map(|(entry, steps, in_base)| {
@@ -525,10 +534,9 @@ fn secant_columns(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Ve
                             None => entry.effect.transform(&p, from),
                         };
                         let terms = u.augmented.terms(sensor);
-                        let a = FitRun { track: from, ..*run };
                         let b = FitRun { track: &moved, ..*run };
                         for (k, c) in col.iter_mut().enumerate() {
-                            let u0 = crate::model::forward(&terms, &u.values[si], &a.state(k));
+                            let u0 = start[si][k];
                             let u1 = crate::model::forward(&terms, &u.values[si], &b.state(k));
                             for ch in 0..3 {
                                 c[3 * si + ch] = (u1[ch] - u0[ch]) / steps[pi];
@@ -546,7 +554,6 @@ fn secant_columns(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Ve
 /// and the basis rows of a block are evaluated once for all channels; each channel's block
 /// of unwhitened columns (with its last p rows of history ahead of it) is prewhitened a
 /// column at a time and its Gram updated by one matrix product.
-#[allow(clippy::too_many_arguments)]
 fn channel_grams(
     u: &Universe,
     run: &FitRun<'_>,
