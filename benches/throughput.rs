@@ -7,9 +7,6 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::time::Instant;
 
-#[global_allocator]
-static ALLOC: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 /// The rows of the README's table: (what, measured).
 type Table = Vec<(String, String)>;
 

@@ -123,8 +123,10 @@ fn several_effects_at_once_on_both_sensors_under_coloured_noise_are_all_named_an
     let tr = crosscal::motion::track(r, s.manifest.g_m_s2, &Default::default());
     for i in 0..3 {
         let n = out.w_rad_s.len() as f64;
-        let ew = (out.w_rad_s.iter().zip(&tr.w_rad_s).map(|(o, t)| (o[i] - t.xyz[i]).powi(2)).sum::<f64>() / n).sqrt();
-        let ea = (out.a_m_s2.iter().zip(&tr.a_m_s2).map(|(o, t)| (o[i] - t.xyz[i]).powi(2)).sum::<f64>() / n).sqrt();
+        let ew =
+            (out.w_rad_s.iter().zip(tr.states()).map(|(o, t)| (o[i] - t.w_rad_s[i]).powi(2)).sum::<f64>() / n).sqrt();
+        let ea =
+            (out.a_m_s2.iter().zip(tr.states()).map(|(o, t)| (o[i] - t.a_m_s2[i]).powi(2)).sum::<f64>() / n).sqrt();
         assert!(ew < 1.15 * GYRO_SD * DEG, "gyro {i}: held-out error {ew:e}");
         assert!(ea < 1.15 * ACCEL_SD * G, "accel {i}: held-out error {ea:e}");
     }

@@ -147,9 +147,13 @@ pub fn check_run(run: &Run, track: &Track, corrected: &Corrected, raw_units: [bo
     let mut before = Vec::with_capacity(n);
     let mut after = Vec::with_capacity(n);
     for (si, sensor) in SensorKind::BOTH.iter().enumerate() {
-        let (truth, truth_a, out, corr) = match sensor {
-            SensorKind::Gyro => (&track.w_rad_s, &truth_after.w_rad_s, &run.rec.gyro, &corrected.w_rad_s),
-            SensorKind::Accel => (&track.a_m_s2, &truth_after.a_m_s2, &run.rec.accel, &corrected.a_m_s2),
+        let (out, corr) = match sensor {
+            SensorKind::Gyro => (&run.rec.gyro, &corrected.w_rad_s),
+            SensorKind::Accel => (&run.rec.accel, &corrected.a_m_s2),
+        };
+        let sensed = |s: crate::motion::SensorKinematics| match sensor {
+            SensorKind::Gyro => s.w_rad_s,
+            SensorKind::Accel => s.a_m_s2,
         };
         for i in 0..3 {
             let bit = 1u8 << (3 * si + i);
@@ -162,10 +166,11 @@ pub fn check_run(run: &Run, track: &Track, corrected: &Corrected, raw_units: [bo
                 if corrected.flags.get(k).is_some_and(|f| f & bit != 0) {
                     continue;
                 }
-                amp = amp.max(truth[k][i].abs());
+                let (truth, truth_a) = (sensed(track.at(k)), sensed(truth_after.at(k)));
+                amp = amp.max(truth[i].abs());
                 t_s.push(track.t_s[k]);
-                before.push(out[k][i] - truth[k][i]);
-                after.push(corr[k][i] - truth_a[k][i]);
+                before.push(out[k][i] - truth[i]);
+                after.push(corr[k][i] - truth_a[i]);
             }
             axes.push(AxisCheck {
                 sensor: *sensor,

@@ -264,7 +264,7 @@ struct Analysis {
 /// while its Grams are built).
 fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotions<'_>, has_temp: bool) -> Analysis {
     let universe = space::Universe::new(model, &base_fit, has_temp);
-    let residual = |i: usize| residuals(model, &base_fit, &runs[i..=i], &motions[i..=i]).remove(0).r;
+    let residual = |i: usize| picture::run_residual(model, &base_fit, &runs[i]).0;
     let stats: Vec<space::RunNoiseStats> =
         (0..runs.len()).into_par_iter().map(|i| space::run_noise(&runs[i], motions[i], &residual(i))).collect();
     let pooled = space::pooled_noise(&stats);
@@ -484,7 +484,7 @@ fn run_span(r: &FitRun<'_>) -> f64 {
 }
 
 /// Samples above which a nonlinear search runs on every k-th sample.
-const REDUCED_SAMPLES: usize = 200_000;
+const REDUCED_SAMPLES: usize = 100_000;
 
 /// Fits `model`; with nonlinear effects on a large session, their parameters are searched
 /// on every k-th sample (the motion is slow against the sampling) and then held while the
@@ -500,29 +500,23 @@ fn refit_reduced(
         return refit(model, runs, opts);
     }
     let k = total.div_ceil(REDUCED_SAMPLES);
-    let every = |v: &[[f64; 3]]| v.iter().step_by(k).copied().collect::<Vec<_>>();
-    let tracks: Vec<crate::motion::Track> = runs
-        .iter()
-        .map(|r| crate::motion::Track {
-            t_s: r.track.t_s.iter().step_by(k).copied().collect(),
-            w_rad_s: r.track.w_rad_s.iter().step_by(k).copied().collect(),
-            e_rad_s2: r.track.e_rad_s2.iter().step_by(k).copied().collect(),
-            a_m_s2: r.track.a_m_s2.iter().step_by(k).copied().collect(),
-            epsilon_source: r.track.epsilon_source.clone(),
-        })
-        .collect();
-    type Outputs = (Vec<[f64; 3]>, Vec<[f64; 3]>, Option<Vec<f64>>);
-    let outputs: Vec<Outputs> = runs
-        .iter()
-        .map(|r| (every(r.gyro), every(r.accel), r.temp_c.map(|t| t.iter().step_by(k).copied().collect())))
-        .collect();
-    let reduced: Vec<FitRun<'_>> = runs
-        .iter()
-        .zip(&tracks)
-        .zip(&outputs)
-        .map(|((r, tr), (g, a, temp))| FitRun { track: tr, gyro: g, accel: a, temp_c: temp.as_deref(), ..*r })
-        .collect();
-    let searched = refit(model, &reduced, opts)?;
+    // The reduced copies live only for the search (memory: the fit on all samples follows).
+    let searched = {
+        let every = |v: &[[f64; 3]]| v.iter().step_by(k).copied().collect::<Vec<_>>();
+        let tracks: Vec<crate::motion::Track> = runs.iter().map(|r| r.track.every(k)).collect();
+        type Outputs = (Vec<[f64; 3]>, Vec<[f64; 3]>, Option<Vec<f64>>);
+        let outputs: Vec<Outputs> = runs
+            .iter()
+            .map(|r| (every(r.gyro), every(r.accel), r.temp_c.map(|t| t.iter().step_by(k).copied().collect())))
+            .collect();
+        let reduced: Vec<FitRun<'_>> = runs
+            .iter()
+            .zip(&tracks)
+            .zip(&outputs)
+            .map(|((r, tr), (g, a, temp))| FitRun { track: tr, gyro: g, accel: a, temp_c: temp.as_deref(), ..*r })
+            .collect();
+        refit(model, &reduced, opts)?
+    };
     let mut held = model.clone();
     for e in model.nonlinear() {
         let values: Vec<f64> =
@@ -793,6 +787,7 @@ pub fn compare(
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
     let first = analyse(&base, refit(&base, runs, opts)?, runs, motions, has_temp);
     let space = first.space.clone();
+    let base_fit = first.base_fit.clone();
     let d = conclude(first, &base, runs, motions, opts, has_temp)?;
     let mut models = vec![("paper (eqs. 3-4)".to_string(), Model::paper()), ("default".to_string(), base.clone())];
     let mut m = base;
@@ -808,8 +803,14 @@ pub fn compare(
     }
     let mut rungs = Vec::with_capacity(models.len());
     let mut notes = Vec::new();
-    for (name, model) in &models {
-        let f = refit_reduced(model, runs, opts, &mut notes)?;
+    // The default model's fit and the diagnosis's final one are already at hand.
+    let last_step = 1 + d.steps.len();
+    for (i, (name, model)) in models.iter().enumerate() {
+        let f = match i {
+            1 => base_fit.clone(),
+            _ if i == last_step => d.final_fit.clone(),
+            _ => refit_reduced(model, runs, opts, &mut notes)?,
+        };
         let mut r = rung(name, &f, &d.noise);
         if runs.len() > 1 {
             r.heldout_rms = heldout_of(&space, model, &d.noise).unwrap_or_else(|| r.rms.clone());

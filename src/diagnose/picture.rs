@@ -37,43 +37,47 @@ pub struct RunResiduals {
 
 /// Residuals of a fitted model on every run (nonlinear effects applied).
 pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotions<'_>) -> Vec<RunResiduals> {
-    let mut out: Vec<RunResiduals> = runs
-        .iter()
+    runs.iter()
         .zip(motions.iter())
-        .map(|(run, m)| RunResiduals {
-            run: run.name.to_string(),
-            t_s: run.track.t_s.clone(),
-            theta: match m {
-                MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
-                    let c = crate::motion::Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
-                    Some(run.track.t_s.iter().map(|&t| c.theta(t).rem_euclid(std::f64::consts::TAU)).collect())
-                }
-                _ => None,
-            },
-            r: (0..6).map(|_| Vec::with_capacity(run.len())).collect(),
-            output_ss: [0.0; 6],
+        .map(|(run, m)| {
+            let (r, output_ss) = run_residual(model, f, run);
+            RunResiduals {
+                run: run.name.to_string(),
+                t_s: run.track.t_s.to_vec(),
+                theta: match m {
+                    MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
+                        let c = crate::motion::Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg);
+                        Some(run.track.t_s.iter().map(|&t| c.theta(t).rem_euclid(std::f64::consts::TAU)).collect())
+                    }
+                    _ => None,
+                },
+                r,
+                output_ss,
+            }
         })
-        .collect();
+        .collect()
+}
+
+/// The six residual channels of one run (output − model, SI; gyro x, y, z, accel x, y, z)
+/// and each channel's sum of squared outputs.
+pub fn run_residual(model: &Model, f: &Fit, run: &FitRun<'_>) -> (Vec<Vec<f64>>, [f64; 6]) {
+    let mut r: Vec<Vec<f64>> = (0..6).map(|_| Vec::with_capacity(run.len())).collect();
+    let mut output_ss = [0.0; 6];
     for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
         let terms = model.terms(sensor);
         let values = values_of(f, model, sensor);
-        let seen = crate::estimate::seen_tracks(model, f, sensor, runs);
-        let moved: Vec<FitRun<'_>> = match &seen {
-            Some(tracks) => runs.iter().zip(tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect(),
-            None => runs.to_vec(),
-        };
-        for (run, o) in moved.iter().zip(out.iter_mut()) {
-            for k in 0..run.len() {
-                let u = forward(&terms, &values, &run.state(k));
-                let y = run.output(sensor, k);
-                for ch in 0..3 {
-                    o.r[3 * si + ch].push(y[ch] - u[ch]);
-                    o.output_ss[3 * si + ch] += y[ch] * y[ch];
-                }
+        let seen = crate::estimate::seen_tracks(model, f, sensor, std::slice::from_ref(run)).and_then(|mut v| v.pop());
+        let moved = FitRun { track: seen.as_ref().unwrap_or(run.track), ..*run };
+        for k in 0..moved.len() {
+            let u = forward(&terms, &values, &moved.state(k));
+            let y = moved.output(sensor, k);
+            for ch in 0..3 {
+                r[3 * si + ch].push(y[ch] - u[ch]);
+                output_ss[3 * si + ch] += y[ch] * y[ch];
             }
         }
     }
-    out
+    (r, output_ss)
 }
 
 /// Channel reports (residual RMS, noise floor, systematic part) from residuals.

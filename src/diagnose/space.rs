@@ -248,10 +248,16 @@ fn basis_row(s: f64, theta: Option<f64>, first: usize, out: &mut [f64]) {
     out[2] = 0.5 * (3.0 * s * s - 1.0);
     out[3] = 0.5 * (5.0 * s * s * s - 3.0 * s);
     if let Some(th) = theta {
-        for h in first..=HARMONICS {
-            let (sn, cs) = (h as f64 * th).sin_cos();
-            out[LEGENDRE + 2 * (h - first)] = cs;
-            out[LEGENDRE + 2 * (h - first) + 1] = sn;
+        // cos hθ, sin hθ by the angle-addition recurrence from the first harmonic's
+        // (one sin_cos per sample; the recurrence's rounding stays near 1e-15 at these h).
+        let (s1, c1) = th.sin_cos();
+        let (mut sn, mut cs) = (0.0, 1.0);
+        for h in 1..=HARMONICS {
+            (sn, cs) = (sn * c1 + cs * s1, cs * c1 - sn * s1);
+            if h >= first {
+                out[LEGENDRE + 2 * (h - first)] = cs;
+                out[LEGENDRE + 2 * (h - first) + 1] = sn;
+            }
         }
     }
 }
@@ -437,7 +443,7 @@ pub fn run_gram(
             RunNoise { ar, n }
         })
         .collect();
-    let secants = secant_columns(u, base, fit, run);
+    let secants = Secants::new(u, base, fit, run);
     let gram = channel_grams(u, run, &noise, &b, r, &secants);
     RunGram {
         gram,
@@ -489,65 +495,100 @@ fn run_lines(channel: usize, clean: &[f64], t: &[f64], fs_hz: f64) -> Vec<RunLin
 }
 
 /// The secant columns of the nonlinear candidates in one run: per candidate and parameter
-/// the change of each channel's model output per unit parameter, n × 6 values.
-fn secant_columns(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Vec<Vec<Vec<[f64; 6]>>> {
-    let seen: [Option<Track>; 2] =
-        SensorKind::BOTH.map(|s| seen_tracks(base, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
-    let n = run.len();
-    if u.nonlinear.is_empty() {
-        return Vec::new();
+/// the change of each channel's model output per unit parameter. The motions are held
+/// (lazily evaluated tracks); the columns are worked out a block at a time.
+struct Secants {
+    /// The motion each sensor sees under the model's own nonlinear effects.
+    seen: [Option<Track>; 2],
+    /// Per candidate, per parameter: the motion per sensor with that parameter stepped
+    /// (None: the candidate does not act on that sensor), and the step.
+    moved: Vec<Vec<([Option<Track>; 2], f64)>>,
+}
+
+/// One block of secant columns: the model's output per sensor, and per candidate and
+/// parameter the columns (buffers reused from block to block).
+#[derive(Default)]
+struct SecantBlock {
+    start: [Vec<[f64; 3]>; 2],
+    cols: Vec<Vec<Vec<[f64; 6]>>>,
+}
+
+impl Secants {
+    fn new(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Self {
+        let seen: [Option<Track>; 2] =
+            SensorKind::BOTH.map(|s| seen_tracks(base, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
+        let moved = u
+            .nonlinear
+            .iter()
+            .map(|(entry, steps, in_base)| {
+                (0..steps.len())
+                    .map(|pi| {
+                        let mut p = entry.values.clone();
+                        p[pi] += steps[pi];
+                        // A base parameter moves inside the model's own chain of nonlinear
+                        // effects; a candidate's acts on the motion the model already sees.
+                        let shifted = in_base.then(|| {
+                            let mut f = fit.clone();
+                            for q in f.nonlinear.iter_mut().filter(|q| q.effect == entry.effect.id()) {
+                                if let Some(i) = entry.effect.params().iter().position(|d| d.name == q.name) {
+                                    q.value = p[i];
+                                }
+                            }
+                            f
+                        });
+                        let tracks = [0, 1].map(|si| {
+                            let sensor = SensorKind::BOTH[si];
+                            if entry.effect.sensor().is_some_and(|s| s != sensor) {
+                                return None;
+                            }
+                            let from = seen[si].as_ref().unwrap_or(run.track);
+                            Some(match &shifted {
+                                Some(f) => seen_tracks(base, f, sensor, std::slice::from_ref(run))
+                                    .and_then(|mut v| v.pop())
+                                    .unwrap_or_else(|| from.clone()),
+                                None => entry.effect.transform(&p, from),
+                            })
+                        });
+                        (tracks, steps[pi])
+                    })
+                    .collect()
+            })
+            .collect();
+        Self { seen, moved }
     }
-    // The model's output on the motion it sees, once per sensor (every secant starts there).
-    let start: [Vec<[f64; 3]>; 2] = [0, 1].map(|si| {
-        let terms = u.augmented.terms(SensorKind::BOTH[si]);
-        let a = FitRun { track: seen[si].as_ref().unwrap_or(run.track), ..*run };
-        (0..n).map(|k| crate::model::forward(&terms, &u.values[si], &a.state(k))).collect()
-    });
-    u.nonlinear
-        .iter()
-        .map(|(entry, steps, in_base)| {
-            (0..steps.len())
-                .map(|pi| {
-                    let mut p = entry.values.clone();
-                    p[pi] += steps[pi];
-                    // A base parameter moves inside the model's own chain of nonlinear
-                    // effects; a candidate's acts on the motion the model already sees.
-                    let shifted = in_base.then(|| {
-                        let mut f = fit.clone();
-                        for q in f.nonlinear.iter_mut().filter(|q| q.effect == entry.effect.id()) {
-                            if let Some(i) = entry.effect.params().iter().position(|d| d.name == q.name) {
-                                q.value = p[i];
-                            }
-                        }
-                        f
-                    });
-                    let mut col = vec![[0.0; 6]; n];
-                    for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
-                        if entry.effect.sensor().is_some_and(|s| s != sensor) {
-                            continue;
-                        }
-                        let from = seen[si].as_ref().unwrap_or(run.track);
-                        let moved = match &shifted {
-                            Some(f) => seen_tracks(base, f, sensor, std::slice::from_ref(run))
-                                .and_then(|mut v| v.pop())
-                                .unwrap_or_else(|| from.clone()),
-                            None => entry.effect.transform(&p, from),
-                        };
-                        let terms = u.augmented.terms(sensor);
-                        let b = FitRun { track: &moved, ..*run };
-                        for (k, c) in col.iter_mut().enumerate() {
-                            let u0 = start[si][k];
-                            let u1 = crate::model::forward(&terms, &u.values[si], &b.state(k));
-                            for ch in 0..3 {
-                                c[3 * si + ch] = (u1[ch] - u0[ch]) / steps[pi];
-                            }
+
+    /// The columns over samples `k0..k1` into `out[candidate][parameter][i]` (resized).
+    fn fill(&self, u: &Universe, run: &FitRun<'_>, k0: usize, k1: usize, out: &mut SecantBlock) {
+        // The model's output on the motion it sees, once per sensor (every secant starts there).
+        for si in 0..2 {
+            let terms = u.augmented.terms(SensorKind::BOTH[si]);
+            let a = FitRun { track: self.seen[si].as_ref().unwrap_or(run.track), ..*run };
+            out.start[si].clear();
+            out.start[si].extend((k0..k1).map(|k| crate::model::forward(&terms, &u.values[si], &a.state(k))));
+        }
+        let (start, out) = (&out.start, &mut out.cols);
+        out.resize_with(self.moved.len(), Vec::new);
+        for (e, params) in self.moved.iter().enumerate() {
+            out[e].resize_with(params.len(), Vec::new);
+            for (pi, (tracks, step)) in params.iter().enumerate() {
+                let col = &mut out[e][pi];
+                col.clear();
+                col.resize(k1 - k0, [0.0; 6]);
+                for (si, moved) in tracks.iter().enumerate() {
+                    let Some(moved) = moved else { continue };
+                    let terms = u.augmented.terms(SensorKind::BOTH[si]);
+                    let b = FitRun { track: moved, ..*run };
+                    for (i, c) in col.iter_mut().enumerate() {
+                        let u0 = start[si][i];
+                        let u1 = crate::model::forward(&terms, &u.values[si], &b.state(k0 + i));
+                        for ch in 0..3 {
+                            c[3 * si + ch] = (u1[ch] - u0[ch]) / step;
                         }
                     }
-                    col
-                })
-                .collect()
-        })
-        .collect()
+                }
+            }
+        }
+    }
 }
 
 /// The whitened Grams of the six channels of one run, built block by block: the states
@@ -560,7 +601,7 @@ fn channel_grams(
     noise: &[RunNoise],
     basis: &RunBasis,
     r: &[Vec<f64>],
-    secants: &[Vec<Vec<[f64; 6]>>],
+    secants: &Secants,
 ) -> Vec<DMatrix<f64>> {
     let n = run.len();
     let nb = basis.size;
@@ -590,6 +631,7 @@ fn channel_grams(
     let mut basis_rows = DMatrix::<f64>::zeros(BLOCK, nb);
     let mut row = vec![0.0; nb];
     let mut phi = vec![0.0; BLOCK];
+    let mut secant_block = SecantBlock::default();
     let t = &run.track.t_s;
     let mut k0 = 0;
     while k0 < n {
@@ -597,6 +639,9 @@ fn channel_grams(
         let len = k1 - k0;
         states.clear();
         states.extend((k0..k1).map(|k| run.state(k)));
+        if !u.nonlinear.is_empty() {
+            secants.fill(u, run, k0, k1, &mut secant_block);
+        }
         for i in 0..len {
             basis.row(t[k0 + i], &mut row);
             for (b, v) in row.iter().enumerate() {
@@ -623,7 +668,7 @@ fn channel_grams(
                         col.rows_mut(p, len).copy_from_slice(&phi[..len]);
                     }
                     Source::Secant(e, pi) => {
-                        for (i, s) in secants[e][pi][k0..k1].iter().enumerate() {
+                        for (i, s) in secant_block.cols[e][pi].iter().enumerate() {
                             col[p + i] = s[c];
                         }
                     }

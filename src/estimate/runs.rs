@@ -52,11 +52,12 @@ impl FitRun<'_> {
     #[inline]
     pub fn state(&self, k: usize) -> State {
         let tr = self.track;
+        let s = tr.at(k);
         State {
             t_session_s: session_time(self.start_s, tr.t_s[k], tr.t_s[0]),
-            w: tr.w_rad_s[k].xyz,
-            e: tr.e_rad_s2[k].xyz,
-            a: tr.a_m_s2[k].xyz,
+            w: s.w_rad_s.xyz,
+            e: s.e_rad_s2.xyz,
+            a: s.a_m_s2.xyz,
             temp_c: self.temp_c.map(|t| t[k]).or(self.temp_const_c).unwrap_or(f64::NAN),
         }
     }

@@ -416,12 +416,15 @@ fn linearise(
             let mut d = [[0.0f64; 6]; 3];
             if let Some(pt) = &pert {
                 for (j, (hi, lo)) in pt.iter().enumerate() {
-                    let at = |tr: &Track| crate::model::State {
-                        t_session_s: st.t_session_s,
-                        w: tr.w_rad_s[k].xyz,
-                        e: tr.e_rad_s2[k].xyz,
-                        a: tr.a_m_s2[k].xyz,
-                        temp_c: st.temp_c,
+                    let at = |tr: &Track| {
+                        let x = tr.at(k);
+                        crate::model::State {
+                            t_session_s: st.t_session_s,
+                            w: x.w_rad_s.xyz,
+                            e: x.e_rad_s2.xyz,
+                            a: x.a_m_s2.xyz,
+                            temp_c: st.temp_c,
+                        }
                     };
                     let (ph, pl) = (pred.predict(&at(hi)), pred.predict(&at(lo)));
                     for c in 0..6 {

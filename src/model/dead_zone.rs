@@ -82,17 +82,29 @@ impl NonlinearEffect for DeadZone {
     }
 
     fn transform(&self, p: &[f64], tr: &Track) -> Track {
-        let mut out = tr.clone();
-        let xs = match self.sensor {
-            SensorKind::Gyro => &mut out.w_rad_s,
-            SensorKind::Accel => &mut out.a_m_s2,
+        let half_width = std::array::from_fn(|i| p.get(i).copied().unwrap_or(0.0).abs());
+        tr.mapped(std::sync::Arc::new(DeadBand { sensor: self.sensor, half_width }))
+    }
+}
+
+/// The dead zone as a per-sample change of the input: `x − clamp(x, −d, d)` per axis on the
+/// quantity the sensor senses.
+#[derive(Debug)]
+struct DeadBand {
+    sensor: SensorKind,
+    half_width: [f64; 3],
+}
+
+impl crate::motion::SampleMap for DeadBand {
+    #[inline]
+    fn apply(&self, k: &mut crate::motion::SensorKinematics) {
+        let x = match self.sensor {
+            SensorKind::Gyro => &mut k.w_rad_s,
+            SensorKind::Accel => &mut k.a_m_s2,
         };
-        for x in xs.iter_mut() {
-            for i in 0..3 {
-                let d = p.get(i).copied().unwrap_or(0.0).abs();
-                x[i] -= x[i].clamp(-d, d);
-            }
+        for i in 0..3 {
+            let d = self.half_width[i];
+            x[i] -= x[i].clamp(-d, d);
         }
-        out
     }
 }

@@ -55,47 +55,4 @@ pub trait NonlinearEffect: Send + Sync + fmt::Debug {
     }
 }
 
-/// Value at time `t` of a sampled series by Catmull–Rom cubic interpolation on the
-/// (possibly non-uniform) time stamps, clamped at the ends.
-pub fn interpolate<T>(t_s: &[f64], x: &[T], t: f64, hint: &mut usize) -> T
-where
-    T: Copy + std::ops::Index<usize, Output = f64> + From<[f64; 3]>,
-{
-    let n = t_s.len();
-    if n == 0 {
-        return T::from([0.0; 3]);
-    }
-    if n == 1 || t <= t_s[0] {
-        return x[0];
-    }
-    if t >= t_s[n - 1] {
-        return x[n - 1];
-    }
-    let mut i = (*hint).min(n - 2);
-    while i + 1 < n - 1 && t_s[i + 1] <= t {
-        i += 1;
-    }
-    while i > 0 && t_s[i] > t {
-        i -= 1;
-    }
-    *hint = i;
-    let (t0, t1) = (t_s[i], t_s[i + 1]);
-    let h = t1 - t0;
-    let u = (t - t0) / h;
-    let slope = |j: usize, c: usize| -> f64 {
-        let a = j.saturating_sub(1);
-        let b = (j + 1).min(n - 1);
-        (x[b][c] - x[a][c]) / (t_s[b] - t_s[a]) * h
-    };
-    let (h00, h10, h01, h11) = (
-        2.0 * u * u * u - 3.0 * u * u + 1.0,
-        u * u * u - 2.0 * u * u + u,
-        -2.0 * u * u * u + 3.0 * u * u,
-        u * u * u - u * u,
-    );
-    let mut out = [0.0; 3];
-    for c in 0..3 {
-        out[c] = h00 * x[i][c] + h10 * slope(i, c) + h01 * x[i + 1][c] + h11 * slope(i + 1, c);
-    }
-    T::from(out)
-}
+pub use crate::motion::interpolate;

@@ -1,6 +1,6 @@
 //! Time delay between the sensor's clock and the stand's.
 
-use super::nonlinear::{interpolate, NonlinearEffect, ParamDef};
+use super::nonlinear::{NonlinearEffect, ParamDef};
 use super::{Inputs, SensorKind};
 use crate::motion::Track;
 
@@ -39,21 +39,6 @@ impl NonlinearEffect for TimeDelay {
     }
 
     fn transform(&self, p: &[f64], tr: &Track) -> Track {
-        let tau = p.first().copied().unwrap_or(0.0);
-        let n = tr.t_s.len();
-        let mut out = Track {
-            t_s: tr.t_s.clone(),
-            w_rad_s: Vec::with_capacity(n),
-            e_rad_s2: Vec::with_capacity(n),
-            a_m_s2: Vec::with_capacity(n),
-            epsilon_source: tr.epsilon_source.clone(),
-        };
-        let (mut h1, mut h2, mut h3) = (0, 0, 0);
-        for &t in &tr.t_s {
-            out.w_rad_s.push(interpolate(&tr.t_s, &tr.w_rad_s, t - tau, &mut h1));
-            out.e_rad_s2.push(interpolate(&tr.t_s, &tr.e_rad_s2, t - tau, &mut h2));
-            out.a_m_s2.push(interpolate(&tr.t_s, &tr.a_m_s2, t - tau, &mut h3));
-        }
-        out
+        tr.delayed(p.first().copied().unwrap_or(0.0))
     }
 }

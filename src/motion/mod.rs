@@ -9,11 +9,13 @@
 //! ```
 
 pub mod derivative;
+mod track;
 
-use crate::frames::{Mount, Sensor, Stand, V3};
+use crate::frames::{Stand, V3};
 pub use derivative::{derivative_offline, DerivativeConfig, SlopeWeights};
+pub use track::{interpolate, track, track_for, SampleMap, SensorKinematics, Track};
 
-use crate::session::{MotionSpec, Run};
+use crate::session::MotionSpec;
 
 /// How ε is known on a conic run.
 pub const EPSILON_CONIC: &str = "exact (conic motion, paper eq. 1 differentiated)";
@@ -109,105 +111,6 @@ impl ConicAt {
             a_m_s2: V3::new([-g_m_s2 * sa * ct, g_m_s2 * sa * st, g_m_s2 * ca]),
         }
     }
-}
-
-/// True motion of one run in sensor axes, one entry per recorded sample (SI units).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Track {
-    /// Time stamps, s.
-    pub t_s: Vec<f64>,
-    /// Angular rate, rad/s.
-    pub w_rad_s: Vec<V3<Sensor>>,
-    /// Angular acceleration, rad/s².
-    pub e_rad_s2: Vec<V3<Sensor>>,
-    /// Specific force, m/s².
-    pub a_m_s2: Vec<V3<Sensor>>,
-    /// How ε was obtained (exact, given, or which derivative).
-    pub epsilon_source: String,
-}
-
-/// Builds the true motion of a run in sensor axes from its declared motion and mount.
-pub fn track(run: &Run, g_m_s2: f64, deriv: &DerivativeConfig) -> Track {
-    track_for(&run.spec.motion, &run.spec.mount, &run.rec, g_m_s2, deriv)
-}
-
-/// As [`track`], from the parts.
-pub fn track_for(
-    motion: &MotionSpec,
-    mount: &Mount,
-    rec: &crate::session::Recording,
-    g_m_s2: f64,
-    deriv: &DerivativeConfig,
-) -> Track {
-    let n = rec.len();
-    let mut tr = Track {
-        t_s: rec.t_s.clone(),
-        w_rad_s: Vec::with_capacity(n),
-        e_rad_s2: Vec::with_capacity(n),
-        a_m_s2: Vec::with_capacity(n),
-        epsilon_source: String::new(),
-    };
-    let push = |tr: &mut Track, k: Kinematics| {
-        tr.w_rad_s.push(mount.to_sensor(k.w_rad_s));
-        tr.e_rad_s2.push(mount.to_sensor(k.e_rad_s2));
-        tr.a_m_s2.push(mount.to_sensor(k.a_m_s2));
-    };
-    match motion {
-        MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
-            let c = Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg).fixed(g_m_s2);
-            for &t in &rec.t_s {
-                push(&mut tr, c.at(t));
-            }
-            tr.epsilon_source = EPSILON_CONIC.into();
-        }
-        MotionSpec::Static { up_stand, earth_rate_rad_s } => {
-            let k = Kinematics {
-                w_rad_s: V3::new(*earth_rate_rad_s),
-                e_rad_s2: V3::new([0.0; 3]),
-                a_m_s2: V3::new([up_stand[0] * g_m_s2, up_stand[1] * g_m_s2, up_stand[2] * g_m_s2]),
-            };
-            for _ in 0..n {
-                push(&mut tr, k);
-            }
-            tr.epsilon_source = EPSILON_STATIC.into();
-        }
-        MotionSpec::StaticUnknown | MotionSpec::Rotation { .. } | MotionSpec::MultiPosition { .. } => {
-            // Protocol runs have no per-sample truth: the state is unknown (NaN), and the
-            // protocol fit (crate::estimate::protocol) uses them instead.
-            let nan = Kinematics {
-                w_rad_s: V3::new([f64::NAN; 3]),
-                e_rad_s2: V3::new([f64::NAN; 3]),
-                a_m_s2: V3::new([f64::NAN; 3]),
-            };
-            for _ in 0..n {
-                push(&mut tr, nan);
-            }
-            tr.epsilon_source = "unknown (protocol run: see `crosscal fit` on protocol sessions)".into();
-        }
-        MotionSpec::Reference => {
-            let Some(r) = rec.reference.as_ref() else {
-                return tr;
-            };
-            let derived;
-            let e: &[V3<Stand>] = match &r.e_rad_s2 {
-                Some(e) => {
-                    tr.epsilon_source = "given (ex_ref, ey_ref, ez_ref columns)".into();
-                    e
-                }
-                None => {
-                    let mut out = vec![V3::new([0.0; 3]); n];
-                    derivative_offline(&rec.t_s, &r.w_rad_s, deriv, &mut out);
-                    derived = out;
-                    tr.epsilon_source = format!("derived from the reference rate: {}", deriv.describe());
-                    &derived
-                }
-            };
-            for k in 0..n {
-                push(&mut tr, Kinematics { w_rad_s: r.w_rad_s[k], e_rad_s2: e[k], a_m_s2: r.a_m_s2[k] });
-            }
-        }
-    }
-    tr
 }
 
 /// The cone phase of a run's declared motion (None unless conic).

@@ -31,7 +31,7 @@ impl ReferenceColumns {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Recording {
     /// Time stamps, s, strictly increasing.
-    pub t_s: Vec<f64>,
+    pub t_s: std::sync::Arc<[f64]>,
     /// Gyro outputs, sensor frame.
     pub gyro: Vec<[f64; 3]>,
     /// Accelerometer outputs, sensor frame.
@@ -61,7 +61,7 @@ impl Recording {
     /// Panics if the range is out of bounds; callers check it against [`Self::len`].
     pub fn slice(&self, start: usize, end: usize) -> Self {
         Self {
-            t_s: self.t_s[start..end].to_vec(),
+            t_s: self.t_s[start..end].into(),
             gyro: self.gyro[start..end].to_vec(),
             accel: self.accel[start..end].to_vec(),
             temp_c: self.temp_c.as_ref().map(|t| t[start..end].to_vec()),
@@ -784,8 +784,8 @@ fn read_stream<R: std::io::Read>(
     opts: ReadOptions,
 ) -> Result<Recording, SessionError> {
     let mut rows = RowReader::new(path, input, units, g_m_s2, opts)?;
+    let mut t_s = Vec::with_capacity(cap);
     let mut out = Recording {
-        t_s: Vec::with_capacity(cap),
         gyro: Vec::with_capacity(cap),
         accel: Vec::with_capacity(cap),
         temp_c: rows.has_temp().then(|| Vec::with_capacity(cap)),
@@ -799,7 +799,7 @@ fn read_stream<R: std::io::Read>(
         if let Some(gap) = scan.push(rows.line(), row.t_s, row.gyro, row.accel).filter(|_| opts.strict) {
             return Err(gap.to_error(path, rows.t_column()));
         }
-        out.t_s.push(row.t_s);
+        t_s.push(row.t_s);
         out.gyro.push(row.gyro);
         out.accel.push(row.accel);
         if let Some(v) = out.temp_c.as_mut() {
@@ -813,8 +813,15 @@ fn read_stream<R: std::io::Read>(
             }
         }
     }
-    if out.t_s.is_empty() {
+    if t_s.is_empty() {
         return Err(rows.no_samples());
+    }
+    // The arrays were reserved from the file's size (an over-estimate): give back the rest.
+    out.t_s = t_s.into();
+    out.gyro.shrink_to_fit();
+    out.accel.shrink_to_fit();
+    if let Some(v) = out.temp_c.as_mut() {
+        v.shrink_to_fit();
     }
     out.reference = refc;
     out.sha256 = rows.sha256();

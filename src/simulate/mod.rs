@@ -255,7 +255,7 @@ impl SimConfig {
             let n = (plan.duration_s * self.sample_rate_hz).round().max(1.0) as usize;
             let t0 = if self.realism.session_clock_gap_s.is_some() { clock_s } else { 0.0 };
             let t_s: Vec<f64> = (0..n).map(|k| t0 + k as f64 / self.sample_rate_hz).collect();
-            let mut rec = Recording { t_s, ..Default::default() };
+            let mut rec = Recording { t_s: t_s.into(), ..Default::default() };
             let tr = track_for(&plan.motion, &plan.mount, &rec, self.g_m_s2, &deriv);
             // Nonlinear effects change the motion as each sensor sees it.
             let seen = |sensor: SensorKind| {
@@ -290,13 +290,7 @@ impl SimConfig {
                 rec.temp_c = Some(rec.t_s.iter().map(|&t| temp(t)).collect());
             }
             for k in 0..n {
-                let state = |tr: &crate::motion::Track| State {
-                    t_session_s: tr.t_s[k],
-                    w: tr.w_rad_s[k].xyz,
-                    e: tr.e_rad_s2[k].xyz,
-                    a: tr.a_m_s2[k].xyz,
-                    temp_c: rec.temp_c.as_ref().map_or(f64::NAN, |t| t[k]),
-                };
+                let state = |tr: &crate::motion::Track| state_at(tr, k, rec.temp_c.as_ref().map_or(f64::NAN, |t| t[k]));
                 let ug = forward(&gterms, &gvals, &state(&tg));
                 let ua = forward(&aterms, &avals, &state(&ta));
                 let mut g = [0.0; 3];
@@ -391,4 +385,10 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
     let text = session.manifest.to_json();
     write_new(&manifest_path, text.as_bytes()).map_err(io(&manifest_path))?;
     Ok(manifest_path)
+}
+
+/// The true state at sample `k` of a track, the time as stamped (the simulator's clock).
+fn state_at(tr: &crate::motion::Track, k: usize, temp_c: f64) -> State {
+    let x = tr.at(k);
+    State { t_session_s: tr.t_s[k], w: x.w_rad_s.xyz, e: x.e_rad_s2.xyz, a: x.a_m_s2.xyz, temp_c }
 }

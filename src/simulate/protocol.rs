@@ -61,10 +61,18 @@ struct Builder<'a> {
     truth: &'a ProtocolTruth,
     rng: ChaCha8Rng,
     rec: Recording,
+    /// Stamps so far (moved into `rec` by [`Builder::finish`]).
+    t: Vec<f64>,
     q: UnitQuaternion<f64>,
 }
 
 impl Builder<'_> {
+    /// The recording built so far, with its stamps.
+    fn finish(mut self) -> Recording {
+        self.rec.t_s = self.t.into();
+        self.rec
+    }
+
     fn sample(&mut self, w_body: Vector3<f64>) {
         let t = self.truth;
         let a = self.q.inverse_transform_vector(&Vector3::new(0.0, 0.0, t.g_m_s2));
@@ -76,24 +84,26 @@ impl Builder<'_> {
             ua[i] += an.map_or(0.0, |d| d.sample(&mut self.rng));
             ug[i] += gn.map_or(0.0, |d| d.sample(&mut self.rng));
         }
-        self.rec.t_s.push(self.rec.t_s.len() as f64 / t.rate_hz);
         self.rec.gyro.push([ug[0], ug[1], ug[2]]);
         self.rec.accel.push([ua[0], ua[1], ua[2]]);
+        // One sample at a time while building: the stamps are rebuilt with the sample.
+        let n = self.rec.gyro.len();
+        self.t.push((n - 1) as f64 / t.rate_hz);
     }
 
     /// Holds still for `s` seconds; returns the rows `[start, end)`.
     fn hold(&mut self, s: f64) -> (usize, usize) {
-        let start = self.rec.len();
+        let start = self.t.len();
         for _ in 0..(s * self.truth.rate_hz).round() as usize {
             self.sample(Vector3::zeros());
         }
-        (start, self.rec.len())
+        (start, self.t.len())
     }
 
     /// Turns by `angle` (rad) about a body axis in `s` seconds, rate profile 6τ(1−τ) (rest
     /// at both ends); the orientation is propagated exactly.
     fn turn(&mut self, axis_body: Vector3<f64>, angle: f64, s: f64) -> (usize, usize) {
-        let start = self.rec.len();
+        let start = self.t.len();
         let n = (s * self.truth.rate_hz).round() as usize;
         let q0 = self.q;
         let axis = axis_body.normalize();
@@ -105,7 +115,7 @@ impl Builder<'_> {
             self.sample(axis * rate);
         }
         self.q = q0 * UnitQuaternion::from_scaled_axis(axis * angle);
-        (start, self.rec.len())
+        (start, self.t.len())
     }
 }
 
@@ -164,6 +174,7 @@ pub fn ferraris(truth: &ProtocolTruth, hold_s: f64, turn_deg: f64, seed: u64) ->
         truth,
         rng: ChaCha8Rng::seed_from_u64(seed),
         rec: Recording::default(),
+        t: Vec::new(),
         q: UnitQuaternion::identity(),
     };
     // Orientation with body axis e up: rotate body e onto world z.
@@ -198,7 +209,7 @@ pub fn ferraris(truth: &ProtocolTruth, hold_s: f64, turn_deg: f64, seed: u64) ->
     }
     let manifest =
         Manifest { serial: "SIM-FERRARIS".into(), units: raw_units(), g_m_s2: truth.g_m_s2, runs, version: 2 };
-    ProtocolSession { manifest, recording: b.rec }
+    ProtocolSession { manifest, recording: b.finish() }
 }
 
 /// Hand-held multi-position session: `init_rest_s` of rest, then `poses` random
@@ -214,6 +225,7 @@ pub fn multi_position(
         truth,
         rng: ChaCha8Rng::seed_from_u64(seed),
         rec: Recording::default(),
+        t: Vec::new(),
         q: UnitQuaternion::identity(),
     };
     b.hold(init_rest_s);
@@ -239,5 +251,5 @@ pub fn multi_position(
         runs: vec![spec("multi-position", motion, None)],
         version: 2,
     };
-    ProtocolSession { manifest, recording: b.rec }
+    ProtocolSession { manifest, recording: b.finish() }
 }

@@ -165,9 +165,11 @@ impl Realism {
         }
         if let Ok(j) = rand_distr::Normal::new(0.0, self.jitter_s) {
             if self.jitter_s > 0.0 {
-                for t in &mut rec.t_s {
+                let mut t_s = rec.t_s.to_vec();
+                for t in &mut t_s {
                     *t += rand_distr::Distribution::sample(&j, rng);
                 }
+                rec.t_s = t_s.into();
             }
         }
     }

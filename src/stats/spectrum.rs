@@ -186,14 +186,24 @@ pub fn refine_frequency(x: &[f64], t_s: &[f64], f0_hz: f64, half_range_hz: f64) 
             best_f = f;
         }
     }
+    // Golden-section search on the best cell (one new evaluation per iteration), to a
+    // bracket of 1/(200 T): far below the frequency's own uncertainty.
     let (mut lo, mut hi) = (best_f - step, best_f + step);
     let g = 0.618_033_988_749_895;
-    for _ in 0..20 {
-        let (m1, m2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-        if sinusoid_amplitude(x, t_s, m1) > sinusoid_amplitude(x, t_s, m2) {
-            hi = m2;
+    let (mut m1, mut m2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+    let (mut a1, mut a2) = (sinusoid_amplitude(x, t_s, m1), sinusoid_amplitude(x, t_s, m2));
+    for _ in 0..64 {
+        if hi - lo <= 0.005 / span {
+            break;
+        }
+        if a1 > a2 {
+            (hi, m2, a2) = (m2, m1, a1);
+            m1 = hi - g * (hi - lo);
+            a1 = sinusoid_amplitude(x, t_s, m1);
         } else {
-            lo = m1;
+            (lo, m1, a1) = (m1, m2, a2);
+            m2 = lo + g * (hi - lo);
+            a2 = sinusoid_amplitude(x, t_s, m2);
         }
     }
     let f = 0.5 * (lo + hi);

@@ -92,7 +92,7 @@ fn classic_biases(model: &Model, obs: &[Obs<'_>]) -> Result<Model, EstimateError
     for i in 0..3 {
         let face = |sign: f64| {
             poses.iter().find(|o| {
-                let a = o.track.a_m_s2[0];
+                let a = o.track.at(0).a_m_s2;
                 let n = norm(a.xyz);
                 n > 0.0 && (a[i] / n - sign).abs() < 1e-6
             })
@@ -177,7 +177,7 @@ pub(super) fn ferraris(
     let bias_g = mean3(&obs.iter().filter(|o| o.turn.is_none()).map(|o| o.gyro[0]).collect::<Vec<_>>());
     for o in obs.iter_mut() {
         if let Some((axis, angle)) = o.turn {
-            o.track.a_m_s2[0] = V3::new(calibrate_a.apply(o.accel[0]));
+            o.track = state_track(o.track.at(0).w_rad_s.xyz, calibrate_a.apply(o.accel[0]));
             let raw: f64 = (0..3).map(|i| (o.gyro[0][i] - bias_g[i]) * axis[i]).sum();
             if raw * angle < 0.0 {
                 warnings.push(format!(

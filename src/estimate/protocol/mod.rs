@@ -224,13 +224,13 @@ pub fn fit_protocol(
 
 /// A one-sample track at a mean state.
 fn state_track(w: [f64; 3], a: [f64; 3]) -> Track {
-    Track {
-        t_s: vec![0.0],
-        w_rad_s: vec![V3::new(w)],
-        e_rad_s2: vec![V3::new([0.0; 3])],
-        a_m_s2: vec![V3::new(a)],
-        epsilon_source: "zero (protocol: rest at both ends)".into(),
-    }
+    Track::sampled(
+        vec![0.0],
+        vec![V3::new(w)],
+        vec![V3::new([0.0; 3])],
+        vec![V3::new(a)],
+        "zero (protocol: rest at both ends)".into(),
+    )
 }
 
 /// Accelerometer forward model `u = b + K a` from a sensor fit: (K, b).

@@ -1,0 +1,385 @@
+//! A run's true motion in sensor axes, one state per recorded sample.
+//!
+//! A conic or static run's motion is a closed-form function of time (paper eq. 1), so its
+//! track stores only the time stamps and evaluates the state when asked: a 1e6-sample
+//! session's tracks take 8 MB instead of 80 MB, and a time shift of a conic track is exact
+//! (no interpolation). Recorded reference motion is stored sample by sample. Input-side
+//! effects (a dead zone) are [`SampleMap`]s applied on the way out, so a transformed track
+//! shares its stamps and source with the original instead of copying them.
+
+use super::{derivative_offline, ConicAt, DerivativeConfig, Kinematics, EPSILON_CONIC, EPSILON_STATIC};
+use crate::frames::{Mount, Sensor, Stand, V3};
+use crate::session::{MotionSpec, Run};
+use std::fmt;
+use std::sync::Arc;
+
+/// True kinematics at one instant in sensor axes (SI units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorKinematics {
+    /// Angular rate, rad/s.
+    pub w_rad_s: V3<Sensor>,
+    /// Angular acceleration, rad/s².
+    pub e_rad_s2: V3<Sensor>,
+    /// Specific force, m/s².
+    pub a_m_s2: V3<Sensor>,
+}
+
+/// A sample-by-sample change of the motion as the sensor sees it (an input-side effect such
+/// as a dead zone): it may read and change every quantity of one state.
+pub trait SampleMap: Send + Sync + fmt::Debug {
+    /// Changes one state in place.
+    fn apply(&self, k: &mut SensorKinematics);
+}
+
+/// Where a track's states come from.
+#[derive(Debug, Clone, PartialEq)]
+enum Source {
+    /// Stored per sample (recorded reference motion, or a materialised track).
+    Sampled { w: Vec<V3<Sensor>>, e: Vec<V3<Sensor>>, a: Vec<V3<Sensor>> },
+    /// Conic motion evaluated at `t − lag_s` and turned into sensor axes by `mount`.
+    Conic { c: ConicAt, mount: Mount, lag_s: f64 },
+    /// The same state at every sample (static runs; NaN for protocol runs).
+    Constant(SensorKinematics),
+}
+
+/// True motion of one run in sensor axes, one state per recorded sample (SI units).
+#[derive(Debug, Clone)]
+pub struct Track {
+    /// Time stamps, s (shared with the tracks derived from this one).
+    pub t_s: Arc<[f64]>,
+    source: Source,
+    maps: Vec<Arc<dyn SampleMap>>,
+    /// How ε was obtained (exact, given, or which derivative).
+    pub epsilon_source: String,
+}
+
+impl PartialEq for Track {
+    fn eq(&self, other: &Self) -> bool {
+        self.t_s == other.t_s
+            && self.source == other.source
+            && self.epsilon_source == other.epsilon_source
+            && self.maps.len() == other.maps.len()
+            && self.maps.iter().zip(&other.maps).all(|(a, b)| Arc::ptr_eq(a, b))
+    }
+}
+
+impl Default for Track {
+    fn default() -> Self {
+        Self::sampled(Vec::new(), Vec::new(), Vec::new(), Vec::new(), String::new())
+    }
+}
+
+impl Track {
+    /// A track stored sample by sample. The four arrays must have the same length.
+    pub fn sampled(
+        t_s: Vec<f64>,
+        w_rad_s: Vec<V3<Sensor>>,
+        e_rad_s2: Vec<V3<Sensor>>,
+        a_m_s2: Vec<V3<Sensor>>,
+        epsilon_source: String,
+    ) -> Self {
+        Self {
+            t_s: t_s.into(),
+            source: Source::Sampled { w: w_rad_s, e: e_rad_s2, a: a_m_s2 },
+            maps: Vec::new(),
+            epsilon_source,
+        }
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// The state at sample `k` (panics when `k` is out of range, like indexing).
+    #[inline]
+    pub fn at(&self, k: usize) -> SensorKinematics {
+        let mut s = match &self.source {
+            Source::Sampled { w, e, a } => SensorKinematics { w_rad_s: w[k], e_rad_s2: e[k], a_m_s2: a[k] },
+            Source::Conic { c, mount, lag_s } => {
+                let st = c.at(self.t_s[k] - lag_s);
+                SensorKinematics {
+                    w_rad_s: mount.to_sensor(st.w_rad_s),
+                    e_rad_s2: mount.to_sensor(st.e_rad_s2),
+                    a_m_s2: mount.to_sensor(st.a_m_s2),
+                }
+            }
+            Source::Constant(s) => {
+                let _ = self.t_s[k];
+                *s
+            }
+        };
+        for m in &self.maps {
+            m.apply(&mut s);
+        }
+        s
+    }
+
+    /// Every state, in order.
+    pub fn states(&self) -> impl ExactSizeIterator<Item = SensorKinematics> + '_ {
+        (0..self.len()).map(|k| self.at(k))
+    }
+
+    /// The same motion with `map` applied after what this track already applies.
+    pub fn mapped(&self, map: Arc<dyn SampleMap>) -> Track {
+        let mut out = self.clone();
+        out.maps.push(map);
+        out
+    }
+
+    /// The motion `tau_s` seconds earlier at every stamp (the truth a sensor stamping its
+    /// samples `tau_s` late reports). Conic and static tracks shift exactly (their maps,
+    /// being pointwise, commute with the shift); stored tracks are interpolated
+    /// (Catmull–Rom, held at the ends).
+    pub fn delayed(&self, tau_s: f64) -> Track {
+        match &self.source {
+            // The maps act sample by sample and do not depend on time, so they commute with
+            // the shift: the conic source moves, the maps stay.
+            Source::Conic { c, mount, lag_s } => {
+                Track { source: Source::Conic { c: *c, mount: mount.clone(), lag_s: lag_s + tau_s }, ..self.clone() }
+            }
+            Source::Constant(_) => self.clone(),
+            _ => {
+                let states: Vec<SensorKinematics> = self.states().collect();
+                let t = &self.t_s;
+                // One quantity at a time: its samples, interpolated at the earlier times.
+                let shift = |of: fn(&SensorKinematics) -> V3<Sensor>| -> Vec<V3<Sensor>> {
+                    let x: Vec<V3<Sensor>> = states.iter().map(of).collect();
+                    let mut hint = 0;
+                    t.iter().map(|&tk| interpolate(t, &x, tk - tau_s, &mut hint)).collect()
+                };
+                let (w, e, a) = (shift(|s| s.w_rad_s), shift(|s| s.e_rad_s2), shift(|s| s.a_m_s2));
+                Track {
+                    t_s: self.t_s.clone(),
+                    source: Source::Sampled { w, e, a },
+                    maps: Vec::new(),
+                    epsilon_source: self.epsilon_source.clone(),
+                }
+            }
+        }
+    }
+
+    /// Every `step`-th sample (from the first), with the same source: for searches on
+    /// reduced data.
+    pub fn every(&self, step: usize) -> Track {
+        let step = step.max(1);
+        let t_s: Arc<[f64]> = self.t_s.iter().step_by(step).copied().collect();
+        let source = match &self.source {
+            Source::Sampled { w, e, a } => {
+                let pick = |x: &[V3<Sensor>]| x.iter().step_by(step).copied().collect();
+                Source::Sampled { w: pick(w), e: pick(e), a: pick(a) }
+            }
+            other => other.clone(),
+        };
+        Track { t_s, source, maps: self.maps.clone(), epsilon_source: self.epsilon_source.clone() }
+    }
+}
+
+/// Builds the true motion of a run in sensor axes from its declared motion and mount.
+pub fn track(run: &Run, g_m_s2: f64, deriv: &DerivativeConfig) -> Track {
+    track_for(&run.spec.motion, &run.spec.mount, &run.rec, g_m_s2, deriv)
+}
+
+/// As [`track`], from the parts.
+pub fn track_for(
+    motion: &MotionSpec,
+    mount: &Mount,
+    rec: &crate::session::Recording,
+    g_m_s2: f64,
+    deriv: &DerivativeConfig,
+) -> Track {
+    let constant = |k: Kinematics| {
+        Source::Constant(SensorKinematics {
+            w_rad_s: mount.to_sensor(k.w_rad_s),
+            e_rad_s2: mount.to_sensor(k.e_rad_s2),
+            a_m_s2: mount.to_sensor(k.a_m_s2),
+        })
+    };
+    let (source, epsilon_source) = match motion {
+        MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
+            let c = super::Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg).fixed(g_m_s2);
+            (Source::Conic { c, mount: mount.clone(), lag_s: 0.0 }, EPSILON_CONIC.to_string())
+        }
+        MotionSpec::Static { up_stand, earth_rate_rad_s } => {
+            let k = Kinematics {
+                w_rad_s: V3::new(*earth_rate_rad_s),
+                e_rad_s2: V3::new([0.0; 3]),
+                a_m_s2: V3::new([up_stand[0] * g_m_s2, up_stand[1] * g_m_s2, up_stand[2] * g_m_s2]),
+            };
+            (constant(k), EPSILON_STATIC.to_string())
+        }
+        MotionSpec::StaticUnknown | MotionSpec::Rotation { .. } | MotionSpec::MultiPosition { .. } => {
+            // Protocol runs have no per-sample truth: the state is unknown (NaN), and the
+            // protocol fit (crate::estimate::protocol) uses them instead.
+            let nan = V3::new([f64::NAN; 3]);
+            (
+                constant(Kinematics { w_rad_s: nan, e_rad_s2: nan, a_m_s2: nan }),
+                "unknown (protocol run: see `crosscal fit` on protocol sessions)".to_string(),
+            )
+        }
+        MotionSpec::Reference => match rec.reference.as_ref() {
+            None => (Source::Sampled { w: Vec::new(), e: Vec::new(), a: Vec::new() }, String::new()),
+            Some(r) => reference_source(rec, r, mount, deriv),
+        },
+    };
+    if let Source::Sampled { w, .. } = &source {
+        if w.is_empty() {
+            // A reference run without reference columns: no states (the reader refuses such
+            // sessions; an empty track keeps callers' lengths honest).
+            return Track::default();
+        }
+    }
+    Track { t_s: rec.t_s.clone(), source, maps: Vec::new(), epsilon_source }
+}
+
+/// A reference run's stored states, with ε given or derived from the reference rate.
+fn reference_source(
+    rec: &crate::session::Recording,
+    r: &crate::session::ReferenceColumns,
+    mount: &Mount,
+    deriv: &DerivativeConfig,
+) -> (Source, String) {
+    let n = rec.len();
+    let derived;
+    let (e, how): (&[V3<Stand>], String) = match &r.e_rad_s2 {
+        Some(e) => (e, "given (ex_ref, ey_ref, ez_ref columns)".into()),
+        None => {
+            let mut out = vec![V3::new([0.0; 3]); n];
+            derivative_offline(&rec.t_s, &r.w_rad_s, deriv, &mut out);
+            derived = out;
+            (&derived, format!("derived from the reference rate: {}", deriv.describe()))
+        }
+    };
+    let to = |x: &[V3<Stand>]| x.iter().map(|&v| mount.to_sensor(v)).collect();
+    (Source::Sampled { w: to(&r.w_rad_s), e: to(e), a: to(&r.a_m_s2) }, how)
+}
+
+/// Value at time `t` of a sampled series by Catmull–Rom cubic interpolation on the
+/// (possibly non-uniform) time stamps, clamped at the ends.
+pub fn interpolate<T>(t_s: &[f64], x: &[T], t: f64, hint: &mut usize) -> T
+where
+    T: Copy + std::ops::Index<usize, Output = f64> + From<[f64; 3]>,
+{
+    let n = t_s.len();
+    if n == 0 {
+        return T::from([0.0; 3]);
+    }
+    if n == 1 || t <= t_s[0] {
+        return x[0];
+    }
+    if t >= t_s[n - 1] {
+        return x[n - 1];
+    }
+    let mut i = (*hint).min(n - 2);
+    while i + 1 < n - 1 && t_s[i + 1] <= t {
+        i += 1;
+    }
+    while i > 0 && t_s[i] > t {
+        i -= 1;
+    }
+    *hint = i;
+    let (t0, t1) = (t_s[i], t_s[i + 1]);
+    let h = t1 - t0;
+    let u = (t - t0) / h;
+    let slope = |j: usize, c: usize| -> f64 {
+        let a = j.saturating_sub(1);
+        let b = (j + 1).min(n - 1);
+        (x[b][c] - x[a][c]) / (t_s[b] - t_s[a]) * h
+    };
+    let (h00, h10, h01, h11) = (
+        2.0 * u * u * u - 3.0 * u * u + 1.0,
+        u * u * u - 2.0 * u * u + u,
+        -2.0 * u * u * u + 3.0 * u * u,
+        u * u * u - u * u,
+    );
+    let mut out = [0.0; 3];
+    for c in 0..3 {
+        out[c] = h00 * x[i][c] + h10 * slope(i, c) + h01 * x[i + 1][c] + h11 * slope(i + 1, c);
+    }
+    T::from(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::session::Recording;
+
+    fn conic_track(mount: &Mount, n: usize) -> (Track, ConicAt) {
+        let rec = Recording { t_s: (0..n).map(|k| k as f64 * 0.01).collect(), ..Default::default() };
+        let motion = MotionSpec::Conic { cone_angle_deg: 20.0, rate_deg_s: -30.0, phase_deg: 15.0 };
+        let tr = track_for(&motion, mount, &rec, 9.81, &DerivativeConfig::default());
+        (tr, super::super::Conic::from_deg(20.0, -30.0, 15.0).fixed(9.81))
+    }
+
+    #[test]
+    fn a_conic_track_is_the_closed_form_in_sensor_axes() {
+        let mount = Mount::parse(&["+y", "-x", "+z"]).unwrap();
+        let (tr, c) = conic_track(&mount, 500);
+        assert_eq!(tr.len(), 500);
+        for k in [0, 17, 499] {
+            let want = c.at(tr.t_s[k]);
+            let got = tr.at(k);
+            assert_eq!(got.w_rad_s, mount.to_sensor(want.w_rad_s));
+            assert_eq!(got.e_rad_s2, mount.to_sensor(want.e_rad_s2));
+            assert_eq!(got.a_m_s2, mount.to_sensor(want.a_m_s2));
+        }
+    }
+
+    #[derive(Debug)]
+    struct Halve;
+    impl SampleMap for Halve {
+        fn apply(&self, k: &mut SensorKinematics) {
+            for i in 0..3 {
+                k.w_rad_s[i] *= 0.5;
+            }
+        }
+    }
+
+    #[test]
+    fn a_delay_is_exact_on_a_conic_and_commutes_with_pointwise_maps() {
+        let (tr, c) = conic_track(&Mount::identity(), 300);
+        let tau = 0.0123;
+        let mapped_then_delayed = tr.mapped(Arc::new(Halve)).delayed(tau);
+        let delayed_then_mapped = tr.delayed(tau).mapped(Arc::new(Halve));
+        for k in [0, 150, 299] {
+            let want = c.at(tr.t_s[k] - tau);
+            let a = mapped_then_delayed.at(k);
+            assert_eq!(a.a_m_s2.xyz, want.a_m_s2.xyz);
+            for i in 0..3 {
+                assert_eq!(a.w_rad_s[i], 0.5 * want.w_rad_s[i]);
+            }
+            assert_eq!(a, delayed_then_mapped.at(k));
+        }
+    }
+
+    #[test]
+    fn a_stored_track_is_delayed_by_interpolation_and_thinned_sample_by_sample() {
+        // A stored track of a smooth motion: the interpolated delay matches the closed form.
+        let (conic, c) = conic_track(&Mount::identity(), 1000);
+        let states: Vec<SensorKinematics> = conic.states().collect();
+        let stored = Track::sampled(
+            conic.t_s.to_vec(),
+            states.iter().map(|s| s.w_rad_s).collect(),
+            states.iter().map(|s| s.e_rad_s2).collect(),
+            states.iter().map(|s| s.a_m_s2).collect(),
+            "test".into(),
+        );
+        let tau = 0.004;
+        let d = stored.delayed(tau);
+        for k in [10, 500, 990] {
+            let want = c.at(stored.t_s[k] - tau);
+            for i in 0..3 {
+                assert!((d.at(k).a_m_s2[i] - want.a_m_s2.xyz[i]).abs() < 1e-6, "k {k} axis {i}");
+            }
+        }
+        let thin = stored.every(7);
+        assert_eq!(thin.len(), 1000_usize.div_ceil(7));
+        assert_eq!(thin.at(3), stored.at(21));
+        assert_eq!(conic.every(7).at(3), conic.at(21));
+    }
+}
