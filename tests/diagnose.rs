@@ -175,3 +175,37 @@ fn an_uncatalogued_wobble_is_reported_as_unexplained() {
     assert!(d.proposal.is_empty());
     assert!(d.unexplained.iter().any(|u| u.starts_with("gyro y") && u.contains("harmonic 3")), "{:?}", d.unexplained);
 }
+
+/// Two candidates the runs cannot tell apart are one finding, with the runs that would
+/// separate them; recording those runs separates them.
+#[test]
+fn aliased_candidates_come_with_the_runs_that_separate_them() {
+    use crosscal::frames::Mount;
+    use crosscal::simulate::RunPlan;
+    // One mount, one direction: accelerometer quadratic and scale asymmetry look alike.
+    let narrow = |c: &mut SimConfig| c.runs.retain(|r| r.mount == Mount::identity() && !r.name.contains('-'));
+    let (mut cfg, _) = hidden("accel-quadratic", &[("accel.q_x", 0.02), ("accel.q_y", -0.01)], 3);
+    narrow(&mut cfg);
+    let d = run_diagnose(&cfg.generate());
+    let first = d.steps.first().expect("a step");
+    let named: Vec<&str> =
+        std::iter::once(first.effect.as_str()).chain(first.indistinguishable.iter().map(String::as_str)).collect();
+    assert!(named.contains(&"accel-quadratic") && named.contains(&"accel-scale-asymmetry"), "{named:?}");
+    let sep = first.separated_by.as_ref().expect("a separating run");
+    assert!(sep.rho_now > 0.99 && sep.rho_with < sep.rho_now - 0.03, "{sep}");
+    // Record the proposed runs as well: the two are told apart and the right one is named.
+    for (i, p) in sep.runs.iter().enumerate() {
+        cfg.runs.push(RunPlan {
+            name: format!("proposed-{i}"),
+            motion: MotionSpec::Conic { cone_angle_deg: p.cone_angle_deg, rate_deg_s: p.rate_deg_s, phase_deg: 0.0 },
+            mount: Mount::parse(&p.mount).unwrap(),
+            duration_s: p.duration_s,
+        });
+    }
+    let d = run_diagnose(&cfg.generate());
+    let first = d.steps.first().expect("a step");
+    // The pair the runs were proposed for is told apart (other pairs may still need theirs).
+    assert_eq!(first.effect, "accel-quadratic", "{:?}", first.indistinguishable);
+    assert!(!first.indistinguishable.iter().any(|e| e == "accel-scale-asymmetry"), "{:?}", first.indistinguishable);
+    assert_eq!(d.verdict, Verdict::Explained, "{:?}", d.unexplained);
+}

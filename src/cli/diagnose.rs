@@ -118,6 +118,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         outln!("  why: {}", s.score.explanation);
         if !s.indistinguishable.is_empty() {
             outln!("  indistinguishable on these runs from: {}", s.indistinguishable.join(", "));
+            if let Some(run) = &s.separated_by {
+                outln!("  {} would separate them: {run}", if run.runs.len() > 1 { "these runs" } else { "this run" });
+            }
         }
         out!("{}", channel_table(&s.channels));
     }

@@ -21,6 +21,7 @@ pub mod picture;
 pub mod protocol;
 pub mod report;
 pub mod select;
+pub mod separate;
 pub mod space;
 
 pub use lines::Line;
@@ -138,6 +139,10 @@ pub struct Step {
     pub score: Candidate,
     /// Other candidates that explain the same residual feature on these runs.
     pub indistinguishable: Vec<String>,
+    /// The runs that would separate it from the first of those, with the largest
+    /// correlation of their coefficients now and with those runs (design, not data).
+    #[serde(default)]
+    pub separated_by: Option<separate::Separation>,
     /// Channel picture after adding it.
     pub channels: Vec<ChannelReport>,
 }
@@ -584,9 +589,16 @@ fn climb(
             break;
         };
         let indistinguishable = aliases(space, &set, best, &passing);
+        let separated_by = indistinguishable.first().and_then(|other| {
+            let b = space.effect_params(other);
+            separate::separating_run(space, &current, &a.base_fit, &set, &best.1, &b, runs, motions)
+        });
         if !indistinguishable.is_empty() {
+            let how = separated_by
+                .as_ref()
+                .map_or_else(|| "runs at another rate, direction, cone angle or mount".into(), ToString::to_string);
             warnings.push(format!(
-                "{} or {}: they explain the same residual on these runs (one finding, not two); runs at another rate, direction, cone angle or mount would separate them",
+                "{} or {}: they explain the same residual on these runs (one finding, not two); {how} would separate them",
                 best.0.effect,
                 indistinguishable.join(" or ")
             ));
@@ -599,7 +611,13 @@ fn climb(
         let next = analyse(&m, f, runs, motions, has_temp);
         let noise = noise_reports(&next.space);
         let channels = pictures(&next, &next.space.base_set(), &next.base_fit, &noise);
-        steps.push(Step { effect: best.0.effect.clone(), score: best.0.clone(), indistinguishable, channels });
+        steps.push(Step {
+            effect: best.0.effect.clone(),
+            score: best.0.clone(),
+            indistinguishable,
+            separated_by,
+            channels,
+        });
         current = m;
         a = next;
     }

@@ -163,6 +163,17 @@ impl Space {
             .collect()
     }
 
+    /// The information (whitened Gram) of all runs, plus `weight` times a further run's.
+    pub fn information_with(&self, extra: Option<(&RunGram, f64)>) -> DMatrix<f64> {
+        let mut g = self.total.g.clone();
+        if let Some((rg, w)) = extra {
+            for c in 0..6 {
+                g += scatter(&self.universe, rg, c).g * w;
+            }
+        }
+        g
+    }
+
     /// The all-run solution on a set.
     pub fn solve(&self, set: &[usize]) -> Lsq {
         Lsq::solve(&self.total.g, &self.total.b, self.total.yy, set)

@@ -468,6 +468,37 @@ pub fn run_gram(
     }
 }
 
+/// The whitened Gram of a run that has not been recorded (outputs and residual zero):
+/// what it would add to the information on every parameter, with the session's noise
+/// models (`noise`, per channel) scaled to the run's length. For planning a run that
+/// separates candidates the recorded runs cannot tell apart.
+pub fn design_gram(
+    u: &Universe,
+    base: &Model,
+    fit: &Fit,
+    run: &FitRun<'_>,
+    motion: &MotionSpec,
+    noise: &[RunNoise],
+) -> RunGram {
+    let n = run.len();
+    let t = &run.track.t_s[..n];
+    let b = RunBasis::new(t, motion);
+    let noise: Vec<RunNoise> = noise.iter().map(|x| RunNoise { ar: x.ar.clone(), n }).collect();
+    let secants = Secants::new(u, base, fit, run);
+    let zero: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
+    let gram = channel_grams(u, run, &noise, &b, &zero, &secants);
+    RunGram {
+        gram,
+        basis: b.size,
+        first_harmonic: b.first,
+        noise,
+        output_ms: [0.0; 6],
+        lines: Vec::new(),
+        cone_hz: b.cone_hz(),
+        basis_ms: DMatrix::zeros(b.size, b.size),
+    }
+}
+
 /// Peak power over the continuum a line must reach (against the running median of its
 /// neighbours and against the session's noise model).
 const LINE_RATIO: f64 = 4.0;

@@ -120,6 +120,14 @@ impl Track {
         s
     }
 
+    /// The mount of a conic track (None for stored or constant motion).
+    pub fn mount(&self) -> Option<&Mount> {
+        match &self.source {
+            Source::Conic { mount, .. } => Some(mount),
+            _ => None,
+        }
+    }
+
     /// Every state, in order.
     pub fn states(&self) -> impl ExactSizeIterator<Item = SensorKinematics> + '_ {
         (0..self.len()).map(|k| self.at(k))
@@ -315,7 +323,7 @@ mod tests {
         let rec = Recording { t_s: (0..n).map(|k| k as f64 * 0.01).collect(), ..Default::default() };
         let motion = MotionSpec::Conic { cone_angle_deg: 20.0, rate_deg_s: -30.0, phase_deg: 15.0 };
         let tr = track_for(&motion, mount, &rec, 9.81, &DerivativeConfig::default());
-        (tr, super::super::Conic::from_deg(20.0, -30.0, 15.0).fixed(9.81))
+        (tr, crate::motion::Conic::from_deg(20.0, -30.0, 15.0).fixed(9.81))
     }
 
     #[test]
