@@ -72,6 +72,12 @@ fn clean_coloured_quantised_and_jittered_sessions_are_adequate() {
             c.realism.quantum = [0.001, 1e-5];
             c
         }),
+        ("noiseless (rounding only)", {
+            let mut c = hard(0.0, 100.0, 6);
+            c.gyro_noise_deg_s = 0.0;
+            c.accel_noise_g = 0.0;
+            c
+        }),
         ("SI at 200 Hz, jittered stamps", {
             let mut c = hard(0.9, 200.0, 5);
             c.realism.si_units = true;

@@ -445,7 +445,15 @@ fn conclude(
     let picture_now = steps.last().map_or_else(|| channels.clone(), |s| s.channels.clone());
     let names: Vec<&str> = a.names.iter().map(String::as_str).collect();
     let tol = runs.iter().map(|r| run_span(r)).fold(0.0, f64::max);
-    let found = lines::group(&a.space.runs, &names, if tol > 0.0 { 4.0 / tol } else { 0.05 });
+    // A line within ten times the recording's numerical resolution is its rounding (a
+    // noiseless recording), not a disturbance.
+    let res = resolution(&a.space);
+    let channel =
+        |l: &Line| 3 * usize::from(l.sensor == SensorKind::Accel) + AXES.iter().position(|&x| x == l.axis).unwrap_or(0);
+    let found: Vec<Line> = lines::group(&a.space.runs, &names, if tol > 0.0 { 4.0 / tol } else { 0.05 })
+        .into_iter()
+        .filter(|l| l.amplitude > 10.0 * res[channel(l)])
+        .collect();
     let remaining: Vec<&ChannelReport> = picture_now.iter().filter(|c| c.systematic).collect();
     let off_cone: Vec<&Line> = found.iter().filter(|l| l.cone_harmonic.is_none()).collect();
     let verdict = if !remaining.is_empty() || !off_cone.is_empty() {
