@@ -4,7 +4,6 @@ use super::Outcome;
 use crate::outln;
 use anyhow::Context;
 use crosscal::check::rules::{evaluate, Evidence, Rules};
-use crosscal::profile::Profile;
 use crosscal::session::Session;
 use std::path::PathBuf;
 
@@ -29,7 +28,7 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let rules = Rules::read(&a.rules)?;
-    let profile = Profile::read(&a.profile)?;
+    let profile = super::read_profile(&a.profile)?;
     let acc = match &a.session {
         Some(path) => {
             let s = Session::load(path).with_context(|| format!("reading session {}", path.display()))?;

@@ -7,7 +7,6 @@ use anyhow::Context;
 use crosscal::app::validate::{check_session, cross_validate, holdout_check};
 use crosscal::check::{CheckReport, Thresholds};
 use crosscal::correct::Calibration;
-use crosscal::profile::Profile;
 use crosscal::session::Session;
 use std::path::PathBuf;
 
@@ -65,7 +64,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         };
         return print_report(&session, &report, &what, a.json);
     };
-    let profile = Profile::read(profile_path)?;
+    let profile = super::read_profile(profile_path)?;
     if !a.allow_other_unit {
         profile
             .ensure_unit(profile_path, &session.manifest.serial)

@@ -125,20 +125,17 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     }
     if let Some(path) = &a.svg {
         let names = ["gyro x", "gyro y", "gyro z", "accel x", "accel y", "accel z"];
-        let series: Vec<(String, Vec<(f64, f64)>)> = (0..6)
+        let series: Vec<(String, Vec<f64>)> = (0..6)
             .map(|c| {
-                let pts = rungs
-                    .iter()
-                    .enumerate()
-                    .map(|(i, r)| (i as f64, r.rms[c] / r.noise_floor[c].max(f64::MIN_POSITIVE)))
-                    .collect();
-                (names[c].to_string(), pts)
+                let ys = rungs.iter().map(|r| r.rms[c] / r.noise_floor[c].max(f64::MIN_POSITIVE)).collect();
+                (names[c].to_string(), ys)
             })
             .collect();
-        let svg = plot::lines(
-            "residual RMS / noise floor along the ladder (0 = paper model)",
-            "ladder step",
-            "RMS / noise floor",
+        let labels: Vec<String> = rungs.iter().map(|r| r.model.clone()).collect();
+        let svg = plot::ladder(
+            &format!("Model ladder of unit {}: residual RMS per channel, in noise floors", session.manifest.serial),
+            "residual RMS / noise floor (log)",
+            &labels,
             &series,
         );
         crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, svg.as_bytes()))

@@ -64,7 +64,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
-    let profile = Profile::read(&a.profile)?;
+    let profile = super::read_profile(&a.profile)?;
     if let Some(age) = profile.age_days(jiff::Timestamp::now()).filter(|d| *d > a.max_age_days) {
         eprintln!(
             "warning: profile {} is {age:.0} days old (limit {} days): the unit may have drifted; recalibrate or check it with `crosscal profile diff`",

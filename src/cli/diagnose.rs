@@ -30,6 +30,10 @@ pub struct Args {
     /// harmonic amplitudes per channel).
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Write the report's plots as SVG files into this folder (four per channel:
+    /// `gyro-x-time`, `-phase`, `-spectrum`, `-harmonics`, …).
+    #[arg(long)]
+    figures: Option<PathBuf>,
 }
 
 fn channel_table(c: &[ChannelReport]) -> String {
@@ -69,18 +73,23 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let runs = fit_runs(&session, &tr);
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
     let d = diagnose(&model, &runs, &motions, &FitOptions::default())?;
-    if let Some(path) = &a.report {
+    if a.report.is_some() || a.figures.is_some() {
         let base_fit = crosscal::estimate::fit(&crosscal::estimate::FitRequest::runs(&model, &runs))?.fit;
         let before = crosscal::diagnose::residuals(&model, &base_fit, &runs, &motions);
         let after = (!d.steps.is_empty()).then(|| {
             let m = crosscal::diagnose::ladder_model(&model, &d);
             crosscal::diagnose::residuals(&m, &d.final_fit, &runs, &motions)
         });
-        let title = format!("crosscal diagnose: unit {}", session.manifest.serial);
-        let html = crosscal::diagnose::report::html(&title, &d, &before, after.as_deref(), &motions);
-        crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, html.as_bytes()))
-            .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("report written to {}", path.display());
+        if let Some(path) = &a.report {
+            let title = format!("crosscal diagnose: unit {}", session.manifest.serial);
+            let html = crosscal::diagnose::report::html(&title, &d, &before, after.as_deref(), &motions);
+            crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, html.as_bytes()))
+                .with_context(|| format!("writing {}", path.display()))?;
+            eprintln!("report written to {}", path.display());
+        }
+        if let Some(dir) = &a.figures {
+            super::write_figures(dir, &crosscal::diagnose::report::figures(&before, after.as_deref(), &motions))?;
+        }
     }
     if a.json {
         outln!("{}", serde_json::to_string_pretty(&d)?);
@@ -149,8 +158,8 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
 
 /// `diagnose` on a protocol session: pose and turn residuals, candidate effects on the poses.
 fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
-    if a.report.is_some() {
-        anyhow::bail!("--report draws stand-run residuals; for a protocol session use the text or --json output");
+    if a.report.is_some() || a.figures.is_some() {
+        anyhow::bail!("--report and --figures draw stand-run residuals; for a protocol session use the text or --json output");
     }
     let model = start_model(a, session)?;
     let d = crosscal::diagnose::protocol::diagnose_protocol(session, &model)
@@ -223,7 +232,7 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
 fn start_model(a: &Args, session: &Session) -> anyhow::Result<crosscal::model::Model> {
     match &a.profile {
         Some(p) => {
-            let prof = crosscal::profile::Profile::read(p)?;
+            let prof = super::read_profile(p)?;
             prof.ensure_unit(p, &session.manifest.serial)?;
             let mut m = prof.model().with_context(|| format!("using profile {}", p.display()))?;
             for e in &a.model.effects {

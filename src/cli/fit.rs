@@ -9,7 +9,6 @@ use std::path::PathBuf;
 
 /// Options of `fit`.
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Example: crosscal fit demo/session.json --out calib-profiles/")]
 pub struct Args {
     /// The session manifest (session.json).
     session: PathBuf,

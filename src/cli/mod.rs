@@ -151,7 +151,15 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
 
 /// Cross-coupling calibration of gyro and accelerometer triads on a conic-motion stand.
 #[derive(Debug, Parser)]
-#[command(name = "crosscal", version, about, long_about = None)]
+#[command(
+    name = "crosscal",
+    version,
+    about,
+    long_about = None,
+    disable_help_subcommand = true,
+    after_help = "Example: crosscal simulate --preset paper -o demo/ && crosscal fit demo/session.json --out calib-profiles/\n\
+                  More: crosscal help TOPIC (a command, or one of: session, profile, rules, effects, conventions, exit-codes, formats)"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -160,35 +168,98 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Write a synthetic stand session (the paper's unit by default).
+    #[command(after_help = "Example: crosscal simulate --preset paper -o demo/")]
     Simulate(simulate::Args),
     /// Fit a calibration profile to a session and store it under calib-profiles/.
+    #[command(after_help = "Example: crosscal fit demo/session.json --out calib-profiles/")]
     Fit(fit::Args),
     /// Correct a recording (CSV) with a profile.
+    #[command(
+        after_help = "Example: crosscal correct --profile calib-profiles/I1426-0042 demo/cone+10.csv -o corrected.csv"
+    )]
     Correct(correct::Args),
     /// Compare corrected outputs with a session's reference motion; exit 1 on failure.
+    #[command(after_help = "Example: crosscal check --profile calib-profiles/I1426-0042 demo/session.json")]
     Check(check::Args),
     /// Run the whole pipeline on the paper's stand and print the paper comparison.
+    #[command(after_help = "Example: crosscal demo")]
     Demo(demo::Args),
     /// Compare model and measurement: where the model fails and which effect is missing.
+    #[command(after_help = "Example: crosscal diagnose hidden/session.json --report diagnose.html")]
     Diagnose(diagnose::Args),
     /// The model ladder: paper model, default, then each effect diagnose adds.
+    #[command(after_help = "Example: crosscal compare hidden/session.json --svg ladder.svg")]
     Compare(compare::Args),
     /// List the effects catalogue with coefficients, units and physical explanations.
+    #[command(after_help = "Example: crosscal effects gyro-dead-zone")]
     Effects(effects::Args),
     /// Allan deviation and noise terms (white noise, bias instability, random walk) of a static recording.
+    #[command(after_help = "Example: crosscal noise still/session.json --report noise.html")]
     Noise(noise::Args),
     /// Predicted uncertainty of every coefficient for proposed runs, before recording; suggests a run.
+    #[command(after_help = "Example: crosscal plan --rates 10 --cone-angles 10 --mounts 1 --arw 0.15 --vrw 0.02")]
     Plan(plan::Args),
     /// Accept or reject a unit: its profile (and session) against acceptance rules; exit 1 on reject.
+    #[command(
+        after_help = "Example: crosscal accept calib-profiles/I1426-0042 --rules rules.json --session demo/session.json"
+    )]
     Accept(accept::Args),
     /// The profile store: list units and histories, show the profile in force, diff two profiles.
+    #[command(after_help = "Example: crosscal profile list")]
     Profile(profile::Args),
     /// Calibrate a production lot in parallel: a profile per unit, acceptance, outliers, reports.
+    #[command(after_help = "Example: crosscal batch lot/ --rules rules.json")]
     Batch(batch::Args),
     /// Turn a recording laid out for imucal, imu_tk or a Tedaldi script into a crosscal session.
+    #[command(after_help = "Example: crosscal import imu-tk acc.mat gyro.mat --init-rest-s 50 --out tk/")]
     Import(import::Args),
-    /// List the exit codes and what each means (as the README's table).
+    /// List the exit codes and what each means (as the guide's table).
+    #[command(after_help = "Example: crosscal exit-codes")]
     ExitCodes,
+    /// Help on a command or a topic: session, profile, rules, effects, conventions, exit-codes, formats.
+    #[command(after_help = "Example: crosscal help conventions")]
+    Help {
+        /// A command name or a topic; without one, the list of commands and topics.
+        topic: Option<String>,
+    },
+}
+
+/// The guide's reference pages, built into the binary so `crosscal help TOPIC` and
+/// `docs/` are one text.
+const TOPICS: &[(&str, &str)] = &[
+    ("session", include_str!("../../docs/reference-session.md")),
+    ("formats", include_str!("../../docs/reference-session.md")),
+    ("profile", include_str!("../../docs/reference-profile.md")),
+    ("rules", include_str!("../../docs/reference-rules.md")),
+    ("effects", include_str!("../../docs/reference-effects.md")),
+    ("conventions", include_str!("../../docs/reference-conventions.md")),
+    ("exit-codes", include_str!("../../docs/reference-exit-codes.md")),
+];
+
+/// `crosscal help [TOPIC]`.
+fn help(topic: Option<&str>) -> anyhow::Result<Outcome> {
+    use clap::CommandFactory;
+    let mut cmd = Cli::command();
+    let Some(topic) = topic else {
+        crate::outln!("{}", cmd.render_help());
+        crate::outln!("Topics: {}", TOPICS.iter().map(|t| t.0).collect::<Vec<_>>().join(", "));
+        return Ok(Outcome::Ok);
+    };
+    if let Some((_, text)) = TOPICS.iter().find(|t| t.0 == topic) {
+        crate::out!("{text}");
+        return Ok(Outcome::Ok);
+    }
+    if let Some(sub) = cmd.find_subcommand_mut(topic) {
+        let mut sub = sub.clone().bin_name(format!("crosscal {topic}"));
+        crate::outln!("{}", sub.render_long_help());
+        return Ok(Outcome::Ok);
+    }
+    let names: Vec<String> = cmd.get_subcommands().map(|c| c.get_name().to_string()).collect();
+    anyhow::bail!(
+        "no help on '{topic}': commands are {}; topics are {}",
+        names.join(", "),
+        TOPICS.iter().map(|t| t.0).collect::<Vec<_>>().join(", ")
+    )
 }
 
 /// Stdout was closed by its reader (`crosscal … | head -1`): the command stops quietly
@@ -258,6 +329,30 @@ fn parse_preset(s: &str) -> Result<crosscal::model::Preset, String> {
     s.parse().map_err(|_| format!("expected one of {}", crosscal::model::Preset::NAMES))
 }
 
+/// Reads the profile a `--profile` flag names: a file, or a unit's folder of the store
+/// (then its newest profile, named on stderr).
+pub fn read_profile(path: &std::path::Path) -> anyhow::Result<crosscal::profile::Profile> {
+    let (used, p) = crosscal::profile::Profile::read_or_latest(path)?;
+    if used != path {
+        eprintln!("profile: {} (the newest of unit {})", used.display(), p.serial);
+    }
+    Ok(p)
+}
+
+/// Writes a report's plots as `DIR/<stem>.svg` (the folder is created; plots are reports,
+/// so an earlier plot of the same name is replaced).
+pub fn write_figures(dir: &std::path::Path, figs: &[crosscal::html::Figure]) -> anyhow::Result<()> {
+    use anyhow::Context;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for f in figs.iter().filter(|f| !f.svg.is_empty()) {
+        let path = dir.join(format!("{}.svg", f.stem));
+        crosscal::atomic::write_atomic(&path, true, |w| std::io::Write::write_all(w, f.svg.as_bytes()))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    eprintln!("{} plots written to {}", figs.iter().filter(|f| !f.svg.is_empty()).count(), dir.display());
+    Ok(())
+}
+
 /// Prints [`EXIT_CODES`] as a Markdown table.
 fn print_exit_codes() -> anyhow::Result<Outcome> {
     let mut s = String::from("| code | meaning |\n|---|---|\n");
@@ -307,6 +402,7 @@ pub fn main() -> ExitCode {
         Command::Batch(a) => batch::run(a),
         Command::Import(a) => import::run(a),
         Command::ExitCodes => print_exit_codes(),
+        Command::Help { topic } => help(topic.as_deref()),
     };
     match result {
         Ok(Outcome::Ok) => ExitCode::SUCCESS,

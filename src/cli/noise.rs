@@ -39,6 +39,9 @@ pub struct Args {
     /// Write a self-contained HTML report with the Allan deviation plots.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Write the Allan deviation plots as SVG files into this folder (`gx-adev.svg`, …).
+    #[arg(long)]
+    figures: Option<PathBuf>,
     /// Write the result as JSON to this file (for `fit --noise`).
     #[arg(long)]
     save: Option<PathBuf>,
@@ -143,6 +146,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, html.as_bytes()))
             .with_context(|| format!("writing {}", path.display()))?;
         eprintln!("report: {}", path.display());
+    }
+    if let Some(dir) = &a.figures {
+        super::write_figures(dir, &report::figures(&r))?;
     }
     if let Some(path) = &a.save {
         let json = serde_json::to_string_pretty(&r)? + "\n";

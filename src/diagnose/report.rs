@@ -3,7 +3,7 @@
 
 use super::{ChannelReport, Diagnosis, RunResiduals, Verdict, HARMONICS};
 use crate::html::plot::{bars, lines, loglog};
-use crate::html::{esc, page_start};
+use crate::html::{esc, page_start, slug, Figure};
 use crate::session::MotionSpec;
 use crate::stats::systematic;
 use crate::units::SensorKind;
@@ -182,44 +182,71 @@ pub fn html(
             &st.channels,
         ));
     }
+    for (c, figs) in figures(before, after, motions).chunks(4).enumerate() {
+        let _ = write!(s, "<h2>{}</h2>", CHANNELS[c.min(5)]);
+        for f in figs {
+            s.push_str(&f.svg);
+        }
+    }
+    s.push_str("</body></html>\n");
+    s
+}
+
+/// The report's plots, four per channel in channel order (gyro x … accel z): residual
+/// against time and against cone phase (before and after the added effects), its spectrum,
+/// and its cone-harmonic amplitudes.
+pub fn figures(before: &[RunResiduals], after: Option<&[RunResiduals]>, motions: &[&MotionSpec]) -> Vec<Figure> {
+    let mut out = Vec::with_capacity(24);
     for c in 0..6 {
         let (u, _) = unit(c);
-        let _ = write!(s, "<h2>{}</h2>", CHANNELS[c]);
+        let name = CHANNELS[c];
+        let fig = |kind: &str, svg: String| Figure { stem: format!("{}-{kind}", slug(name)), svg };
         let mut t = vec![("model".to_string(), vs_time(before, c))];
         let mut p = vec![("model".to_string(), vs_phase(before, c))];
         if let Some(a) = after {
             t.push(("with added effects".to_string(), vs_time(a, c)));
             p.push(("with added effects".to_string(), vs_phase(a, c)));
         }
-        s.push_str(&lines(
-            &format!("{}: residual vs time (runs end to end, bucket means)", CHANNELS[c]),
-            "t (s)",
-            u,
-            &t,
+        out.push(fig(
+            "time",
+            lines(
+                &format!("{name}: residual vs time (runs end to end, bucket means)"),
+                "time, runs end to end (s)",
+                &format!("residual ({u})"),
+                &t,
+            ),
         ));
-        s.push_str(&lines(
-            &format!("{}: residual vs cone phase (10° bins, conic runs)", CHANNELS[c]),
-            "cone phase (deg)",
-            u,
-            &p,
+        out.push(fig(
+            "phase",
+            lines(
+                &format!("{name}: residual vs cone phase (10° bins, conic runs)"),
+                "cone phase (deg)",
+                &format!("residual ({u})"),
+                &p,
+            ),
         ));
         let spec = spectrum(after.unwrap_or(before), c);
-        if !spec.is_empty() {
-            s.push_str(&loglog(
-                &format!("{}: residual spectrum (lines stand out of the continuum)", CHANNELS[c]),
+        let spec_svg = if spec.is_empty() {
+            String::new()
+        } else {
+            loglog(
+                &format!("{name}: residual spectrum (lines stand out of the continuum)"),
                 "frequency (Hz)",
                 &format!("PSD (({u})²/Hz)"),
                 &[],
                 &spec,
-            ));
-        }
-        s.push_str(&bars(
-            &format!("{}: residual cone harmonics (RMS over runs)", CHANNELS[c]),
-            "harmonic of the cone frequency",
-            u,
-            &harmonics(before, motions, c),
+            )
+        };
+        out.push(fig("spectrum", spec_svg));
+        out.push(fig(
+            "harmonics",
+            bars(
+                &format!("{name}: residual cone harmonics (RMS over runs)"),
+                "harmonic of the cone frequency",
+                &format!("amplitude ({u})"),
+                &harmonics(before, motions, c),
+            ),
         ));
     }
-    s.push_str("</body></html>\n");
-    s
+    out
 }

@@ -24,3 +24,18 @@ pub fn page_start(title: &str) -> String {
 pub fn esc(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
+
+/// One plot of a report, also written on its own by `--figures DIR` (the guide's pictures
+/// come from there): a file-name stem such as `gyro-x-phase` and the SVG.
+#[derive(Debug, Clone)]
+pub struct Figure {
+    /// File-name stem, without extension.
+    pub stem: String,
+    /// The plot as an SVG document.
+    pub svg: String,
+}
+
+/// A file-name stem from a channel's display name (`gyro x` → `gyro-x`).
+pub fn slug(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_lowercase() } else { '-' }).collect()
+}

@@ -34,9 +34,13 @@ fn builder<'a, 'b>(
     title: &str,
 ) -> ChartBuilder<'a, 'b, SVGBackend<'b>> {
     let mut b = ChartBuilder::on(root);
-    b.caption(title, ("sans-serif", 15)).margin(8).x_label_area_size(32).y_label_area_size(70);
+    b.caption(title, ("sans-serif", 17)).margin(10).x_label_area_size(44).y_label_area_size(84);
     b
 }
+
+/// Axis descriptions and tick labels at a size that reads in a report and in the guide.
+const DESC_FONT: (&str, u32) = ("sans-serif", 15);
+const TICK_FONT: (&str, u32) = ("sans-serif", 13);
 
 /// A line chart of named series of (x, y) points, as an SVG string.
 pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(f64, f64)>)]) -> String {
@@ -49,7 +53,14 @@ pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(
         let Ok(mut chart) = builder(&root, title).build_cartesian_2d(x0..x1, y0..y1) else {
             return String::new();
         };
-        let _ = chart.configure_mesh().x_desc(x_label).y_desc(y_label).light_line_style(WHITE).draw();
+        let _ = chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .axis_desc_style(DESC_FONT)
+            .label_style(TICK_FONT)
+            .light_line_style(WHITE)
+            .draw();
         for (i, (name, pts)) in series.iter().enumerate() {
             let c = COLORS[i % COLORS.len()];
             if let Ok(s) = chart.draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(1))) {
@@ -80,6 +91,8 @@ pub fn bars(title: &str, x_label: &str, y_label: &str, values: &[(String, f64)])
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
+            .axis_desc_style(DESC_FONT)
+            .label_style(TICK_FONT)
             .x_labels(values.len().max(1))
             .x_label_formatter(&|x| {
                 let i = x.round();
@@ -121,8 +134,14 @@ pub fn loglog(
         let Ok(mut chart) = builder(&root, title).build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale()) else {
             return String::new();
         };
-        let _ =
-            chart.configure_mesh().x_desc(x_label).y_desc(y_label).y_label_formatter(&|v| format!("{v:.1e}")).draw();
+        let _ = chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .axis_desc_style(DESC_FONT)
+            .label_style(TICK_FONT)
+            .y_label_formatter(&|v| format!("{v:.1e}"))
+            .draw();
         let c0 = COLORS[0];
         let inside = |y: f64| y.clamp(y0, y1);
         if let Ok(s) = chart.draw_series(
@@ -142,6 +161,76 @@ pub fn loglog(
             }
         }
         let _ = chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw();
+        let _ = root.present();
+    }
+    buf
+}
+
+/// The model ladder as an SVG string: one rung per model on a categorical x axis (labelled
+/// by `rungs`), each channel's residual RMS / noise floor on a logarithmic y axis, and the
+/// noise floor (1) drawn as a dashed line.
+pub fn ladder(title: &str, y_label: &str, rungs: &[String], series: &[(String, Vec<f64>)]) -> String {
+    let mut buf = String::new();
+    let n = rungs.len().max(1);
+    let positive = |v: &f64| v.is_finite() && *v > 0.0;
+    let ys = series.iter().flat_map(|s| s.1.iter().copied()).chain([1.0]);
+    let (y0, y1) = range(ys.filter(positive).map(f64::log10));
+    let (y0, y1) = (10f64.powf(y0.min(-0.35)), 10f64.powf(y1.max(0.35)));
+    let vertical = rungs.iter().map(String::len).sum::<usize>() > 70 || n > 7;
+    let width = 760u32.max(90 * n as u32);
+    let label_area = if vertical { 14 + 8 * rungs.iter().map(String::len).max().unwrap_or(4) as u32 } else { 44 };
+    {
+        let root = SVGBackend::with_string(&mut buf, (width, 340 + label_area)).into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let mut b = builder(&root, title);
+        b.x_label_area_size(label_area);
+        let Ok(mut chart) = b.build_cartesian_2d(-0.5..n as f64 - 0.5, (y0..y1).log_scale()) else {
+            return String::new();
+        };
+        let tick = if vertical { TICK_FONT.into_font().transform(FontTransform::Rotate90) } else { TICK_FONT.into_font() };
+        let _ = chart
+            .configure_mesh()
+            .y_desc(y_label)
+            .axis_desc_style(DESC_FONT)
+            .y_label_style(TICK_FONT)
+            .x_label_style(tick)
+            .x_labels(n)
+            .x_label_formatter(&|x| {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 {
+                    rungs.get(i as usize).cloned().unwrap_or_default()
+                } else {
+                    String::new()
+                }
+            })
+            .y_labels(12)
+            .y_label_formatter(&|v| format!("{}", (v * 1000.0).round() / 1000.0))
+            .light_line_style(WHITE)
+            .draw();
+        let grey = RGBColor(90, 90, 90);
+        let dashes = (0..2 * n).map(|i| {
+            let a = -0.5 + i as f64 * 0.5;
+            PathElement::new(vec![(a, 1.0), (a + 0.3, 1.0)], grey.stroke_width(2))
+        });
+        if let Ok(s) = chart.draw_series(dashes) {
+            s.label("noise floor (1)").legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], grey));
+        }
+        for (i, (name, ys)) in series.iter().enumerate() {
+            let c = COLORS[i % COLORS.len()];
+            let pts: Vec<(f64, f64)> =
+                ys.iter().enumerate().filter(|p| positive(p.1)).map(|(k, &y)| (k as f64, y)).collect();
+            let _ = chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())));
+            if let Ok(s) = chart.draw_series(LineSeries::new(pts, c.stroke_width(2))) {
+                s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
+            }
+        }
+        let _ = chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(TICK_FONT)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw();
         let _ = root.present();
     }
     buf

@@ -3,7 +3,7 @@
 
 use super::{NoiseReport, FLAT};
 use crate::html::plot::loglog;
-use crate::html::{esc, page_start};
+use crate::html::{esc, page_start, slug, Figure};
 use crate::units::SensorKind;
 use std::fmt::Write;
 
@@ -62,6 +62,18 @@ pub fn table(r: &NoiseReport, g_m_s2: f64) -> String {
 pub fn html(r: &NoiseReport, g_m_s2: f64) -> String {
     let mut s = page_start(&format!("crosscal noise: {}", r.source));
     let _ = write!(s, "<pre>{}</pre>", esc(&table(r, g_m_s2)));
+    for (c, f) in r.channels.iter().zip(figures(r)) {
+        let _ = write!(s, "<h2>{}</h2>", esc(&c.channel));
+        s.push_str(&f.svg);
+    }
+    s.push_str("</body></html>\n");
+    s
+}
+
+/// One log-log Allan deviation plot per channel: measured points with their intervals, the
+/// fitted curve and the slope line of each term found.
+pub fn figures(r: &NoiseReport) -> Vec<Figure> {
+    let mut out = Vec::with_capacity(r.channels.len());
     for c in &r.channels {
         let (u, k) = c.sensor().display_unit();
         let measured: Vec<(f64, f64, f64, f64)> =
@@ -84,9 +96,16 @@ pub fn html(r: &NoiseReport, g_m_s2: f64) -> String {
         if let Some(q) = c.quantization {
             series.push(("quantisation (slope −1)".into(), curve(&|t| 3f64.sqrt() * q / t)));
         }
-        let _ = write!(s, "<h2>{}</h2>", esc(&c.channel));
-        s.push_str(&loglog(&format!("{}: overlapping Allan deviation", c.channel), "τ (s)", u, &measured, &series));
+        out.push(Figure {
+            stem: format!("{}-adev", slug(&c.channel)),
+            svg: loglog(
+                &format!("{}: overlapping Allan deviation", c.channel),
+                "cluster time τ (s)",
+                &format!("Allan deviation ({u})"),
+                &measured,
+                &series,
+            ),
+        });
     }
-    s.push_str("</body></html>\n");
-    s
+    out
 }

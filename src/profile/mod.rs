@@ -407,6 +407,18 @@ impl Profile {
         Self::from_json(path, &text)
     }
 
+    /// Reads a profile given as a file, or as a unit's folder of the store
+    /// (`calib-profiles/<serial>`): then the newest profile in force now, whose path is
+    /// returned beside it so the caller can say which revision it used.
+    pub fn read_or_latest(path: &Path) -> Result<(PathBuf, Self), ProfileError> {
+        if !path.is_dir() {
+            return Self::read(path).map(|p| (path.to_path_buf(), p));
+        }
+        let serial = path.file_name().and_then(|s| s.to_str()).unwrap_or_default();
+        let root = path.parent().unwrap_or(Path::new("."));
+        store::latest(root, serial, None)
+    }
+
     /// The same profile as a new revision created now (for `save`, which never overwrites).
     pub fn revised(&self, note: impl Into<String>) -> Self {
         let mut p = self.clone();
