@@ -211,3 +211,22 @@ fn unreadable_file() {
     assert_eq!(c, 3, "{err}");
     assert!(err.contains("nowhere/session.json") && err.contains("cannot read"), "{err}");
 }
+
+// Optional manifest fields of the wrong kind are refused, not ignored (a "hot" temperature
+// used to fall back to no temperature; a string phase to 0°).
+bad_csv_case!(
+    temperature_of_the_wrong_kind,
+    |d| edit_manifest(d, |t| t.replacen(
+        "\"name\": \"cone+10\"",
+        "\"name\": \"cone+10\", \"temperature_c\": \"hot\"",
+        1
+    )),
+    18,
+    ["temperature_c", "must be a finite number"]
+);
+bad_csv_case!(
+    phase_of_the_wrong_kind,
+    |d| edit_manifest(d, |t| t.replacen("\"phase_deg\": 0.0", "\"phase_deg\": \"zero\"", 1)),
+    18,
+    ["phase_deg", "must be a finite number"]
+);

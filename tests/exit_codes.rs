@@ -1,4 +1,4 @@
-//! Every exit code the README documents is produced by a real case, and the README's table
+//! Every exit code the guide documents is produced by a real case, and the guide's table
 //! is the one the binary prints (`crosscal exit-codes`).
 
 use crate::common::{edit, run_in, small_session};
@@ -184,10 +184,11 @@ fn case(code: u8, dir: &Path) -> Vec<String> {
     }
 }
 
-/// The codes of the README's table (between its markers).
+/// The codes of the guide's table (docs/reference-exit-codes.md, between its markers).
 fn documented() -> (String, Vec<u8>) {
-    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
-    let start = readme.find("<!-- exit-codes:begin -->").expect("README marks its exit-code table");
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/reference-exit-codes.md")).unwrap();
+    let start = readme.find("<!-- exit-codes:begin -->").expect("docs/reference-exit-codes.md marks its table");
     let end = readme.find("<!-- exit-codes:end -->").expect("and its end");
     let table = readme[start..end].lines().skip(1).collect::<Vec<_>>().join("\n") + "\n";
     let codes = table.lines().filter_map(|l| l.strip_prefix("| ")?.split(' ').next()?.parse().ok()).collect();
@@ -195,12 +196,16 @@ fn documented() -> (String, Vec<u8>) {
 }
 
 #[test]
-fn the_readme_table_is_the_binarys() {
+fn the_guides_table_is_the_binarys() {
     let (table, codes) = documented();
     let d = tempfile::tempdir().unwrap();
     let (code, out, err) = run_in(d.path(), &["exit-codes"]);
     assert_eq!(code, 0, "{err}");
-    assert_eq!(table.trim(), out.trim(), "regenerate the README's table with `crosscal exit-codes`");
+    assert_eq!(
+        table.trim(),
+        out.trim(),
+        "regenerate the table of docs/reference-exit-codes.md with `crosscal exit-codes`"
+    );
     assert_eq!(codes, (0..=24).collect::<Vec<u8>>());
 }
 

@@ -446,3 +446,57 @@ fn profile_diff_of_a_session_says_what_the_file_is() {
     let (c, _, err) = run_timed(d.path(), &["fit", "s/session.json", "--dry-run"], 30);
     assert_eq!(c, 0, "{err}");
 }
+
+/// A unit whose fitted C_ε is too large for the derivative at its sample rate (a hidden
+/// g-sensitivity the default model absorbs into e_xx on short runs): the offline correction's
+/// fixed point is not reached. It was returned silently (errors of 10⁷ % that `check` then
+/// called "noise-limited"); now `correct` refuses with exit 23 and says why, `check` does not
+/// pass, and the streaming corrector still gives bounded output.
+#[test]
+fn an_offline_correction_that_does_not_converge_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let (code, _, err) = crate::common::run_in(
+        d.path(),
+        &[
+            "simulate",
+            "-o",
+            "u",
+            "--serial",
+            "U6",
+            "--seed",
+            "6",
+            "--gyro-noise",
+            "0.002",
+            "--accel-noise",
+            "2e-5",
+            "--duration",
+            "12",
+            "--hidden",
+            "gyro-g-sensitivity",
+            "--set",
+            "gyro.g_xz=0.0002",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = crate::common::run_in(d.path(), &["fit", "u/session.json", "--out", "cp"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) =
+        crate::common::run_in(d.path(), &["correct", "--profile", "cp/U6", "u/cone+10.csv", "-o", "c.csv"]);
+    assert_eq!(code, 23, "{err}");
+    assert!(err.contains("did not converge"), "{err}");
+    assert!(!d.path().join("c.csv").exists(), "a refused correction leaves no output");
+    let (code, out, err) = crate::common::run_in(d.path(), &["check", "--profile", "cp/U6", "u/session.json"]);
+    assert_ne!(code, 0, "check must not pass a diverged correction:\n{out}\n{err}");
+    let (code, _, err) = crate::common::run_in(
+        d.path(),
+        &["correct", "--mode", "streaming", "--profile", "cp/U6", "u/cone+10.csv", "-o", "s.csv"],
+    );
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(d.path().join("s.csv")).unwrap();
+    let worst = text
+        .lines()
+        .skip(1)
+        .flat_map(|l| l.split(',').skip(1).take(3).map(|v| v.parse::<f64>().unwrap().abs()).collect::<Vec<_>>())
+        .fold(0.0, f64::max);
+    assert!(worst < 10.0, "streaming output bounded (deg/s): {worst}");
+}

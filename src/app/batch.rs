@@ -347,9 +347,9 @@ pub fn to_html(r: &BatchReport, title: &str) -> String {
             .map(|(i, &c)| (format!("{:.3e}", lo + (i as f64 + 0.5) * width), c as f64))
             .collect();
         s.push_str(&crate::html::plot::bars(
-            &format!("{name}: median {med:.6e}, robust σ {sigma:.2e}"),
-            "value (bin centre)",
-            "units",
+            &format!("{name} over the lot: median {med:.6e}, robust σ {sigma:.2e}"),
+            "coefficient value, SI (bin centre)",
+            "number of units",
             &bars,
         ));
     }

@@ -216,7 +216,11 @@ pub fn summarize(runs: Vec<RunCheck>, thresholds: Thresholds) -> CheckReport {
         let (chi, dof) = runs
             .iter()
             .fold((0.0, 0usize), |(c, d), r| (c + r.axes[idx].after.sys_chi2, d + r.axes[idx].after.sys_dof));
-        let noise_limited = dof > 0 && chi <= crate::stats::chi2_upper(dof, 4.265);
+        // A correction that leaves an axis more than twice as wrong as no correction at all
+        // is never "noise-limited", whatever the χ² says (the χ² is scaled by the corrected
+        // output's own noise, which a diverging correction inflates too).
+        let worse = matches!((before_pct, after_pct), (Some(b), Some(a)) if a > 2.0 * b);
+        let noise_limited = !worse && dof > 0 && chi <= crate::stats::chi2_upper(dof, 4.265);
         let pass = noise_limited || reduction_sys.is_none_or(|r| r >= threshold);
         summary.push(AxisSummary {
             sensor,

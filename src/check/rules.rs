@@ -183,13 +183,13 @@ impl Rules {
             path: path.to_path_buf(),
             line: e.line(),
             column: e.column(),
-            msg: format!("{e}; see the README for the rule kinds"),
+            msg: format!("{e}; see `crosscal help rules` for the rule kinds"),
         })?;
         if r.format != RULES_FORMAT {
             return Err(RulesError::UnknownFormat { path: path.to_path_buf(), found: r.format });
         }
         for rule in &r.rules {
-            if let Rule::Noise { term, unit, .. } = rule {
+            if let Rule::Noise { sensor, term, unit, .. } = rule {
                 if !["white", "bias_instability", "random_walk"].contains(&term.as_str()) {
                     return Err(RulesError::Parse {
                         path: path.to_path_buf(),
@@ -199,12 +199,25 @@ impl Rules {
                     });
                 }
                 if let Some(u) = unit {
+                    let fits = noise_unit_fits(*sensor, term, u);
+                    if noise_factor(u).is_some() && !fits {
+                        return Err(RulesError::Parse {
+                            path: path.to_path_buf(),
+                            line: 0,
+                            column: 0,
+                            msg: format!(
+                                "noise unit '{u}' does not measure the {sensor} {term} term; see `crosscal help rules`"
+                            ),
+                        });
+                    }
                     if noise_factor(u).is_none() {
                         return Err(RulesError::Parse {
                             path: path.to_path_buf(),
                             line: 0,
                             column: 0,
-                            msg: format!("noise unit '{u}' is not known; see the README for the accepted units"),
+                            msg: format!(
+                                "noise unit '{u}' is not known; see `crosscal help rules` for the accepted units"
+                            ),
                         });
                     }
                 }
@@ -260,6 +273,20 @@ pub fn matches(pattern: &str, name: &str) -> bool {
 }
 
 /// Multiplier from a display unit to SI for noise terms.
+/// Whether `unit` measures `term` of `sensor` (an accelerometer bound in deg/h is a mistake,
+/// not a number to convert).
+fn noise_unit_fits(sensor: SensorKind, term: &str, unit: &str) -> bool {
+    unit == "SI"
+        || match (sensor, term) {
+            (SensorKind::Gyro, "white") => ["deg/sqrt(h)", "deg/s/sqrt(Hz)"].contains(&unit),
+            (SensorKind::Gyro, "bias_instability") => unit == "deg/h",
+            (SensorKind::Gyro, "random_walk") => unit == "deg/h/sqrt(h)",
+            (SensorKind::Accel, "white") => ["m/s/sqrt(h)", "ug/sqrt(Hz)"].contains(&unit),
+            (SensorKind::Accel, "bias_instability") => unit == "ug",
+            _ => false,
+        }
+}
+
 fn noise_factor(unit: &str) -> Option<f64> {
     let deg = std::f64::consts::PI / 180.0;
     let g = 9.80665;
@@ -312,6 +339,9 @@ fn coefficient_rule(
 }
 
 fn std_error_rule(coefs: &Coefs<'_>, select: &str, max: f64, label: String) -> Outcome {
+    if !coefs.iter().any(|c| matches(select, &c.name)) {
+        return (label, false, format!("no coefficient matches '{select}'"));
+    }
     let picked: Vec<_> =
         coefs.iter().filter(|c| matches(select, &c.name) && c.status != crate::estimate::CoefStatus::Fixed).collect();
     let bad: Vec<String> = picked

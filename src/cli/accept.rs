@@ -12,7 +12,7 @@ use std::path::PathBuf;
 pub struct Args {
     /// The unit's profile.
     profile: PathBuf,
-    /// Acceptance rules (JSON, format crosscal-rules/1; see the README).
+    /// Acceptance rules (JSON, format crosscal-rules/1; see `crosscal help rules`).
     #[arg(long)]
     rules: PathBuf,
     /// The unit's session: checked with the profile for residual and reduction rules.

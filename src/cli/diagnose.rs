@@ -159,7 +159,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
 /// `diagnose` on a protocol session: pose and turn residuals, candidate effects on the poses.
 fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
     if a.report.is_some() || a.figures.is_some() {
-        anyhow::bail!("--report and --figures draw stand-run residuals; for a protocol session use the text or --json output");
+        anyhow::bail!(
+            "--report and --figures draw stand-run residuals; for a protocol session use the text or --json output"
+        );
     }
     let model = start_model(a, session)?;
     let d = crosscal::diagnose::protocol::diagnose_protocol(session, &model)

@@ -25,6 +25,9 @@ pub struct Args {
 #[derive(Debug, clap::Subcommand)]
 enum Layout {
     /// imucal's example: CSV `n_samples,gyr_*,acc_*` (deg/s, m/s²) and, optionally, its section list.
+    #[command(
+        after_help = "Example: crosscal import imucal-ferraris session.csv sections.json --rate-hz 102.4 --out ferraris/"
+    )]
     ImucalFerraris {
         /// The recording.
         csv: PathBuf,
@@ -39,6 +42,9 @@ enum Layout {
         turn_angle_deg: f64,
     },
     /// imucal's annotated session: CSV with `part`, `samples` and raw `acc_*`, `gyr_*`.
+    #[command(
+        after_help = "Example: crosscal import imucal-annotated annotated.csv --rate-hz 204.8 --turn-angle-deg 360 --out ann/"
+    )]
     ImucalAnnotated {
         /// The recording.
         csv: PathBuf,
@@ -50,6 +56,7 @@ enum Layout {
         turn_angle_deg: f64,
     },
     /// imu_tk: accelerometer and gyro files of `t x y z` rows (multi-position protocol).
+    #[command(after_help = "Example: crosscal import imu-tk acc.mat gyro.mat --init-rest-s 50 --g 9.81744 --out tk/")]
     ImuTk {
         /// Accelerometer file.
         acc: PathBuf,
@@ -60,6 +67,7 @@ enum Layout {
         init_rest_s: f64,
     },
     /// `Fs,…` header lines then `ax,ay,az,gx,gy,gz` raw counts (multi-position protocol).
+    #[command(after_help = "Example: crosscal import tedaldi mpu.csv --out mpu/")]
     Tedaldi {
         /// The recording.
         csv: PathBuf,

@@ -24,7 +24,7 @@ pub const EXIT_CHECK_FAILED: u8 = 1;
 /// Exit code: bad usage, or a request these data cannot satisfy.
 pub const EXIT_INPUT: u8 = 2;
 
-/// Every exit code and its one meaning, as the README's table lists them (and
+/// Every exit code and its one meaning, as docs/reference-exit-codes.md lists them (and
 /// `tests/exit_codes.rs` produces each one).
 pub const EXIT_CODES: &[(u8, &str)] = &[
     (0, "success"),
@@ -50,7 +50,7 @@ pub const EXIT_CODES: &[(u8, &str)] = &[
     (20, "invalid rules file (unknown format version, rule kind, term or unit)"),
     (21, "invalid profile (a coefficient missing, repeated or not finite; g out of range; a scale matrix that cannot be inverted; in another unit's folder)"),
     (22, "the estimate failed (a nonlinear search did not converge, too few samples, values too large to compute with)"),
-    (23, "the correction cannot be made (a non-finite result; no temperature for a temperature model)"),
+    (23, "the correction cannot be made (a non-finite result; an offline correction that does not converge; no temperature for a temperature model)"),
     (24, "the output already exists (crosscal never overwrites without --force)"),
 ];
 
@@ -116,7 +116,9 @@ fn code_of(cause: &(dyn std::error::Error + 'static)) -> Option<u8> {
     if let Some(c) = cause.downcast_ref::<CorrectError>() {
         return Some(match c {
             CorrectError::Model(_) | CorrectError::Singular(_) => 21,
-            CorrectError::NonFinite { .. } | CorrectError::MissingTemperature(_) => 23,
+            CorrectError::NonFinite { .. }
+            | CorrectError::MissingTemperature(_)
+            | CorrectError::NotConverged { .. } => 23,
             _ => EXIT_INPUT,
         });
     }

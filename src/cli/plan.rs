@@ -55,6 +55,14 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         accel_density: a.vrw / 60.0,
     };
     if let Some(path) = &a.noise_from {
+        // A unit's folder of the store: its newest profile.
+        let newest;
+        let path = if path.is_dir() {
+            newest = crosscal::profile::Profile::read_or_latest(path)?.0;
+            &newest
+        } else {
+            path
+        };
         let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
         let report: NoiseReport = match serde_json::from_str::<crosscal::profile::Profile>(&text) {
             Ok(p) => p.noise.ok_or_else(|| {

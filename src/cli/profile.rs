@@ -15,6 +15,7 @@ pub struct Args {
 #[derive(Debug, clap::Subcommand)]
 enum Sub {
     /// List units, or one unit's profile history (oldest first).
+    #[command(after_help = "Example: crosscal profile list I1426-0042")]
     List {
         /// Unit serial (all units when absent).
         #[arg(value_parser = super::parse_serial)]
@@ -24,6 +25,7 @@ enum Sub {
         store: PathBuf,
     },
     /// Show the latest profile of a unit (valid at a date with --at).
+    #[command(after_help = "Example: crosscal profile show I1426-0042 --at 2026-11-01")]
     Show {
         /// Unit serial.
         #[arg(value_parser = super::parse_serial)]
@@ -39,6 +41,7 @@ enum Sub {
         json: bool,
     },
     /// Coefficient changes between two profiles in units of their standard errors (has the unit drifted?).
+    #[command(after_help = "Example: crosscal profile diff old.json new.json")]
     Diff {
         /// Older profile (file).
         a: PathBuf,
@@ -49,8 +52,11 @@ enum Sub {
         threshold: f64,
     },
     /// Export a profile to imucal's calibration JSON (Ferraris) or Kalibr's imu.yaml.
+    #[command(
+        after_help = "Example: crosscal profile export calib-profiles/I1426-0042/P.json --to kalibr -o imu.yaml"
+    )]
     Export {
-        /// Profile file.
+        /// Profile file, or a unit's folder of the store (its newest profile).
         profile: PathBuf,
         /// Target format: `imucal` or `kalibr`.
         #[arg(long)]
@@ -63,6 +69,7 @@ enum Sub {
         rate_hz: f64,
     },
     /// Import an imucal Ferraris calibration JSON as a profile of a unit in the store.
+    #[command(after_help = "Example: crosscal profile import-imucal cal.json --serial I1426-0042")]
     ImportImucal {
         /// imucal calibration JSON.
         file: PathBuf,
@@ -160,7 +167,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
 }
 
 fn export(profile: &Path, to: &str, output: &Path, rate_hz: f64) -> anyhow::Result<()> {
-    let p = Profile::read(profile)?;
+    let p = super::read_profile(profile)?;
     let (text, lost) = match to {
         "imucal" => {
             let (v, lost) = crosscal::profile::interop::to_imucal(&p);

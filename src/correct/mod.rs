@@ -67,6 +67,17 @@ pub enum CorrectError {
         /// Its time stamp, s.
         t_s: f64,
     },
+    /// The offline correction's fixed point (ε̂ from the corrected rate) was not reached:
+    /// refused rather than returned.
+    #[error(
+        "the offline correction did not converge ({passes} passes, last change {change:.1e} of the signal): the profile's angular-acceleration terms (C_ε) are too large for the derivative at this sample rate; check the profile (is C_ε plausible?) or use --mode streaming"
+    )]
+    NotConverged {
+        /// Passes made.
+        passes: usize,
+        /// Largest change of the last pass relative to the signal's largest value.
+        change: f64,
+    },
     /// Input arrays disagree in length.
     #[error("input lengths differ: t has {t}, gyro {g}, accel {a}")]
     Length {

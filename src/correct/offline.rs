@@ -39,6 +39,7 @@ pub fn correct_offline(
     let mut e = vec![[0.0; 3]; n];
     let mut iterations = 0;
     let mut converged = !needs_eps;
+    let mut last_change = (0.0_f64, 1.0_f64);
     while needs_eps && iterations < 50 {
         iterations += 1;
         derivative_offline(t_s, &w, &deriv, &mut e);
@@ -65,10 +66,21 @@ pub fn correct_offline(
             w[k] = wn;
             acc[k] = an;
         }
+        last_change = if change_w * size_a.max(f64::MIN_POSITIVE) >= change_a * size_w.max(f64::MIN_POSITIVE) {
+            (change_w, size_w.max(f64::MIN_POSITIVE))
+        } else {
+            (change_a, size_a.max(f64::MIN_POSITIVE))
+        };
         if change_w <= 1e-14 * size_w.max(f64::MIN_POSITIVE) && change_a <= 1e-14 * size_a.max(f64::MIN_POSITIVE) {
             converged = true;
             break;
         }
+    }
+    // Passes that stop changing below 1e-9 of the signal have converged for every practical
+    // purpose; anything larger after the last pass is a fixed point that was not reached
+    // (the profile's C_ε times the derivative's gain at this sample rate exceeds one).
+    if !converged && (last_change.0 > 1e-9 * last_change.1 || last_change.0.is_nan()) {
+        return Err(CorrectError::NotConverged { passes: iterations, change: last_change.0 / last_change.1 });
     }
     let out =
         Corrected { w_rad_s: w, a_m_s2: acc, iterations, converged, warmup: 0, flags, time_offset_s: cal.lag_s() };

@@ -13,7 +13,7 @@ pub fn page_start(title: &str) -> String {
         "<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>{t}</title><style>\
          body{{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}}\
          table{{border-collapse:collapse;margin:0.5em 0}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
-         th{{background:#eee}}.verdict{{font-size:1.2em;padding:0.5em;background:#f4f4f4}}</style></head><body>\
+         th{{background:#eee}}td:first-child{{text-align:left;white-space:nowrap}}.verdict{{font-size:1.2em;padding:0.5em;background:#f4f4f4}}</style></head><body>\
          <h1>{t}</h1>",
         t = esc(title)
     );

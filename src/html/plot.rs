@@ -68,7 +68,12 @@ pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(
             }
         }
         if series.len() > 1 {
-            let _ = chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw();
+            let _ = chart
+                .configure_series_labels()
+                .label_font(TICK_FONT)
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw();
         }
         let _ = root.present();
     }
@@ -160,7 +165,12 @@ pub fn loglog(
                 s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
             }
         }
-        let _ = chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw();
+        let _ = chart
+            .configure_series_labels()
+            .label_font(TICK_FONT)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw();
         let _ = root.present();
     }
     buf
@@ -187,7 +197,8 @@ pub fn ladder(title: &str, y_label: &str, rungs: &[String], series: &[(String, V
         let Ok(mut chart) = b.build_cartesian_2d(-0.5..n as f64 - 0.5, (y0..y1).log_scale()) else {
             return String::new();
         };
-        let tick = if vertical { TICK_FONT.into_font().transform(FontTransform::Rotate90) } else { TICK_FONT.into_font() };
+        let tick =
+            if vertical { TICK_FONT.into_font().transform(FontTransform::Rotate90) } else { TICK_FONT.into_font() };
         let _ = chart
             .configure_mesh()
             .y_desc(y_label)

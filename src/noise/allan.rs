@@ -179,16 +179,35 @@ pub fn edf(n: usize, m: usize, kind: NoiseType) -> f64 {
 /// Chi-squared confidence interval of a deviation σ estimated with `edf` degrees of
 /// freedom at two-sided level `level` (e.g. 0.683): (low, high) (SP 1065 eq. 41).
 pub fn interval(sigma: f64, edf: f64, level: f64) -> (f64, f64) {
-    let Ok(chi) = ChiSquared::new(edf.max(1e-3)) else {
-        return (0.0, f64::INFINITY);
-    };
+    // Below one degree of freedom the χ² quantiles underflow and the interval means nothing;
+    // such points (the last cluster time of a short record) get the interval of one.
+    let edf = edf.max(1.0);
     let p = (1.0 - level) / 2.0;
-    let hi_q = chi.inverse_cdf(1.0 - p);
-    let lo_q = chi.inverse_cdf(p);
+    let (lo_q, hi_q) = chi2_quantiles(edf, p);
     let var = sigma * sigma;
     let low = (var * edf / hi_q).sqrt();
-    let high = if lo_q > 0.0 { (var * edf / lo_q).sqrt() } else { f64::INFINITY };
+    // The upper end is finite for every edf > 0; a quantile that underflows to 0 at tiny edf
+    // is held at the smallest positive double so the bound stays a number (JSON has no ∞).
+    let high = (var * edf / lo_q.max(f64::MIN_POSITIVE)).sqrt().min(f64::MAX);
     (low, high)
+}
+
+/// The p and 1 − p quantiles of χ²(k). statrs' inverse fails (NaN) at the edf of long
+/// recordings (≳ 3e5); there, and wherever it does not return a finite number, the
+/// Wilson–Hilferty approximation k(1 − 2/(9k) + z√(2/(9k)))³ is used (relative error < 1e-6
+/// for k > 1e3).
+fn chi2_quantiles(k: f64, p: f64) -> (f64, f64) {
+    let wilson_hilferty = |z: f64| {
+        let c = 2.0 / (9.0 * k);
+        k * (1.0 - c + z * c.sqrt()).powi(3).max(0.0)
+    };
+    let z = statrs::distribution::Normal::standard().inverse_cdf(1.0 - p);
+    let exact =
+        if k <= 1e4 { ChiSquared::new(k).ok().map(|c| (c.inverse_cdf(p), c.inverse_cdf(1.0 - p))) } else { None };
+    match exact {
+        Some((lo, hi)) if lo.is_finite() && hi.is_finite() && hi > 0.0 => (lo, hi),
+        _ => (wilson_hilferty(-z), wilson_hilferty(z)),
+    }
 }
 
 #[cfg(test)]
@@ -211,5 +230,26 @@ mod tests {
         assert!(lo < 2.0 && hi > 2.0, "{lo} {hi}");
         let (lo2, hi2) = interval(2.0, 1000.0, 0.683);
         assert!(hi2 - lo2 < hi - lo);
+    }
+
+    /// Long recordings (edf ~ 1e5–1e7) used to give NaN bounds, saved as JSON nulls that
+    /// nothing could read back; the bounds are now finite and match the normal limit
+    /// σ(1 ± z/√(2·edf)).
+    #[test]
+    fn intervals_stay_finite_at_the_edf_of_long_recordings() {
+        for edf in [3e3, 1e4, 1e4 + 1.0, 3e5, 7e5, 1e7] {
+            let (lo, hi) = interval(1.0, edf, 0.683);
+            assert!(lo.is_finite() && hi.is_finite() && lo < 1.0 && hi > 1.0, "{edf}: {lo} {hi}");
+            let half = 1.0 / (2.0 * edf).sqrt();
+            assert!(
+                ((1.0 - lo) / half - 1.0).abs() < 0.05 && ((hi - 1.0) / half - 1.0).abs() < 0.05,
+                "{edf}: {lo} {hi}"
+            );
+        }
+        let (a, b) = interval(1.0, 1e4, 0.683);
+        let (c, d) = interval(1.0, 1e4 + 1.0, 0.683);
+        assert!((a - c).abs() < 1e-6 && (b - d).abs() < 1e-6, "exact and approximate agree at the switch");
+        let (lo, hi) = interval(1.0, 1e-3, 0.683);
+        assert!(lo.is_finite() && hi.is_finite() && lo < 1.0 && hi > 1.0, "{lo} {hi}");
     }
 }

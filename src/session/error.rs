@@ -71,7 +71,7 @@ pub enum SessionError {
         msg: String,
     },
     /// The manifest's `format` is not one this reader knows.
-    #[error("{path}: unknown session format '{found}': this crosscal reads 'crosscal-session/1'; upgrade crosscal or convert the session")]
+    #[error("{path}: unknown session format '{found}': this crosscal reads 'crosscal-session/1' and 'crosscal-session/2'; upgrade crosscal or convert the session")]
     UnknownFormat {
         /// The manifest.
         path: PathBuf,

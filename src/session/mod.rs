@@ -565,6 +565,23 @@ fn num(v: &Value, key: &str) -> Option<f64> {
     v.get(key).and_then(Value::as_f64).filter(|x| x.is_finite())
 }
 
+/// Refuses optional fields that are present with a value of the wrong kind (a string where a
+/// number belongs, a fraction where a count belongs) instead of ignoring them: `numbers` must
+/// be finite numbers, `counts` non-negative integers.
+fn kinds_ok(name: &str, v: &Value, numbers: &[&str], counts: &[&str], bad: &BadValue<'_>) -> Result<(), SessionError> {
+    for key in numbers {
+        if v.get(*key).is_some_and(|x| !x.is_null() && !x.as_f64().is_some_and(f64::is_finite)) {
+            return Err(bad(key, format!("run '{name}': \"{key}\" must be a finite number")));
+        }
+    }
+    for key in counts {
+        if v.get(*key).is_some_and(|x| !x.is_null() && x.as_u64().is_none()) {
+            return Err(bad(key, format!("run '{name}': \"{key}\" must be a whole number")));
+        }
+    }
+    Ok(())
+}
+
 fn vec3(v: &Value, key: &str) -> Option<[f64; 3]> {
     let a = v.get(key)?.as_array().filter(|a| a.len() == 3)?;
     let x: Vec<f64> = a.iter().filter_map(Value::as_f64).filter(|x| x.is_finite()).collect();
@@ -607,6 +624,7 @@ fn parse_run(i: usize, r: &Value, bad_kind: &Bad<'_>) -> Result<RunSpec, Session
             ))
         }
     };
+    kinds_ok(&name, r, &["temperature_c"], &[], &bad)?;
     let temperature_c = match num(r, "temperature_c") {
         Some(t) => Some(
             within(&name, "temperature_c", t, LIMITS.temperature_c.0, LIMITS.temperature_c.1, "degC")
@@ -642,6 +660,7 @@ fn conic_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSpec,
     };
     let check =
         |key: &str, x: f64, lim: f64, unit: &str| within(name, key, x, -lim, lim, unit).map_err(|m| bad(key, m));
+    kinds_ok(name, m, &["cone_angle_deg", "rate_deg_s", "phase_deg"], &[], bad)?;
     let cone_angle_deg = need("cone_angle_deg")?;
     let rate_deg_s = check("rate_deg_s", need("rate_deg_s")?, LIMITS.rate_deg_s, "deg/s")?;
     let phase_deg = check("phase_deg", num(m, "phase_deg").unwrap_or(0.0), LIMITS.phase_deg, "degrees")?;
@@ -672,6 +691,7 @@ fn static_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSpec
     }
     let up = [up[0] / norm, up[1] / norm, up[2] / norm];
     let mut earth = [0.0; 3];
+    kinds_ok(name, m, &["latitude_deg"], &[], bad)?;
     if m.get("earth_rate").and_then(Value::as_bool).unwrap_or(false) {
         let lat = num(m, "latitude_deg")
             .ok_or_else(|| bad(name, format!("run '{name}': earth_rate needs \"latitude_deg\"")))?
@@ -712,6 +732,7 @@ fn rotation_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSp
 }
 
 fn multi_position_motion(name: &str, m: &Value, bad: &BadValue<'_>) -> Result<MotionSpec, SessionError> {
+    kinds_ok(name, m, &["init_rest_s", "threshold_multiplier"], &["window", "min_pose_samples"], bad)?;
     let init_rest_s = num(m, "init_rest_s").unwrap_or(30.0);
     let window = m.get("window").and_then(Value::as_u64).unwrap_or(101) as usize;
     let threshold_multiplier = num(m, "threshold_multiplier");

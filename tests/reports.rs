@@ -1,0 +1,168 @@
+//! The HTML reports (diagnose, noise, batch) open in a browser without scripts or network
+//! and have the structure a reader expects: a title, tables, one section per channel with
+//! its plots, every plot titled and with labelled axes. Where Chromium is installed
+//! (`/usr/bin/chromium`, as `.ci/run` installs it when it can), each report is also rendered
+//! headless to a screenshot that must not be blank; elsewhere that part is skipped with a
+//! message.
+
+use crate::common::run_in;
+use std::path::Path;
+
+fn count(s: &str, pat: &str) -> usize {
+    s.matches(pat).count()
+}
+
+/// No scripts, no external resources (the only URL allowed is the SVG namespace).
+fn self_contained(html: &str, what: &str) {
+    assert!(!html.contains("<script"), "{what}: has a script");
+    let urls = html.replace("http://www.w3.org/2000/svg", "").replace("http://www.w3.org/1999/xlink", "");
+    assert!(!urls.contains("http://") && !urls.contains("https://"), "{what}: refers to the network");
+    assert!(html.starts_with("<!DOCTYPE html>") && html.trim_end().ends_with("</html>"), "{what}: a whole page");
+    assert_eq!(count(html, "<h1>"), 1, "{what}: one title");
+}
+
+/// Every plot has a title (caption) and axis descriptions with units in parentheses.
+fn plots_are_labelled(html: &str, what: &str) -> usize {
+    let svgs: Vec<&str> = html.split("<svg").skip(1).map(|s| s.split("</svg>").next().unwrap_or_default()).collect();
+    for (i, svg) in svgs.iter().enumerate() {
+        let texts: Vec<&str> =
+            svg.split("<text").skip(1).filter_map(|t| t.split('>').nth(1)?.split("</text").next()).collect();
+        assert!(texts.len() >= 4, "{what}: plot {i} has too little text: {texts:?}");
+        assert!(
+            texts.iter().filter(|t| t.contains('(') && t.contains(')')).count() >= 1,
+            "{what}: plot {i} axes without units: {texts:?}"
+        );
+    }
+    svgs.len()
+}
+
+/// Renders a page with headless Chromium and checks the screenshot is not blank.
+fn render(page: &Path, what: &str) {
+    let chromium = Path::new("/usr/bin/chromium");
+    if !chromium.is_file() {
+        eprintln!("skipped: rendering {what} needs /usr/bin/chromium (apt-get install chromium)");
+        return;
+    }
+    let dir = page.parent().unwrap();
+    let shot = dir.join(format!("{what}.png"));
+    let profile = tempfile::tempdir().unwrap();
+    let out = std::process::Command::new("timeout")
+        .arg("120")
+        .arg(chromium)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--window-size=1200,2400",
+        ])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(format!("file://{}", page.display()))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "chromium failed on {what}: {}", String::from_utf8_lossy(&out.stderr));
+    let png = std::fs::read(&shot).unwrap();
+    assert_eq!(&png[1..4], b"PNG", "{what}: a PNG screenshot");
+    // A blank 1200×2400 page compresses to a few kB; text, tables and plots do not.
+    assert!(png.len() > 40_000, "{what}: the screenshot looks blank ({} bytes)", png.len());
+}
+
+#[test]
+fn diagnose_report_has_a_section_per_channel_and_renders() {
+    let d = tempfile::tempdir().unwrap();
+    let (code, _, err) = run_in(
+        d.path(),
+        &[
+            "simulate",
+            "-o",
+            "u",
+            "--gyro-noise",
+            "0.002",
+            "--accel-noise",
+            "2e-5",
+            "--duration",
+            "12",
+            "--hidden",
+            "gyro-g-sensitivity",
+            "--set",
+            "gyro.g_xz=0.00005",
+        ],
+    );
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = run_in(d.path(), &["diagnose", "u/session.json", "--report", "d.html", "--figures", "figs"]);
+    assert_eq!(code, 0, "{err}");
+    let html = std::fs::read_to_string(d.path().join("d.html")).unwrap();
+    self_contained(&html, "diagnose report");
+    assert!(html.contains("class=\"verdict\"") && html.contains("gyro-g-sensitivity"), "the verdict names the effect");
+    assert!(count(&html, "<table") >= 2, "tables: residuals before, after each step");
+    for ch in ["gyro x", "gyro y", "gyro z", "accel x", "accel y", "accel z"] {
+        assert_eq!(count(&html, &format!("<h2>{ch}</h2>")), 1, "one section for {ch}");
+    }
+    let plots = plots_are_labelled(&html, "diagnose report");
+    assert_eq!(plots, 24, "four plots per channel");
+    let figs = std::fs::read_dir(d.path().join("figs")).unwrap().count();
+    assert_eq!(figs, 24, "--figures writes the report's plots");
+    render(&d.path().join("d.html"), "diagnose");
+}
+
+#[test]
+fn noise_report_has_a_plot_per_channel_and_renders() {
+    let d = tempfile::tempdir().unwrap();
+    let (code, _, err) = run_in(
+        d.path(),
+        &["simulate", "--preset", "static", "--duration", "600", "--arw", "0.15", "--vrw", "0.02", "-o", "still"],
+    );
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = run_in(d.path(), &["noise", "still/session.json", "--report", "n.html"]);
+    assert_eq!(code, 0, "{err}");
+    let html = std::fs::read_to_string(d.path().join("n.html")).unwrap();
+    self_contained(&html, "noise report");
+    assert_eq!(count(&html, "<h2>"), 6, "one section per channel");
+    assert_eq!(plots_are_labelled(&html, "noise report"), 6, "one Allan deviation plot per channel");
+    assert!(html.contains("Allan deviation (") && html.contains("cluster time τ (s)"), "axes with units");
+    render(&d.path().join("n.html"), "noise");
+}
+
+#[test]
+fn batch_report_has_its_tables_and_distributions_and_renders() {
+    let d = tempfile::tempdir().unwrap();
+    for i in 1..=5 {
+        let (code, _, err) = run_in(
+            d.path(),
+            &[
+                "simulate",
+                "-o",
+                &format!("lot/U{i}"),
+                "--serial",
+                &format!("U{i}"),
+                "--seed",
+                &i.to_string(),
+                "--duration",
+                "6",
+                "--gyro-noise",
+                "0.002",
+                "--accel-noise",
+                "2e-5",
+            ],
+        );
+        assert_eq!(code, 0, "{err}");
+    }
+    std::fs::write(
+        d.path().join("rules.json"),
+        r#"{"format": "crosscal-rules/1", "rules": [{"kind": "coefficient", "select": "gyro.c_*", "max_abs_deviation": 0.02}]}"#,
+    )
+    .unwrap();
+    let (code, _, err) = run_in(d.path(), &["batch", "lot", "--rules", "rules.json"]);
+    assert_eq!(code, 0, "{err}");
+    let html = std::fs::read_to_string(d.path().join("lot/batch-report.html")).unwrap();
+    self_contained(&html, "batch report");
+    assert!(count(&html, "<table") >= 1 && count(&html, "<tr") >= 6, "a verdict row per unit");
+    assert!(html.contains("coefficients across the batch"));
+    assert!(plots_are_labelled(&html, "batch report") >= 30, "a distribution per coefficient");
+    render(&d.path().join("lot/batch-report.html"), "batch");
+}
