@@ -502,5 +502,38 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("furlong"), "{e}");
+        // A known unit of another sensor or term is a mistake, not a number to convert.
+        let e = Rules::parse(
+            p,
+            r#"{"format":"crosscal-rules/1","rules":[{"kind":"noise","sensor":"accel","term":"bias_instability","max":1,"unit":"deg/h"}]}"#,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("does not measure the accel bias_instability"), "{e}");
+        for (sensor, term, unit) in
+            [("gyro", "white", "deg/sqrt(h)"), ("accel", "bias_instability", "ug"), ("gyro", "random_walk", "SI")]
+        {
+            let text = format!(
+                r#"{{"format":"crosscal-rules/1","rules":[{{"kind":"noise","sensor":"{sensor}","term":"{term}","max":1,"unit":"{unit}"}}]}}"#
+            );
+            assert!(Rules::parse(p, &text).is_ok(), "{sensor} {term} in {unit}");
+        }
+    }
+
+    /// A `std_error` rule whose `select` matches nothing is a typo, and fails (it passed).
+    #[test]
+    fn a_std_error_rule_selecting_nothing_fails() {
+        let c = crate::estimate::Coefficient {
+            name: "gyro.b_x".into(),
+            effect: "gyro-bias".into(),
+            channel: 0,
+            unit: "rad/s".into(),
+            value: 0.0,
+            std_error: Some(1e-6),
+            status: crate::estimate::CoefStatus::Fitted,
+        };
+        let coefs = [&c];
+        assert!(std_error_rule(&coefs, "gyro.b_*", 1e-5, "r".into()).1);
+        let (_, pass, detail) = std_error_rule(&coefs, "gyro.bx*", 1e-5, "r".into());
+        assert!(!pass && detail.contains("no coefficient matches"), "{detail}");
     }
 }
