@@ -75,6 +75,59 @@ pub struct ChannelNoise {
     /// Fitted Allan-variance coefficients [3Q², N², (2 ln2/π) B², K²/3, R²/2] as the
     /// weights of [τ⁻², τ⁻¹, 1, τ, τ²].
     pub coefficients: [f64; 5],
+    /// The standard reading of bias instability (IEEE 952 C.1.3 read off the measured curve,
+    /// not the fitted one): the smallest measured σ(τ) / 0.664, with its τ and interval.
+    /// Present when the curve has a flat part (the fit finds a flicker floor).
+    #[serde(default)]
+    pub bias_instability_reading: Option<Reading>,
+    /// Cluster-time ranges where the measured curve leaves the fitted IEEE 952 model by more
+    /// than its interval: a bump (a periodic disturbance), a shoulder, a slope the five terms
+    /// do not have. Terms are not forced there; these say where and what it looks like.
+    #[serde(default)]
+    pub departures: Vec<Departure>,
+}
+
+/// A value read off the measured curve, with the interval of the point it comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Reading {
+    /// The value (SI).
+    pub value: f64,
+    /// The cluster time it was read at, s.
+    pub tau_s: f64,
+    /// Lower end of its 68.3 % interval.
+    pub low: f64,
+    /// Upper end of its 68.3 % interval.
+    pub high: f64,
+}
+
+/// A range of cluster times where the measured curve and the fitted model disagree.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Departure {
+    /// First cluster time of the range, s.
+    pub tau_from_s: f64,
+    /// Last cluster time of the range, s.
+    pub tau_to_s: f64,
+    /// Measured σ over fitted σ where they differ most (> 1: the curve lies above the model).
+    pub ratio: f64,
+    /// Local log-log slope of the measured curve over the range.
+    pub slope: f64,
+    /// What it looks like, in words.
+    pub looks_like: String,
+}
+
+impl Departure {
+    /// One line for people.
+    pub fn describe(&self) -> String {
+        format!(
+            "τ {:.3}–{:.3} s: the measured curve lies {} the IEEE 952 model by up to {:.2}× (local slope {:+.2}): {}",
+            self.tau_from_s,
+            self.tau_to_s,
+            if self.ratio > 1.0 { "above" } else { "below" },
+            if self.ratio > 1.0 { self.ratio } else { 1.0 / self.ratio },
+            self.slope,
+            self.looks_like
+        )
+    }
 }
 
 /// A noise characterisation of one recording.
@@ -106,6 +159,11 @@ pub enum NoiseError {
 
 const BASIS: [fn(f64) -> f64; 5] = [|t| 1.0 / (t * t), |t| 1.0 / t, |_| 1.0, |t| t, |t| t * t];
 const FLAT: f64 = 0.664_282_4; // sqrt(2 ln 2 / π), IEEE 952 table C.1
+/// Degrees of freedom a point needs to be read as the curve's minimum (±10 % at 68 %).
+pub const READING_EDF: f64 = 50.0;
+/// The band a fitted model must stay inside at every measured point (99.7 %: with tens of
+/// correlated points a 68 % band is left by chance).
+const WIDE: f64 = 0.997;
 
 impl ChannelNoise {
     /// The fitted Allan deviation at τ.
@@ -218,7 +276,9 @@ pub fn analyse_channel(
         }
     }
     // Pass 1: relative errors weighted as white rate noise; pass 2 and 3: degrees of
-    // freedom by the dominant fitted term, relative to the fitted variance.
+    // freedom by the dominant fitted term, relative to the fitted variance. Where the five
+    // terms cannot follow the measured curve the misfit is reported (`departures`), and the
+    // bias instability is also read off the measured curve (`bias_instability_reading`).
     let mut w: Vec<f64> =
         used.iter().zip(&avar).map(|(&m, v)| allan::edf(n, m, NoiseType::WhiteRate) / (v * v)).collect();
     let mut c = fit_terms(&tau, &avar, &w);
@@ -263,7 +323,10 @@ pub fn analyse_channel(
         quantization: visible(0).then(|| (c[0] / 3.0).sqrt()),
         ramp: visible(4).then(|| (2.0 * c[4]).sqrt()),
         coefficients: c,
+        bias_instability_reading: None,
+        departures: Vec::new(),
     };
+    out.departures = departures(&out);
     if visible(2) {
         // The flat minimum of the fitted curve over the measured range (IEEE 952 C.1.3).
         let (t0, t1) = (tau[0].ln(), tau[tau.len() - 1].ln());
@@ -272,8 +335,98 @@ pub fn analyse_channel(
             out.bias_instability = Some(s / FLAT);
             out.bias_instability_tau_s = Some(t);
         }
+        // The standard reading: the smallest well-determined measured point (≥ READING_EDF
+        // degrees of freedom: the minimum of scattered long-τ points is biased low) / 0.664.
+        let eligible: Vec<usize> = (0..out.points.len()).filter(|&k| out.points[k].edf >= READING_EDF).collect();
+        let k = eligible.iter().copied().min_by(|&a, &b| out.points[a].adev.total_cmp(&out.points[b].adev));
+        // At the last of them the minimum counts only where the curve has flattened: a
+        // log-log slope above −0.2 over the factor of three of τ before it.
+        let flat_end = |k: usize| {
+            let t = out.points[k].tau_s / 3.0;
+            let j = eligible
+                .iter()
+                .copied()
+                .filter(|&j| out.points[j].tau_s <= t)
+                .max_by(|&a, &b| out.points[a].tau_s.total_cmp(&out.points[b].tau_s));
+            j.is_some_and(|j| {
+                let (a, b) = (out.points[j], out.points[k]);
+                (b.adev.ln() - a.adev.ln()) / (b.tau_s.ln() - a.tau_s.ln()) > -0.2
+            })
+        };
+        let interior = |k: usize| Some(&k) != eligible.first() && (Some(&k) != eligible.last() || flat_end(k));
+        if let Some(k) = k.filter(|&k| interior(k)) {
+            let p = out.points[k];
+            out.bias_instability_reading =
+                Some(Reading { value: p.adev / FLAT, tau_s: p.tau_s, low: p.low / FLAT, high: p.high / FLAT });
+        }
     }
     Ok(out)
+}
+
+/// Ranges of consecutive points where the fitted model leaves the measured point's 99.7 %
+/// interval, with what the measured curve does there.
+fn departures(c: &ChannelNoise) -> Vec<Departure> {
+    let pts = &c.points;
+    let off = |p: &AdevPoint| {
+        let m = c.model_adev(p.tau_s);
+        let (lo, hi) = allan::interval(p.adev, p.edf, WIDE);
+        m > hi || m < lo
+    };
+    let mut out = Vec::new();
+    let mut k = 0;
+    while k < pts.len() {
+        if !off(&pts[k]) {
+            k += 1;
+            continue;
+        }
+        let start = k;
+        while k < pts.len() && off(&pts[k]) {
+            k += 1;
+        }
+        let (a, b) = (start, k - 1);
+        let ratio = pts[a..=b]
+            .iter()
+            .map(|p| p.adev / c.model_adev(p.tau_s).max(f64::MIN_POSITIVE))
+            .max_by(|x, y| x.ln().abs().total_cmp(&y.ln().abs()))
+            .unwrap_or(1.0);
+        let (lo, hi) = (a.saturating_sub(1), (b + 1).min(pts.len() - 1));
+        let slope = if hi > lo {
+            (pts[hi].adev.ln() - pts[lo].adev.ln()) / (pts[hi].tau_s.ln() - pts[lo].tau_s.ln())
+        } else {
+            0.0
+        };
+        // A local maximum of the measured curve that rises significantly (its 99.7 % interval
+        // above that of the lowest point before it in the range) is a bump: a sinusoid of
+        // period T peaks near τ = 0.37 T whatever the model does around it.
+        let peak = (lo.max(1)..=hi.min(pts.len().saturating_sub(2))).find(|&k| {
+            let Some(j) = (lo..k).min_by(|&x, &y| pts[x].adev.total_cmp(&pts[y].adev)) else { return false };
+            let (k_low, _) = allan::interval(pts[k].adev, pts[k].edf, WIDE);
+            let (_, j_high) = allan::interval(pts[j].adev, pts[j].edf, WIDE);
+            pts[k].adev > pts[k + 1].adev && k_low > j_high
+        });
+        let looks_like = if let Some(k) = peak {
+            format!(
+                "a bump peaking at τ = {:.3} s: a periodic disturbance of period near {:.3} s (vibration, a \
+                 temperature or supply cycle) adds variance there",
+                pts[k].tau_s,
+                pts[k].tau_s / 0.371
+            )
+        } else if ratio > 1.0 && b + 1 == pts.len() {
+            "more variance than the five terms allow at the end of the curve (a trend, a drift, or a \
+             random walk steeper than +1/2)"
+                .to_string()
+        } else if ratio > 1.0 {
+            "more variance than the model here: correlated noise (an output filter, a resonance) the \
+             five terms do not have"
+                .to_string()
+        } else if slope < -0.75 {
+            "a slope near −1: quantisation or correlated high-frequency noise the model does not fit here".to_string()
+        } else {
+            "less variance than the model: the terms overshoot here, read the curve rather than the fit".to_string()
+        };
+        out.push(Departure { tau_from_s: pts[a].tau_s, tau_to_s: pts[b].tau_s, ratio, slope, looks_like });
+    }
+    out
 }
 
 /// The chosen channels of a static recording, read as a stream.

@@ -21,8 +21,8 @@ pub fn table(r: &NoiseReport, g_m_s2: f64) -> String {
     );
     let _ = writeln!(
         s,
-        "{:<4} {:>13} {:>13} {:>13} {:>10} {:>13} {:>13}",
-        "chan", "white /√Hz", "ARW/VRW", "bias inst.", "at τ (s)", "random walk", "quantisation"
+        "{:<4} {:>13} {:>13} {:>13} {:>10} {:>13} {:>13} {:>13}",
+        "chan", "white /√Hz", "ARW/VRW", "BI reading", "at τ (s)", "BI model fit", "random walk", "quantisation"
     );
     for c in &r.channels {
         let (_, k) = c.sensor().display_unit();
@@ -30,29 +30,64 @@ pub fn table(r: &NoiseReport, g_m_s2: f64) -> String {
             Some((a, b)) => (format!("{a:.4e}"), format!("{b:.4e}")),
             None => ("-".into(), "-".into()),
         };
-        let bias = match c.sensor() {
-            SensorKind::Gyro => c.bias_instability.map(|b| b * k * 3600.0),
-            SensorKind::Accel => c.bias_instability.map(|b| b / g_m_s2 * 1e6),
+        let bi = |b: f64| match c.sensor() {
+            SensorKind::Gyro => b * k * 3600.0,
+            SensorKind::Accel => b / g_m_s2 * 1e6,
         };
+        let bias = c.bias_instability.map(bi);
+        let reading = c.bias_instability_reading.map(|r| r.value).map(bi);
         let rw = match c.sensor() {
             SensorKind::Gyro => c.random_walk.map(|v| v * k * 3600.0 * 60.0),
             SensorKind::Accel => c.random_walk,
         };
         let _ = writeln!(
             s,
-            "{:<4} {:>13} {:>13} {:>13} {:>10} {:>13} {:>13}",
+            "{:<4} {:>13} {:>13} {:>13} {:>10} {:>13} {:>13} {:>13}",
             c.channel,
             w,
             walk,
+            opt(reading, 4),
+            c.bias_instability_reading.map_or("-".into(), |r| format!("{:.3}", r.tau_s)),
             opt(bias, 4),
-            c.bias_instability_tau_s.map_or("-".into(), |t| format!("{t:.3}")),
             opt(rw, 4),
             opt(c.quantization.map(|q| q * k), 3)
         );
     }
+    for c in &r.channels {
+        if let Some(rd) = c.bias_instability_reading {
+            let (_, k) = c.sensor().display_unit();
+            let f = |b: f64| match c.sensor() {
+                SensorKind::Gyro => b * k * 3600.0,
+                SensorKind::Accel => b / g_m_s2 * 1e6,
+            };
+            let _ = writeln!(
+                s,
+                "{}: bias instability reading {:.4e} (68 % interval {:.4e}–{:.4e}) at τ = {:.3} s",
+                c.channel,
+                f(rd.value),
+                f(rd.low),
+                f(rd.high),
+                rd.tau_s
+            );
+        }
+        if c.bias_instability.is_some() && c.bias_instability_reading.is_none() {
+            let last = c.points.iter().filter(|p| p.edf >= super::READING_EDF).map(|p| p.tau_s).fold(0.0, f64::max);
+            let _ = writeln!(
+                s,
+                "{}: no bias instability reading: the measured curve has no minimum among its well-determined points \
+                 (≥ 50 degrees of freedom, τ ≤ {last:.3} s); the model fit's value is an extrapolation: record longer",
+                c.channel
+            );
+        }
+        for d in &c.departures {
+            let _ = writeln!(s, "{}: {}", c.channel, d.describe());
+        }
+    }
     let _ = writeln!(
         s,
-        "units: gyro white °/s/√Hz, ARW °/√h, bias instability °/h, rate random walk °/h/√h, quantisation °;\n       \
+        "BI reading: the curve's measured minimum / 0.664 (IEEE 952 C.1.3, the standard reading); BI model fit: the flat\n\
+         floor of the fitted five-term model (they agree when the model follows the curve)\n\
+         units: gyro white °/s/√Hz, ARW °/√h, bias instability °/h, rate random walk °/h/√h, quantisation °;\n       \
          accel white µg/√Hz, VRW m/s/√h, bias instability µg, random walk m/s²/√s, quantisation m/s"
     );
     s
@@ -88,7 +123,10 @@ pub fn figures(r: &NoiseReport) -> Vec<Figure> {
             series.push(("white noise (slope −½)".into(), curve(&|t| n / t.sqrt())));
         }
         if let Some(b) = c.bias_instability {
-            series.push(("bias instability (0.664 B)".into(), curve(&|_| b * FLAT)));
+            series.push(("bias instability, model fit (0.664 B)".into(), curve(&|_| b * FLAT)));
+        }
+        if let Some(r) = c.bias_instability_reading {
+            series.push(("bias instability, reading (measured minimum)".into(), curve(&|_| r.value * FLAT)));
         }
         if let Some(w) = c.random_walk {
             series.push(("random walk (slope +½)".into(), curve(&|t| w * (t / 3.0).sqrt())));
