@@ -276,11 +276,11 @@ fn help_has_an_example_for_every_command_and_topics_print() {
     }
     for (topic, page) in [
         ("session", "reference-session.md"),
-        ("profile", "reference-profile.md"),
+        ("profile-format", "reference-profile.md"),
         ("rules", "reference-rules.md"),
-        ("effects", "reference-effects.md"),
+        ("catalogue", "reference-effects.md"),
         ("conventions", "reference-conventions.md"),
-        ("exit-codes", "reference-exit-codes.md"),
+        ("errors", "reference-exit-codes.md"),
     ] {
         let text = std::fs::read_to_string(root().join("docs").join(page)).unwrap();
         assert!(
@@ -288,7 +288,13 @@ fn help_has_an_example_for_every_command_and_topics_print() {
             "`crosscal help {topic}` differs from docs/{page} (built into the binary)"
         );
     }
-    assert!(crosscal(&["help", "fit"]).contains("Usage: crosscal fit"));
+    for command in &commands {
+        let help = crosscal(&["help", command]);
+        assert!(
+            help.contains(&format!("Usage: crosscal {command}")),
+            "`crosscal help {command}` is the command's help"
+        );
+    }
     let bad = Command::new(env!("CARGO_BIN_EXE_crosscal")).args(["help", "no-such"]).output().unwrap();
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("topics are"));

@@ -137,8 +137,8 @@ pub enum RulesError {
         /// What is wrong.
         msg: String,
     },
-    /// Not valid rules.
-    #[error("{path}:{line}:{column}: {msg}")]
+    /// Not valid rules (line 0: a problem of the whole file or of a rule, no single place).
+    #[error("{}: {msg}", place(path, *line, *column))]
     Parse {
         /// File.
         path: std::path::PathBuf,
@@ -224,6 +224,15 @@ impl Rules {
             }
         }
         Ok(r)
+    }
+}
+
+/// `file:line:column`, or the file alone when there is no single place (line 0).
+fn place(path: &std::path::Path, line: usize, column: usize) -> String {
+    if line == 0 {
+        path.display().to_string()
+    } else {
+        format!("{}:{line}:{column}", path.display())
     }
 }
 
@@ -418,8 +427,8 @@ fn reduction_rule(ev: &Evidence<'_>, sensor: SensorKind, min: f64, label: String
 fn adequate_rule(ev: &Evidence<'_>, label: String) -> Outcome {
     match &ev.adequacy {
         None => (label, false, "diagnose was not run".into()),
-        Some((true, _)) => (label, true, "no unexplained systematic residual".into()),
-        Some((false, why)) => (label, false, format!("unexplained systematic residual: {}", why.join("; "))),
+        Some((true, _)) => (label, true, "diagnose: adequate (no systematic residual, nothing missing)".into()),
+        Some((false, why)) => (label, false, format!("diagnose: not adequate: {}", why.join("; "))),
     }
 }
 

@@ -160,7 +160,7 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
     long_about = None,
     disable_help_subcommand = true,
     after_help = "Example: crosscal simulate --preset paper -o demo/ && crosscal fit demo/session.json --out calib-profiles/\n\
-                  More: crosscal help TOPIC (a command, or one of: session, profile, rules, effects, conventions, exit-codes, formats)"
+                  More: crosscal help COMMAND, or crosscal help TOPIC for one of: session, formats, profile-format, rules, catalogue, conventions, errors"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -218,7 +218,7 @@ enum Command {
     /// List the exit codes and what each means (as the guide's table).
     #[command(after_help = "Example: crosscal exit-codes")]
     ExitCodes,
-    /// Help on a command or a topic: session, profile, rules, effects, conventions, exit-codes, formats.
+    /// Help on a command, or a topic: session, formats, profile-format, rules, catalogue, conventions, errors.
     #[command(after_help = "Example: crosscal help conventions")]
     Help {
         /// A command name or a topic; without one, the list of commands and topics.
@@ -231,11 +231,11 @@ enum Command {
 const TOPICS: &[(&str, &str)] = &[
     ("session", include_str!("../../docs/reference-session.md")),
     ("formats", include_str!("../../docs/reference-session.md")),
-    ("profile", include_str!("../../docs/reference-profile.md")),
+    ("profile-format", include_str!("../../docs/reference-profile.md")),
     ("rules", include_str!("../../docs/reference-rules.md")),
-    ("effects", include_str!("../../docs/reference-effects.md")),
+    ("catalogue", include_str!("../../docs/reference-effects.md")),
     ("conventions", include_str!("../../docs/reference-conventions.md")),
-    ("exit-codes", include_str!("../../docs/reference-exit-codes.md")),
+    ("errors", include_str!("../../docs/reference-exit-codes.md")),
 ];
 
 /// `crosscal help [TOPIC]`.

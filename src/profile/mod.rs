@@ -436,8 +436,9 @@ impl Profile {
 
 /// The current UTC time, RFC 3339 to the millisecond.
 pub(crate) fn now_utc() -> String {
+    // Always three decimals, so the store's file names sort in time order as text too.
     let now = jiff::Timestamp::now();
-    now.round(jiff::Unit::Millisecond).unwrap_or(now).to_string()
+    now.round(jiff::Unit::Millisecond).unwrap_or(now).strftime("%Y-%m-%dT%H:%M:%S%.3fZ").to_string()
 }
 
 /// How one coefficient changed between two profiles of a unit.
