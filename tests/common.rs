@@ -136,3 +136,31 @@ pub fn edit(path: &std::path::Path, f: impl Fn(String) -> String) {
     let text = std::fs::read_to_string(path).unwrap();
     std::fs::write(path, f(text)).unwrap();
 }
+
+/// Simulates in `dir/out` a 12 s-per-run stand session of a noisy unit (0.002 °/s, 2e-5 g)
+/// with a hidden gyro g-sensitivity g_xz = `g_xz` (rad/s per m/s²) and the given serial and
+/// seed; panics with crosscal's message if the simulation fails.
+pub fn simulate_g_sensitive(dir: &std::path::Path, out: &str, serial: &str, seed: u64, g_xz: f64) {
+    let (seed, set) = (seed.to_string(), format!("gyro.g_xz={g_xz}"));
+    let args = [
+        "simulate",
+        "-o",
+        out,
+        "--serial",
+        serial,
+        "--seed",
+        &seed,
+        "--gyro-noise",
+        "0.002",
+        "--accel-noise",
+        "2e-5",
+        "--duration",
+        "12",
+        "--hidden",
+        "gyro-g-sensitivity",
+        "--set",
+        &set,
+    ];
+    let (code, stdout, err) = run_in(dir, &args);
+    assert_eq!(code, 0, "{stdout}{err}");
+}

@@ -455,29 +455,7 @@ fn profile_diff_of_a_session_says_what_the_file_is() {
 #[test]
 fn an_offline_correction_that_does_not_converge_is_refused() {
     let d = tempfile::tempdir().unwrap();
-    let (code, _, err) = crate::common::run_in(
-        d.path(),
-        &[
-            "simulate",
-            "-o",
-            "u",
-            "--serial",
-            "U6",
-            "--seed",
-            "6",
-            "--gyro-noise",
-            "0.002",
-            "--accel-noise",
-            "2e-5",
-            "--duration",
-            "12",
-            "--hidden",
-            "gyro-g-sensitivity",
-            "--set",
-            "gyro.g_xz=0.0002",
-        ],
-    );
-    assert_eq!(code, 0, "{err}");
+    crate::common::simulate_g_sensitive(d.path(), "u", "U6", 6, 0.0002);
     let (code, _, err) = crate::common::run_in(d.path(), &["fit", "u/session.json", "--out", "cp"]);
     assert_eq!(code, 0, "{err}");
     let (code, _, err) =

@@ -75,25 +75,7 @@ fn render(page: &Path, what: &str) {
 #[test]
 fn diagnose_report_has_a_section_per_channel_and_renders() {
     let d = tempfile::tempdir().unwrap();
-    let (code, _, err) = run_in(
-        d.path(),
-        &[
-            "simulate",
-            "-o",
-            "u",
-            "--gyro-noise",
-            "0.002",
-            "--accel-noise",
-            "2e-5",
-            "--duration",
-            "12",
-            "--hidden",
-            "gyro-g-sensitivity",
-            "--set",
-            "gyro.g_xz=0.00005",
-        ],
-    );
-    assert_eq!(code, 0, "{err}");
+    crate::common::simulate_g_sensitive(d.path(), "u", "I1426-0042", 42, 0.00005);
     let (code, _, err) = run_in(d.path(), &["diagnose", "u/session.json", "--report", "d.html", "--figures", "figs"]);
     assert_eq!(code, 0, "{err}");
     let html = std::fs::read_to_string(d.path().join("d.html")).unwrap();

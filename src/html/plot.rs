@@ -42,6 +42,20 @@ fn builder<'a, 'b>(
 const DESC_FONT: (&str, u32) = ("sans-serif", 15);
 const TICK_FONT: (&str, u32) = ("sans-serif", 13);
 
+/// The series' legend, boxed, at `pos`, in the tick font.
+fn legend<'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, SVGBackend<'a>, CT>,
+    pos: SeriesLabelPosition,
+) {
+    let _ = chart
+        .configure_series_labels()
+        .position(pos)
+        .label_font(TICK_FONT)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw();
+}
+
 /// A line chart of named series of (x, y) points, as an SVG string.
 pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(f64, f64)>)]) -> String {
     let mut buf = String::new();
@@ -68,12 +82,7 @@ pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(
             }
         }
         if series.len() > 1 {
-            let _ = chart
-                .configure_series_labels()
-                .label_font(TICK_FONT)
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw();
+            legend(&mut chart, SeriesLabelPosition::MiddleRight);
         }
         let _ = root.present();
     }
@@ -165,12 +174,7 @@ pub fn loglog(
                 s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
             }
         }
-        let _ = chart
-            .configure_series_labels()
-            .label_font(TICK_FONT)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw();
+        legend(&mut chart, SeriesLabelPosition::UpperRight);
         let _ = root.present();
     }
     buf
@@ -235,13 +239,7 @@ pub fn ladder(title: &str, y_label: &str, rungs: &[String], series: &[(String, V
                 s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
             }
         }
-        let _ = chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font(TICK_FONT)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw();
+        legend(&mut chart, SeriesLabelPosition::UpperRight);
         let _ = root.present();
     }
     buf
