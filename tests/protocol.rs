@@ -4,6 +4,7 @@
 use crosscal::estimate::protocol::{fit_protocol, ProtocolOptions};
 use crosscal::estimate::{CoefStatus, Fit};
 use crosscal::model::{matrix_name, Model};
+use crosscal::session::MotionSpec;
 use crosscal::simulate::protocol::{ferraris, multi_position, ProtocolTruth};
 use crosscal::units::{SensorKind, AXES};
 
@@ -263,5 +264,41 @@ fn ferraris_sections_are_found_from_the_data() {
                 assert!(sec.sign * sign > 0.0, "{}: sign {}", sec.name, sec.sign);
             }
         }
+    }
+}
+
+/// A declared initial rest that runs into the first turn (declared 26 s, the unit moves at
+/// 20 s): the fit stops and names the time the motion starts, within one detector window;
+/// with `trim_rest` it uses the still part and says so, and recovers the unit as a clean
+/// session does. Clean sessions (several seeds) pass the check.
+#[test]
+fn motion_inside_the_declared_rest_is_found_and_reported_or_trimmed() {
+    let truth = ProtocolTruth::mems(true);
+    for seed in [5, 6, 7] {
+        let sim = multi_position(&truth, 20.0, 24, 3.0, seed);
+        assert!(fit_protocol(&sim.session(), &Model::tedaldi(), &ProtocolOptions::default()).is_ok(), "seed {seed}");
+    }
+    let mut sim = multi_position(&truth, 20.0, 24, 3.0, 5);
+    for run in &mut sim.manifest.runs {
+        if let MotionSpec::MultiPosition { init_rest_s, .. } = &mut run.motion {
+            *init_rest_s = 26.0;
+        }
+    }
+    let err = fit_protocol(&sim.session(), &Model::tedaldi(), &ProtocolOptions::default()).unwrap_err().to_string();
+    assert!(err.contains("not at rest") && err.contains("--trim-rest"), "{err}");
+    let at: f64 = err.split("motion from t = ").nth(1).and_then(|s| s.split(' ').next()).unwrap().parse().unwrap();
+    // The window is 51 samples (0.51 s at 100 Hz): the motion starts at 20 s.
+    let window_s = 51.0 / truth.rate_hz;
+    assert!((at - 20.0).abs() <= window_s, "motion reported at {at} s, starts at 20 s");
+    let opts = ProtocolOptions { trim_rest: true, ..Default::default() };
+    let (fit, report) = fit_protocol(&sim.session(), &Model::tedaldi(), &opts).unwrap();
+    let det = report.detection.unwrap();
+    assert!(det.rest_note.contains("shortened from 26 s"), "{}", det.rest_note);
+    assert_eq!(det.declared_rest_samples, Some((26.0 * truth.rate_hz) as usize));
+    assert!(det.init_rest_samples as f64 <= 20.0 * truth.rate_hz, "{}", det.init_rest_samples);
+    for i in 0..3 {
+        let b = fit.get(&format!("gyro.b_{}", AXES[i])).unwrap().value;
+        let expect = truth.b_gyro[i] + (truth.g_gyro * nalgebra::Vector3::new(0.0, 0.0, truth.g_m_s2))[i];
+        assert!((b - expect).abs() < 5.0 * truth.noise.0 / (19.0 * truth.rate_hz).sqrt(), "b_{i}: {b} vs {expect}");
     }
 }

@@ -40,7 +40,8 @@ fn import(dir: &Path, args: &[&str]) -> PathBuf {
 fn fit(manifest: &Path, model: &Model, classic: bool) -> (Session, Fit, ProtocolReport, f64) {
     let t0 = Instant::now();
     let s = Session::load(manifest).unwrap();
-    let (f, r) = fit_protocol(&s, model, &ProtocolOptions { classic_six_position: classic }).unwrap();
+    let (f, r) =
+        fit_protocol(&s, model, &ProtocolOptions { classic_six_position: classic, ..Default::default() }).unwrap();
     (s, f, r, t0.elapsed().as_secs_f64())
 }
 

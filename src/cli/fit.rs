@@ -45,6 +45,10 @@ pub struct Args {
     /// imucal computes them, instead of least squares over all six faces.
     #[arg(long)]
     classic_six_position: bool,
+    /// Multi-position sessions: when the declared initial rest is not at rest (motion or a
+    /// drifting gyro in it), use its still part and say so, instead of refusing the fit.
+    #[arg(long)]
+    trim_rest: bool,
     /// Require the streamed fit (recordings read as streams, memory independent of their
     /// length), which is used anyway whenever the session and model allow it (conic and
     /// static runs, linear models, no --holdout/--stand/--robust): fail instead of reading
@@ -64,7 +68,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     req.stand = a.stand;
     req.holdout = a.holdout.clone();
     req.streaming = if a.stream { StreamPolicy::Require } else { StreamPolicy::Auto };
-    req.protocol = ProtocolOptions { classic_six_position: a.classic_six_position };
+    req.protocol = ProtocolOptions { classic_six_position: a.classic_six_position, trim_rest: a.trim_rest };
     let noise = match &a.noise {
         Some(path) => Some(read_noise(path)?),
         None => None,

@@ -189,6 +189,9 @@ pub fn protocol(r: &crosscal::estimate::protocol::ProtocolReport) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "protocol: {} ({} static poses, {} turns/motions)", r.protocol, r.poses.len(), r.turns.len());
     if let Some(d) = &r.detection {
+        if !d.rest_note.is_empty() {
+            let _ = writeln!(s, "  note: {} (--trim-rest)", d.rest_note);
+        }
         match (d.multiplier, d.threshold) {
             (Some(m), Some(t)) => {
                 let _ = writeln!(

@@ -23,6 +23,7 @@
 
 mod ferraris;
 mod multi_position;
+mod rest;
 
 use super::{EstimateError, Fit, FitRun, SensorFit};
 use crate::frames::V3;
@@ -143,6 +144,13 @@ pub struct Detection {
     pub min_pose_samples: usize,
     /// Every multiplier tried: (multiplier, poses found, accelerometer cost or null).
     pub tried: Vec<(f64, usize, Option<f64>)>,
+    /// The declared initial rest, samples, when motion was found in it and the rest was
+    /// shortened to `init_rest_samples` (with `trim_rest`).
+    #[serde(default)]
+    pub declared_rest_samples: Option<usize>,
+    /// What was found in the declared rest, in words (empty when it was at rest).
+    #[serde(default)]
+    pub rest_note: String,
 }
 
 /// Residuals and settings of a protocol fit.
@@ -195,6 +203,9 @@ pub struct ProtocolOptions {
     /// squares over all six faces, which uses every face and exposes their disagreement as
     /// residual.
     pub classic_six_position: bool,
+    /// When the declared initial rest of a multi-position run is not at rest, use its still
+    /// part (and say so) instead of refusing the fit.
+    pub trim_rest: bool,
 }
 
 /// Fits a protocol session (see the module documentation).
@@ -216,7 +227,7 @@ pub fn fit_protocol(
                 "a session is either Ferraris (static runs with up_stand + rotation runs) or multi-position (multi_position / unknown-pose runs), not both",
             ));
         }
-        multi_position::multi_position(session, model)
+        multi_position::multi_position(session, model, opts)
     } else {
         ferraris::ferraris(session, model, opts)
     }

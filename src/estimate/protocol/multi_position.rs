@@ -1,7 +1,7 @@
 //! Multi-position sessions (Tedaldi, Pretto & Menegatti, ICRA 2014; imu_tk): static poses
 //! in unknown orientations, detected automatically, joined by free motion.
 
-use super::{protocol_error, rms, Detection, PoseResidual, ProtocolReport, TurnResidual};
+use super::{protocol_error, rms, Detection, PoseResidual, ProtocolOptions, ProtocolReport, TurnResidual};
 use crate::estimate::lm::{minimise, numeric_jacobian, LeastSquares};
 use crate::estimate::{ChannelFit, CoefStatus, Coefficient, EstimateError, Fit, SensorFit, Unidentifiable};
 use crate::model::{Model, TermStatus};
@@ -158,6 +158,48 @@ fn the_run(session: &Session) -> Result<Recording<'_>, EstimateError> {
     }
 }
 
+/// The declared initial rest checked against its own noise ([`super::rest`]): motion in it
+/// stops the fit with the time it starts, or with `trim_rest` shortens the rest to its still
+/// part. Returns the rest's samples, the declared samples when shortened, and a note.
+fn verified_rest(
+    rec: &crate::session::Recording,
+    r: &Recording<'_>,
+    n_init: usize,
+    window: usize,
+    opts: &ProtocolOptions,
+) -> Result<(usize, Option<usize>, String), EstimateError> {
+    let super::rest::RestCheck::Moving { from, still, sensor, size, variance } =
+        super::rest::check_rest(&rec.accel, &rec.gyro, n_init, window)
+    else {
+        return Ok((n_init, None, String::new()));
+    };
+    let t0 = rec.t_s.first().copied().unwrap_or(0.0);
+    let at = rec.t_s.get(from).map_or(0.0, |t| t - t0);
+    let what = if variance {
+        format!("{sensor} motion from t = {at:.2} s (moving variance {size:.0}× the rest's own)")
+    } else {
+        format!("the gyro's mean drifts in its second half, from t = {at:.2} s ({size:.1} standard errors)")
+    };
+    let keep_s = rec.t_s.get(still).map_or(0.0, |t| t - t0);
+    if !opts.trim_rest {
+        return Err(protocol_error(format!(
+            "run '{}': the declared initial rest (init_rest_s = {} s) is not at rest: {what}; the gyro bias and the \
+             detector's baseline would come from moving data. Set init_rest_s to {keep_s:.2} s or less, or pass \
+             --trim-rest to use the still part",
+            r.run.spec.name, r.init_rest_s
+        )));
+    }
+    if still < window.max(10) {
+        return Err(protocol_error(format!(
+            "run '{}': the declared initial rest is not at rest ({what}) and its still part ({keep_s:.2} s) is \
+             shorter than the detector window: record a longer rest",
+            r.run.spec.name
+        )));
+    }
+    let note = format!("initial rest shortened from {} s to {keep_s:.2} s: {what}", r.init_rest_s);
+    Ok((still, Some(n_init), note))
+}
+
 /// The static poses and the accelerometer fitted on them: the given poses, or those of the
 /// detector's threshold multiplier whose accelerometer fit costs least (imu_tk's rule).
 struct Poses {
@@ -166,7 +208,7 @@ struct Poses {
     detection: Detection,
 }
 
-fn detect_poses(session: &Session, r: &Recording<'_>) -> Result<Poses, EstimateError> {
+fn detect_poses(session: &Session, r: &Recording<'_>, opts: &ProtocolOptions) -> Result<Poses, EstimateError> {
     let (run, window, min_pose_samples) = (r.run, r.window, r.min_pose_samples);
     let g = session.manifest.g_m_s2;
     let rec = &run.rec;
@@ -178,6 +220,7 @@ fn detect_poses(session: &Session, r: &Recording<'_>) -> Result<Poses, EstimateE
             run.spec.name, r.init_rest_s
         )));
     }
+    let (n_init, declared, rest_note) = verified_rest(rec, r, n_init, window, opts)?;
     let baseline = variance_norm(&rec.accel, 0, n_init);
     let norms = moving_variance_norm(&rec.accel, window);
     let extra: Vec<[f64; 3]> = session
@@ -245,6 +288,8 @@ fn detect_poses(session: &Session, r: &Recording<'_>) -> Result<Poses, EstimateE
         threshold: (!given).then_some(multiplier * baseline),
         min_pose_samples,
         tried,
+        declared_rest_samples: declared,
+        rest_note,
     };
     Ok(Poses { poses, acc, detection })
 }
@@ -314,11 +359,15 @@ fn segments(
 /// Fits a multi-position session (Tedaldi et al. 2014): the accelerometer so that every
 /// pose measures |a| = g, then the gyro so that the motions between poses turn one pose's
 /// gravity direction onto the next.
-pub(super) fn multi_position(session: &Session, model: &Model) -> Result<(Fit, ProtocolReport), EstimateError> {
+pub(super) fn multi_position(
+    session: &Session,
+    model: &Model,
+    opts: &ProtocolOptions,
+) -> Result<(Fit, ProtocolReport), EstimateError> {
     let g = session.manifest.g_m_s2;
     let r = the_run(session)?;
     let (run, rec) = (r.run, &r.run.rec);
-    let Poses { poses, acc, detection } = detect_poses(session, &r)?;
+    let Poses { poses, acc, detection } = detect_poses(session, &r, opts)?;
     let m_acc = upper(&acc.p);
     let b_acc = Vector3::new(acc.p[6], acc.p[7], acc.p[8]);
     let a_cal = |u: &[f64; 3]| -> Vector3<f64> { m_acc * (Vector3::from(*u) - b_acc) };

@@ -1,0 +1,155 @@
+//! Is a declared rest at rest? A multi-position recording's initial rest gives the gyro bias
+//! and the detector's noise baseline; if the unit was already moving in it, both are wrong
+//! and nothing downstream can tell. The rest is checked against its own noise: the moving
+//! variance of both sensors (window = the detector's) against the median over the rest's
+//! first half, and the drift of the gyro's block means between the rest's two halves.
+
+use crate::stats::segment::moving_variance_norm;
+
+/// A moving variance this many times the rest's own median is motion (for a window of ~50
+/// samples or more the variance estimate scatters by ~20 %: 4× is a > 10σ event).
+const MOTION_RATIO: f64 = 4.0;
+/// Block means that differ between the rest's halves by more than this many standard errors
+/// are a drift (a slow turn, a bias still settling).
+const DRIFT_Z: f64 = 6.0;
+
+/// What was found in a declared rest.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum RestCheck {
+    /// At rest throughout.
+    Still,
+    /// Motion from sample `from` on: the rest's still part is `[0, still)`.
+    Moving {
+        /// First sample of the window that showed the motion.
+        from: usize,
+        /// Samples before it that are at rest.
+        still: usize,
+        /// `accelerometer` or `gyro`.
+        sensor: &'static str,
+        /// The moving variance over the rest's median there (variance), or the drift in
+        /// standard errors (drift).
+        size: f64,
+        /// A change of variance (true) or a drift of the mean (false).
+        variance: bool,
+    },
+}
+
+/// Median of the finite values.
+fn median(v: &mut [f64]) -> Option<f64> {
+    let mut f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if f.is_empty() {
+        return None;
+    }
+    f.sort_by(f64::total_cmp);
+    Some(f[f.len() / 2])
+}
+
+/// Checks the first `n_rest` samples of a recording (accelerometer and gyro, any units) with
+/// the detector's `window`.
+pub(super) fn check_rest(accel: &[[f64; 3]], gyro: &[[f64; 3]], n_rest: usize, window: usize) -> RestCheck {
+    let w = window | 1;
+    let h = w / 2;
+    let n_rest = n_rest.min(accel.len()).min(gyro.len());
+    if n_rest < 2 * w {
+        return RestCheck::Still; // too short to tell its own noise from motion
+    }
+    // Only the rest and one window beyond it are needed.
+    let span = (n_rest + h).min(accel.len());
+    let mut first: Option<(usize, &'static str, f64)> = None;
+    for (sensor, x) in [("accelerometer", &accel[..span]), ("gyro", &gyro[..span])] {
+        let norms = moving_variance_norm(x, w);
+        let Some(reference) = median(&mut norms[h..(n_rest / 2).max(h + 1)].to_vec()) else { continue };
+        if reference <= 0.0 {
+            continue;
+        }
+        let hit = (h..n_rest.saturating_sub(h)).find(|&c| norms[c] > MOTION_RATIO * reference);
+        if let Some(c) = hit {
+            let from = c + h - 1;
+            if first.is_none_or(|(f, ..)| from < f) {
+                first = Some((from, sensor, norms[c] / reference));
+            }
+        }
+    }
+    if let Some((from, sensor, size)) = first {
+        return RestCheck::Moving { from, still: from.saturating_sub(w), sensor, size, variance: true };
+    }
+    drift(gyro, n_rest, w)
+}
+
+/// The gyro's mean in the rest's first and second half, in standard errors from the scatter
+/// of block means (blocks of one window, so serial correlation within a window is allowed for).
+fn drift(gyro: &[[f64; 3]], n_rest: usize, w: usize) -> RestCheck {
+    let blocks: Vec<[f64; 3]> = gyro[..n_rest]
+        .chunks_exact(w)
+        .map(|b| {
+            let mut m = [0.0; 3];
+            for v in b {
+                (0..3).for_each(|i| m[i] += v[i] / w as f64);
+            }
+            m
+        })
+        .collect();
+    let k = blocks.len();
+    if k < 8 {
+        return RestCheck::Still;
+    }
+    let (a, b) = blocks.split_at(k / 2);
+    let mut worst = 0.0_f64;
+    for i in 0..3 {
+        let mean = |s: &[[f64; 3]]| s.iter().map(|v| v[i]).sum::<f64>() / s.len() as f64;
+        let (ma, mb) = (mean(a), mean(b));
+        let all = mean(&blocks);
+        let var = blocks.iter().map(|v| (v[i] - all).powi(2)).sum::<f64>() / (k - 1) as f64;
+        // Scatter of block means after the step between the halves is taken out.
+        let step = (mb - ma).powi(2) * (a.len() * b.len()) as f64 / (k * (k - 1)) as f64;
+        let se = ((var - step).max(var * 0.05) * (1.0 / a.len() as f64 + 1.0 / b.len() as f64)).sqrt();
+        if se > 0.0 {
+            worst = worst.max((mb - ma).abs() / se);
+        }
+    }
+    if worst > DRIFT_Z {
+        RestCheck::Moving { from: (k / 2) * w, still: (k / 2) * w, sensor: "gyro", size: worst, variance: false }
+    } else {
+        RestCheck::Still
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    fn noise(n: usize, seed: u64, s: f64) -> Vec<[f64; 3]> {
+        let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        (0..n).map(|_| [r.random_range(-s..s), r.random_range(-s..s), r.random_range(-s..s)]).collect()
+    }
+
+    #[test]
+    fn still_rests_pass_and_motion_is_found_within_a_window() {
+        for seed in 0..20 {
+            let (a, g) = (noise(3000, seed, 0.01), noise(3000, seed + 100, 0.002));
+            assert_eq!(check_rest(&a, &g, 3000, 51), RestCheck::Still, "seed {seed}");
+        }
+        let (mut a, g) = (noise(3000, 1, 0.01), noise(3000, 2, 0.002));
+        for (k, v) in a.iter_mut().enumerate().skip(2000) {
+            v[0] += 0.5 * ((k - 2000) as f64 * 0.02).sin();
+        }
+        match check_rest(&a, &g, 3000, 51) {
+            RestCheck::Moving { from, still, sensor, variance, .. } => {
+                assert!((1950..=2051).contains(&from), "{from}");
+                assert!(still <= 2000 && sensor == "accelerometer" && variance, "{still} {sensor}");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_slow_gyro_drift_is_found() {
+        let a = noise(3000, 3, 0.01);
+        let mut g = noise(3000, 4, 0.002);
+        for (k, v) in g.iter_mut().enumerate() {
+            v[2] += 2e-6 * k as f64; // a slow turn: 0.006 over the rest, noise 0.002
+        }
+        assert!(matches!(check_rest(&a, &g, 3000, 51), RestCheck::Moving { variance: false, .. }));
+    }
+}
