@@ -197,3 +197,45 @@ fn killing_a_batch_never_leaves_a_partial_profile_and_resume_completes_it() {
         assert_eq!(crosscal::profile::history(&store, &s).unwrap().len(), 1, "{s}");
     }
 }
+
+/// `batch` accepts every session `fit` accepts: a lot of multi-position (hand-held) units is
+/// fitted and judged like stand units; the clean ones pass an `adequate` rule, the one with
+/// a hidden gyro g-sensitivity fails it by name, and rules that need a per-sample reference
+/// say that a protocol session has none instead of "could not be processed".
+#[test]
+fn a_lot_of_protocol_sessions_is_fitted_and_judged() {
+    use crosscal::simulate::protocol::{multi_position, ProtocolTruth};
+    let d = tempfile::tempdir().unwrap();
+    let mut clean = ProtocolTruth::mems(true);
+    clean.g_gyro = nalgebra::Matrix3::zeros();
+    let mut hidden = clean.clone();
+    hidden.g_gyro = nalgebra::Matrix3::new(0.5, -0.2, 0.1, 0.3, 0.4, -0.2, -0.1, 0.2, 0.6);
+    for (i, truth) in [&clean, &clean, &hidden].into_iter().enumerate() {
+        let mut sim = multi_position(truth, 20.0, 24, 3.0, 2 + i as u64);
+        sim.manifest.serial = format!("HAND-{i}");
+        sim.write(&d.path().join(format!("lot/u{i}"))).unwrap();
+    }
+    std::fs::write(
+        d.path().join("rules.json"),
+        r#"{"format":"crosscal-rules/1","rules":[{"kind":"adequate"},{"kind":"std_error","select":"accel.k_xx","max":0.1}]}"#,
+    )
+    .unwrap();
+    let (code, out, err) = run_in(d.path(), &["batch", "lot", "--rules", "rules.json"]);
+    assert_eq!(code, 1, "{out}{err}");
+    let r = report(&d.path().join("lot"));
+    let by = |u: &str| r.units.iter().find(|x| folder(x) == u).unwrap();
+    for u in ["u0", "u1"] {
+        assert_eq!(by(u).verdict, Verdict::Pass, "{u}: {:?}", by(u).reasons);
+    }
+    assert_eq!(by("u2").verdict, Verdict::Fail);
+    assert!(by("u2").reasons.iter().any(|x| x.contains("gyro-g-sensitivity")), "{:?}", by("u2").reasons);
+    std::fs::write(
+        d.path().join("rules2.json"),
+        r#"{"format":"crosscal-rules/1","rules":[{"kind":"reduction","sensor":"gyro","min":10}]}"#,
+    )
+    .unwrap();
+    let (_, out, err) = run_in(d.path(), &["batch", "lot", "--rules", "rules2.json", "--out", "cp2"]);
+    let r = report(&d.path().join("lot"));
+    assert!(r.units.iter().all(|u| u.verdict == Verdict::Fail), "{out}{err}");
+    assert!(r.units[0].reasons[0].contains("no per-sample reference"), "{:?}", r.units[0].reasons);
+}

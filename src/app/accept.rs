@@ -15,8 +15,11 @@ use crate::session::Session;
 /// adequate.
 #[derive(Debug, Clone)]
 pub struct Acceptance {
-    /// Check report (offline correction).
-    pub check: CheckReport,
+    /// Check report (offline correction); none for a protocol session, which has no
+    /// per-sample reference.
+    pub check: Option<CheckReport>,
+    /// The session is a protocol session.
+    pub protocol: bool,
     /// Diagnose verdict: adequate, and the unexplained findings otherwise.
     pub adequacy: Option<(bool, Vec<String>)>,
 }
@@ -30,8 +33,22 @@ pub fn acceptance(
     let what = session.manifest_path.display().to_string();
     let correct = |source| AppError::Correct { what: what.clone(), source };
     let cal = Calibration::from_profile(profile).map_err(correct)?;
-    let check = check_session(session, &cal, Mode::Offline, Thresholds::default()).map_err(correct)?;
-    let adequacy = if diagnose {
+    let protocol = session.is_protocol();
+    let check = if protocol {
+        None
+    } else {
+        Some(check_session(session, &cal, Mode::Offline, Thresholds::default()).map_err(correct)?)
+    };
+    let adequacy = if diagnose && protocol {
+        let model = profile.fitted_model().map_err(|e| AppError::Correct { what: what.clone(), source: e.into() })?;
+        let d = crate::diagnose::protocol::diagnose_protocol(session, &model)
+            .map_err(|source| AppError::Fit { what: what.clone(), source })?;
+        let mut why: Vec<String> = d.outlier_poses.iter().map(|p| format!("pose {p} stands out")).collect();
+        if let Some(p) = &d.proposal {
+            why.push(format!("missing effect: {p}"));
+        }
+        Some((why.is_empty(), why))
+    } else if diagnose {
         let model = profile.fitted_model().map_err(|e| AppError::Correct { what: what.clone(), source: e.into() })?;
         let tr = tracks(session, &DerivativeConfig::default());
         let runs = fit_runs(session, &tr);
@@ -47,5 +64,5 @@ pub fn acceptance(
     } else {
         None
     };
-    Ok(Acceptance { check, adequacy })
+    Ok(Acceptance { check, protocol, adequacy })
 }

@@ -173,7 +173,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
             return r;
         }
     };
-    let ev = Evidence { check: Some(&acc.check), adequacy: acc.adequacy.clone() };
+    let ev = Evidence { check: acc.check.as_ref(), adequacy: acc.adequacy.clone(), protocol: acc.protocol };
     r.rules = evaluate(&opts.rules, &profile, &ev);
     r.reasons = r.rules.iter().filter(|x| !x.pass).map(|x| format!("{}: {}", x.rule, x.detail)).collect();
     r.verdict = if r.reasons.is_empty() { Verdict::Pass } else { Verdict::Fail };

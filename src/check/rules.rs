@@ -254,6 +254,18 @@ pub struct Evidence<'a> {
     pub check: Option<&'a CheckReport>,
     /// Diagnose verdict and its unexplained findings, if it was run.
     pub adequacy: Option<(bool, Vec<String>)>,
+    /// The session is a protocol session (poses and turns): it has no per-sample reference,
+    /// so rules on the check say that rather than "no session was checked".
+    pub protocol: bool,
+}
+
+/// Why a rule that needs the session's check has none.
+fn no_check(ev: &Evidence<'_>) -> String {
+    if ev.protocol {
+        "a protocol session has no per-sample reference to check against (its poses and turns are in the fit)".into()
+    } else {
+        "no session was checked".into()
+    }
 }
 
 /// Shell-style match with `*` only.
@@ -403,13 +415,13 @@ fn noise_rule(
 }
 
 fn residual_rule(ev: &Evidence<'_>, sensor: SensorKind, max_pct: f64, label: String) -> Outcome {
-    let Some(r) = ev.check else { return (label, false, "no session was checked".into()) };
+    let Some(r) = ev.check else { return (label, false, no_check(ev)) };
     let worst = r.summary.iter().filter(|a| a.sensor == sensor).filter_map(|a| a.after_pct).fold(0.0, f64::max);
     (label, worst <= max_pct, format!("largest corrected error {worst:.3e} % (limit {max_pct} %)"))
 }
 
 fn reduction_rule(ev: &Evidence<'_>, sensor: SensorKind, min: f64, label: String) -> Outcome {
-    let Some(r) = ev.check else { return (label, false, "no session was checked".into()) };
+    let Some(r) = ev.check else { return (label, false, no_check(ev)) };
     let bad: Vec<String> = r
         .summary
         .iter()

@@ -38,8 +38,11 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         None if a.diagnose => anyhow::bail!("--diagnose needs --session"),
         None => None,
     };
-    let ev =
-        Evidence { check: acc.as_ref().map(|x| &x.check), adequacy: acc.as_ref().and_then(|x| x.adequacy.clone()) };
+    let ev = Evidence {
+        check: acc.as_ref().and_then(|x| x.check.as_ref()),
+        adequacy: acc.as_ref().and_then(|x| x.adequacy.clone()),
+        protocol: acc.as_ref().is_some_and(|x| x.protocol),
+    };
     let results = evaluate(&rules, &profile, &ev);
     let pass = results.iter().all(|r| r.pass);
     if a.json {
