@@ -15,6 +15,7 @@ mod fuzz;
 mod fuzz_found;
 mod hostile;
 mod identify;
+mod import_text;
 mod noise;
 mod paper;
 mod profile_store;

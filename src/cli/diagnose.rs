@@ -34,6 +34,10 @@ pub struct Args {
     /// `gyro-x-time`, `-phase`, `-spectrum`, `-harmonics`, …).
     #[arg(long)]
     figures: Option<PathBuf>,
+    /// Multi-position sessions: when the declared initial rest is not at rest, use its still
+    /// part (as `fit --trim-rest`).
+    #[arg(long)]
+    trim_rest: bool,
 }
 
 fn channel_table(c: &[ChannelReport]) -> String {
@@ -164,7 +168,8 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
         );
     }
     let model = start_model(a, session)?;
-    let d = crosscal::diagnose::protocol::diagnose_protocol(session, &model)
+    let protocol = crosscal::estimate::protocol::ProtocolOptions { trim_rest: a.trim_rest, ..Default::default() };
+    let d = crosscal::diagnose::protocol::diagnose_protocol_with(session, &model, &protocol)
         .with_context(|| format!("diagnosing {}", a.session.display()))?;
     if a.json {
         outln!("{}", serde_json::to_string_pretty(&d)?);

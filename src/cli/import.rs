@@ -4,6 +4,8 @@ use super::Outcome;
 use crate::outln;
 use anyhow::Context;
 use crosscal::session::import::{imu_tk, imucal_annotated, imucal_ferraris, tedaldi_csv, ImportOptions, Imported};
+use crosscal::session::import_text::{text, Delimiter, TextKind, TextLayout};
+use crosscal::units::{AccelUnit, GyroUnit, Units};
 use std::path::PathBuf;
 
 /// Options of `import`.
@@ -75,6 +77,49 @@ enum Layout {
         #[arg(long)]
         intervals: Option<PathBuf>,
     },
+    /// Any delimited text: comma, semicolon, tab or spaces (detected), columns by header or
+    /// by --columns, units stated; a multi-position or a static recording.
+    #[command(
+        after_help = "Example: crosscal import text imu.txt --columns t,gx,gy,gz,ax,ay,az --gyro-unit raw --accel-unit raw --init-rest-s 60 --out board/"
+    )]
+    Text {
+        /// The recording.
+        file: PathBuf,
+        /// Column order when the file has no header (or to override it): names from t, gx, gy,
+        /// gz, ax, ay, az, and '-' for a column to skip, comma-separated.
+        #[arg(long, value_delimiter = ',')]
+        columns: Option<Vec<String>>,
+        /// Field separator: ',', ';', tab or space (default: detected from the first lines).
+        #[arg(long, value_parser = parse_delimiter)]
+        delimiter: Option<Delimiter>,
+        /// Unit of the gyro columns: deg/s, rad/s or raw.
+        #[arg(long, default_value = "rad/s", value_parser = parse_gyro_unit)]
+        gyro_unit: GyroUnit,
+        /// Unit of the accelerometer columns: g, m/s^2 or raw.
+        #[arg(long, default_value = "m/s^2", value_parser = parse_accel_unit)]
+        accel_unit: AccelUnit,
+        /// A static recording (for `crosscal noise`) instead of a multi-position one.
+        #[arg(long)]
+        r#static: bool,
+        /// Initial rest of a multi-position recording, s.
+        #[arg(long, default_value_t = 30.0)]
+        init_rest_s: f64,
+        /// Sample rate, Hz, when the file has no time column.
+        #[arg(long)]
+        rate_hz: Option<f64>,
+    },
+}
+
+fn parse_delimiter(s: &str) -> Result<Delimiter, String> {
+    Delimiter::parse(s).ok_or_else(|| format!("'{s}': expected ',', ';', tab or space"))
+}
+
+fn parse_gyro_unit(s: &str) -> Result<GyroUnit, String> {
+    GyroUnit::parse(s).ok_or_else(|| format!("'{s}': expected deg/s, rad/s or raw"))
+}
+
+fn parse_accel_unit(s: &str) -> Result<AccelUnit, String> {
+    AccelUnit::parse(s).ok_or_else(|| format!("'{s}': expected g, m/s^2 or raw"))
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
@@ -100,6 +145,18 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         Layout::Tedaldi { csv, intervals } => {
             opts.g_m_s2 = a.g.unwrap_or(9.80665);
             tedaldi_csv(csv, intervals.as_deref(), &a.out, &opts)
+        }
+        Layout::Text { file, columns, delimiter, gyro_unit, accel_unit, r#static, init_rest_s, rate_hz } => {
+            opts.g_m_s2 = a.g.unwrap_or(9.80665);
+            opts.init_rest_s = Some(*init_rest_s);
+            opts.rate_hz = *rate_hz;
+            let layout = TextLayout {
+                columns: columns.clone(),
+                delimiter: *delimiter,
+                units: Units { gyro: *gyro_unit, accel: *accel_unit, ..Units::default() },
+                kind: if *r#static { TextKind::Static } else { TextKind::MultiPosition },
+            };
+            text(file, &a.out, &opts, &layout)
         }
     }
     .with_context(|| format!("importing into {}", a.out.display()))?;

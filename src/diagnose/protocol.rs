@@ -74,7 +74,18 @@ fn rss(f: &SensorFit) -> (f64, usize, usize) {
 
 /// Diagnoses a protocol session with `model` (see the module documentation).
 pub fn diagnose_protocol(session: &Session, model: &Model) -> Result<ProtocolDiagnosis, EstimateError> {
-    let outcome = crate::estimate::fit(&FitRequest::session(model, session))?;
+    diagnose_protocol_with(session, model, &crate::estimate::protocol::ProtocolOptions::default())
+}
+
+/// [`diagnose_protocol`] with the protocol fit's options (e.g. `trim_rest`).
+pub fn diagnose_protocol_with(
+    session: &Session,
+    model: &Model,
+    protocol: &crate::estimate::protocol::ProtocolOptions,
+) -> Result<ProtocolDiagnosis, EstimateError> {
+    let mut req = FitRequest::session(model, session);
+    req.protocol = *protocol;
+    let outcome = crate::estimate::fit(&req)?;
     let report = outcome.protocol.ok_or_else(|| {
         EstimateError::Request(format!("{} is not a protocol session", session.manifest_path.display()))
     })?;

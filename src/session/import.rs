@@ -48,10 +48,10 @@ pub struct Imported {
 }
 
 /// Samples in the order written: t (s), gyro, accel.
-struct Table {
-    t: Vec<f64>,
-    gyro: Vec<[f64; 3]>,
-    accel: Vec<[f64; 3]>,
+pub(super) struct Table {
+    pub(super) t: Vec<f64>,
+    pub(super) gyro: Vec<[f64; 3]>,
+    pub(super) accel: Vec<[f64; 3]>,
 }
 
 fn csv_err(path: &Path, line: usize, column: &str, problem: Problem, msg: String) -> SessionError {
@@ -130,7 +130,9 @@ fn columns(path: &Path, header: &str, names: &[&str]) -> Result<Vec<usize>, Sess
         .collect()
 }
 
-fn write_session(
+/// Writes the recording (`recording.csv`) and its manifest (`session.json`) into `out_dir`,
+/// neither replacing an existing file.
+pub(super) fn write_table(
     out_dir: &Path,
     units: Units,
     opts: &ImportOptions,
@@ -188,7 +190,8 @@ fn section_list(path: &Path, n: usize) -> Result<Vec<Section>, SessionError> {
     Ok(out)
 }
 
-fn run(name: &str, motion: MotionSpec, rows: Option<(usize, usize)>) -> RunSpec {
+/// A run of the imported recording.
+pub(super) fn run(name: &str, motion: MotionSpec, rows: Option<(usize, usize)>) -> RunSpec {
     RunSpec::new(name, "recording.csv", motion, rows)
 }
 
@@ -278,7 +281,7 @@ pub fn imucal_ferraris(
         }
     }
     let units = Units { gyro: GyroUnit::DegPerS, accel: AccelUnit::MPerS2, time: TimeUnit::S };
-    write_session(out_dir, units, opts, &table, runs)
+    write_table(out_dir, units, opts, &table, runs)
 }
 
 /// imucal's annotated layout: `part,samples,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z` in raw
@@ -359,7 +362,7 @@ pub fn imucal_annotated(csv: &Path, out_dir: &Path, opts: &ImportOptions) -> Res
         accel: rows.iter().map(|r| [r.2[0], r.2[1], r.2[2]]).collect(),
     };
     let units = Units { gyro: GyroUnit::Raw, accel: AccelUnit::Raw, time: TimeUnit::S };
-    write_session(out_dir, units, opts, &table, runs)
+    write_table(out_dir, units, opts, &table, runs)
 }
 
 /// Whitespace-separated `t x y z` rows (imu_tk's `.mat` text files).
@@ -425,7 +428,7 @@ pub fn imu_tk(acc: &Path, gyro: &Path, out_dir: &Path, opts: &ImportOptions) -> 
         poses: None,
     };
     let units = Units { gyro: GyroUnit::Raw, accel: AccelUnit::Raw, time: TimeUnit::S };
-    write_session(out_dir, units, opts, &table, vec![run("multi-position", motion, None)])
+    write_table(out_dir, units, opts, &table, vec![run("multi-position", motion, None)])
 }
 
 /// The `Fs,…` layout (e.g. tomisuarez2/ImuCalibration): header lines `Fs,<Hz>`,
@@ -483,7 +486,7 @@ pub fn tedaldi_csv(
         poses,
     };
     let units = Units { gyro: GyroUnit::Raw, accel: AccelUnit::Raw, time: TimeUnit::S };
-    write_session(out_dir, units, opts, &table, vec![run("multi-position", motion, None)])
+    write_table(out_dir, units, opts, &table, vec![run("multi-position", motion, None)])
 }
 
 /// Two CSV rows of sample indices: starts, then ends (inclusive).

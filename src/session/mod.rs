@@ -9,6 +9,7 @@ mod csvread;
 mod csvwrite;
 mod error;
 pub mod import;
+pub mod import_text;
 pub mod sanity;
 
 use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};

@@ -6,9 +6,13 @@
 
 use crate::stats::segment::moving_variance_norm;
 
-/// A moving variance this many times the rest's own median is motion (for a window of ~50
-/// samples or more the variance estimate scatters by ~20 %: 4× is a > 10σ event).
-const MOTION_RATIO: f64 = 4.0;
+/// A gyro moving variance this many times the rest's own median is motion (for a window of
+/// ~50 samples or more the variance estimate scatters by ~20 %: 4× is a > 10σ event).
+const GYRO_RATIO: f64 = 4.0;
+/// The accelerometer's threshold is higher: a knock on the table or a vibration raises its
+/// variance ten-fold without turning the unit (seen in a real board's rest, gyro unmoved);
+/// a hand that starts to move raises both.
+const ACCEL_RATIO: f64 = 25.0;
 /// Block means that differ between the rest's halves by more than this many standard errors
 /// are a drift (a slow turn, a bias still settling).
 const DRIFT_Z: f64 = 6.0;
@@ -56,13 +60,13 @@ pub(super) fn check_rest(accel: &[[f64; 3]], gyro: &[[f64; 3]], n_rest: usize, w
     // Only the rest and one window beyond it are needed.
     let span = (n_rest + h).min(accel.len());
     let mut first: Option<(usize, &'static str, f64)> = None;
-    for (sensor, x) in [("accelerometer", &accel[..span]), ("gyro", &gyro[..span])] {
+    for (sensor, x, ratio) in [("accelerometer", &accel[..span], ACCEL_RATIO), ("gyro", &gyro[..span], GYRO_RATIO)] {
         let norms = moving_variance_norm(x, w);
         let Some(reference) = median(&mut norms[h..(n_rest / 2).max(h + 1)].to_vec()) else { continue };
         if reference <= 0.0 {
             continue;
         }
-        let hit = (h..n_rest.saturating_sub(h)).find(|&c| norms[c] > MOTION_RATIO * reference);
+        let hit = (h..n_rest.saturating_sub(h)).find(|&c| norms[c] > ratio * reference);
         if let Some(c) = hit {
             let from = c + h - 1;
             if first.is_none_or(|(f, ..)| from < f) {
