@@ -255,3 +255,56 @@ fn a_periodic_disturbance_is_reported_as_a_bump() {
         c.departures.iter().find(|d| d.looks_like.contains("bump") && d.tau_from_s <= 7.68 && d.tau_to_s >= 5.12);
     assert!(bump.is_some(), "no bump around τ = 7.4 s: {:?}", c.departures);
 }
+
+/// `noise --lot`: every unit of a lot recorded at rest, the spread of each term over the
+/// lot, and the `noise` rules applied to each unit — the unit with three times the white
+/// noise fails by name, the others pass, and the lot's median ARW is the simulated one.
+#[test]
+fn a_lot_of_static_units_is_characterised_and_judged() {
+    let d = tempfile::tempdir().unwrap();
+    for (i, arw) in [0.15, 0.15, 0.15, 0.45].iter().enumerate() {
+        let (code, out, err) = crate::common::run_in(
+            d.path(),
+            &[
+                "simulate",
+                "--preset",
+                "static",
+                "--duration",
+                "600",
+                "--arw",
+                &arw.to_string(),
+                "--vrw",
+                "0.02",
+                "--seed",
+                &(10 + i).to_string(),
+                "--serial",
+                &format!("S{i}"),
+                "-o",
+                &format!("lot/s{i}"),
+            ],
+        );
+        assert_eq!(code, 0, "{out}{err}");
+    }
+    std::fs::write(
+        d.path().join("rules.json"),
+        r#"{"format":"crosscal-rules/1","rules":[{"kind":"noise","sensor":"gyro","term":"white","max":0.2,"unit":"deg/sqrt(h)"}]}"#,
+    )
+    .unwrap();
+    let (code, out, err) =
+        crate::common::run_in(d.path(), &["noise", "lot", "--lot", "--rules", "rules.json", "--channels", "gx,gy,gz"]);
+    assert_eq!(code, 1, "{out}{err}");
+    assert!(out.contains("noise of a lot of 4 units"), "{out}");
+    for i in 0..3 {
+        assert!(out.contains(&format!("s{i}: pass")), "{out}");
+    }
+    assert!(out.contains("s3: FAIL — gyro white noise"), "{out}");
+    let median: f64 = out
+        .lines()
+        .find(|l| l.trim_start().starts_with("gx ARW/VRW:"))
+        .and_then(|l| l.split_whitespace().nth(2))
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!((median / 0.15 - 1.0).abs() < 0.05, "median ARW {median}");
+    assert!(out.contains("3 of 4 units pass the noise rules"), "{out}");
+}

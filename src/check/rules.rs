@@ -381,7 +381,7 @@ fn std_error_rule(coefs: &Coefs<'_>, select: &str, max: f64, label: String) -> O
 }
 
 fn noise_rule(
-    profile: &Profile,
+    noise: Option<&crate::noise::NoiseReport>,
     sensor: SensorKind,
     term: &str,
     max: f64,
@@ -389,9 +389,11 @@ fn noise_rule(
     label: String,
 ) -> Outcome {
     let k = unit.and_then(noise_factor).unwrap_or(1.0);
-    let Some(n) = &profile.noise else {
+    let Some(n) = noise else {
         return (label, false, "the profile has no noise characterisation (crosscal noise --store)".into());
     };
+    // Bias instability by the standard reading (the measured curve's minimum / 0.664) where
+    // the curve gives one, the model fit's otherwise.
     let vals: Vec<(String, Option<f64>)> = n
         .channels
         .iter()
@@ -399,7 +401,7 @@ fn noise_rule(
         .map(|c| {
             let v = match term {
                 "white" => c.white_density,
-                "bias_instability" => c.bias_instability,
+                "bias_instability" => c.bias_instability_reading.map(|r| r.value).or(c.bias_instability),
                 _ => c.random_walk,
             };
             (c.channel.clone(), v)
@@ -412,6 +414,23 @@ fn noise_rule(
     } else {
         (label, worst <= max, format!("worst axis {worst:.4e} {u} (limit {max} {u})"))
     }
+}
+
+/// The `noise` rules of `rules` against a noise characterisation alone (a unit of a lot
+/// measured at rest, no profile): the other rule kinds need a profile and are left out.
+pub fn evaluate_noise(rules: &Rules, noise: &crate::noise::NoiseReport) -> Vec<RuleResult> {
+    rules
+        .rules
+        .iter()
+        .filter_map(|rule| match rule {
+            Rule::Noise { sensor, term, max, unit, name } => {
+                let label = name.clone().unwrap_or_else(|| format!("{sensor} {term} noise"));
+                let (rule, pass, detail) = noise_rule(Some(noise), *sensor, term, *max, unit.as_deref(), label);
+                Some(RuleResult { rule, pass, detail })
+            }
+            _ => None,
+        })
+        .collect()
 }
 
 fn residual_rule(ev: &Evidence<'_>, sensor: SensorKind, max_pct: f64, label: String) -> Outcome {
@@ -468,7 +487,7 @@ pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<Rule
                     name.clone().unwrap_or_else(|| format!("standard error {select}")),
                 ),
                 Rule::Noise { sensor, term, max, unit, name } => noise_rule(
-                    profile,
+                    profile.noise.as_ref(),
                     *sensor,
                     term,
                     *max,

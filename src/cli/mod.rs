@@ -12,6 +12,7 @@ mod fit;
 mod format;
 mod import;
 mod noise;
+mod noise_lot;
 mod plan;
 mod profile;
 mod simulate;

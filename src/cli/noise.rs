@@ -10,11 +10,19 @@ use crosscal::units::{AccelUnit, GyroUnit, Units};
 use std::path::{Path, PathBuf};
 
 /// Options of `noise`.
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct Args {
     /// A session manifest (its static run, or the run given by --run) or a plain CSV
-    /// (t,gx,gy,gz,ax,ay,az).
-    recording: PathBuf,
+    /// (t,gx,gy,gz,ax,ay,az); with --lot, a folder of units (`DIR/<unit>/session.json`).
+    pub(super) recording: PathBuf,
+    /// The recording is a lot: every sub-folder holding a session.json is a unit; prints each
+    /// unit's terms, their spread over the lot and (with --rules) each unit's verdict.
+    #[arg(long)]
+    pub(super) lot: bool,
+    /// Acceptance rules whose `noise` rules are applied to each unit of --lot (exit 1 when a
+    /// unit fails).
+    #[arg(long, requires = "lot")]
+    pub(super) rules: Option<PathBuf>,
     /// Run of the session to analyse (default: its first static run).
     #[arg(long)]
     run: Option<String>,
@@ -61,6 +69,20 @@ struct Source {
     g: f64,
     serial: Option<String>,
     label: String,
+}
+
+/// Reads and analyses the recording `a` names (a session's static run or a plain CSV):
+/// the report and the local gravity of its units.
+pub(super) fn analyse_one(a: &Args, chans: &[usize]) -> anyhow::Result<(NoiseReport, f64)> {
+    let Source { csv, span, units, g, label, .. } = locate(a)?;
+    if units.gyro == GyroUnit::Raw || units.accel == AccelUnit::Raw {
+        anyhow::bail!("{label}: raw (uncalibrated) units have no physical noise density; record in deg/s and g");
+    }
+    let data = read_channels(&csv, &units, g, chans, span).with_context(|| format!("reading {}", csv.display()))?;
+    for w in &data.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok((analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?, g))
 }
 
 /// The recording (or the part of a session's run) to analyse.
@@ -126,6 +148,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             anyhow::anyhow!("--channels: unknown channel '{c}'; expected some of {}", CHANNELS.join(","))
         })?;
         chans.push(k);
+    }
+    if a.lot {
+        return super::noise_lot::run(&a, &chans);
     }
     let Source { csv, span, units, g, serial, label } = locate(&a)?;
     if units.gyro == GyroUnit::Raw || units.accel == AccelUnit::Raw {
