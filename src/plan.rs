@@ -256,3 +256,55 @@ pub fn plan(model: &Model, spec: &PlanSpec, candidates: &[RunPlan]) -> Result<Pl
         suggestion,
     })
 }
+
+/// The runs of a session manifest as a design for [`plan`]: its conic runs and its static runs
+/// with a known up, in their mounts, each for its `duration_s` (runs not yet recorded) or,
+/// when every run is recorded, its recording's span; with the recordings' sample rate (None
+/// when a run is not recorded: the caller's rate is used). Protocol runs (rotations,
+/// multi-position, poses of unknown orientation) and reference runs have no stand design
+/// and are refused by name.
+pub fn design_runs(manifest_path: &std::path::Path) -> Result<(Vec<RunPlan>, Option<f64>), EstimateError> {
+    let read = |source| EstimateError::Read { path: manifest_path.to_path_buf(), source };
+    let manifest = crate::session::read_manifest(manifest_path).map_err(read)?;
+    for r in &manifest.runs {
+        if !matches!(r.motion, MotionSpec::Conic { .. } | MotionSpec::Static { .. }) {
+            return Err(EstimateError::Request(format!(
+                "run '{}' of {}: plan predicts conic and static stand runs; protocol runs (rotation, multi_position, poses of unknown up) and reference runs have no stand design",
+                r.name,
+                manifest_path.display()
+            )));
+        }
+    }
+    let plans = |durations: &[f64]| -> Vec<RunPlan> {
+        manifest
+            .runs
+            .iter()
+            .zip(durations)
+            .map(|(r, &d)| RunPlan {
+                name: r.name.clone(),
+                motion: r.motion.clone(),
+                mount: r.mount.clone(),
+                duration_s: d,
+            })
+            .collect()
+    };
+    if let Some(d) = manifest.runs.iter().map(|r| r.duration_s).collect::<Option<Vec<f64>>>() {
+        return Ok((plans(&d), None));
+    }
+    // Recorded: the durations and the sample rate from the recordings themselves.
+    let session = crate::session::Session::load(manifest_path).map_err(read)?;
+    let mut durations = Vec::with_capacity(session.runs.len());
+    let (mut samples, mut span) = (0usize, 0.0);
+    for run in &session.runs {
+        let t = &run.rec.t_s;
+        let n = t.len();
+        let dt = if n > 1 { (t[n - 1] - t[0]) / (n - 1) as f64 } else { 0.0 };
+        if dt.is_nan() || dt <= 0.0 {
+            return Err(EstimateError::Request(format!("run '{}' has too few samples to plan from", run.spec.name)));
+        }
+        durations.push(n as f64 * dt);
+        samples += n;
+        span += n as f64 * dt;
+    }
+    Ok((plans(&durations), Some(samples as f64 / span)))
+}

@@ -72,3 +72,43 @@ fn a_second_rate_or_direction_separates_epsilon_from_rate_coupling() {
     assert_eq!(held.len(), 3, "{held:?}");
     assert!(held.iter().all(|h| h.ends_with('z') && h.starts_with("gyro.e_")), "{held:?}");
 }
+
+/// `plan --design`: the runs a manifest describes. A recorded session predicts exactly what
+/// the factorial flags that made it predict; a design of two planned runs (`duration_s`, no
+/// recordings) names what those runs cannot identify; a protocol run is refused by name.
+#[test]
+fn plan_predicts_the_design_a_manifest_describes() {
+    let d = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        let (code, out, err) = crate::common::run_in(d.path(), args);
+        assert_eq!(code, 0, "{args:?}: {out}{err}");
+        out
+    };
+    run(&["simulate", "-o", "s", "--gyro-noise", "0.002"]);
+    let noise = ["--arw", "0.012", "--vrw", "0.0011768", "--json"];
+    let factorial = run(&[&["plan"][..], &noise].concat());
+    let designed = run(&[&["plan", "--design", "s/session.json"][..], &noise].concat());
+    assert_eq!(factorial, designed, "the recorded session is the factorial plan");
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.path().join("s/session.json")).unwrap()).unwrap();
+    let runs: Vec<serde_json::Value> = m["runs"].as_array().unwrap()[..2]
+        .iter()
+        .map(|r| {
+            let mut r = r.clone();
+            r["duration_s"] = serde_json::json!(36.0);
+            r["file"] = serde_json::json!("not-yet-recorded.csv");
+            r
+        })
+        .collect();
+    m["runs"] = serde_json::Value::Array(runs);
+    std::fs::write(d.path().join("two.json"), m.to_string()).unwrap();
+    let out = run(&["plan", "--design", "two.json", "--arw", "0.012", "--vrw", "0.0011768"]);
+    assert!(out.contains("plan: 2 runs, 7200 samples"), "{out}");
+    assert!(out.contains("UNIDENTIFIABLE gyro.e_xz"), "two runs in one mount cannot see ε_z:\n{out}");
+    m["runs"][0]["motion"] = serde_json::json!({"kind": "rotation", "axis_stand": [0, 0, 1], "angle_deg": 360});
+    m["format"] = serde_json::json!("crosscal-session/2");
+    std::fs::write(d.path().join("prot.json"), m.to_string()).unwrap();
+    let (code, _, err) = crate::common::run_in(d.path(), &["plan", "--design", "prot.json"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("plan predicts conic and static stand runs"), "{err}");
+}

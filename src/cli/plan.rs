@@ -28,6 +28,11 @@ pub struct Args {
     /// section or from a `crosscal noise --save` file, instead of --arw/--vrw.
     #[arg(long)]
     noise_from: Option<PathBuf>,
+    /// Predict the runs a session manifest describes (any subset of conic and static runs, in
+    /// their mounts; `duration_s` per run for runs not yet recorded, else the recordings'
+    /// spans and sample rate) instead of the factorial --rates × --cone-angles × --mounts.
+    #[arg(long)]
+    design: Option<PathBuf>,
     /// Do not search for an extra run.
     #[arg(long)]
     no_suggest: bool,
@@ -48,12 +53,16 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         anyhow::bail!("--duration, --rate-hz, --arw and --vrw must be positive");
     }
     let model = a.model.spec(&[]).build()?;
-    let mut spec = PlanSpec {
-        runs: a.runs.plan(),
-        sample_rate_hz: a.runs.rate_hz,
-        gyro_density: a.arw.to_radians() / 60.0,
-        accel_density: a.vrw / 60.0,
+    let (runs, rate) = match &a.design {
+        Some(path) => {
+            let (runs, rate) =
+                crosscal::plan::design_runs(path).with_context(|| format!("planning the design {}", path.display()))?;
+            (runs, rate.unwrap_or(a.runs.rate_hz))
+        }
+        None => (a.runs.plan(), a.runs.rate_hz),
     };
+    let mut spec =
+        PlanSpec { runs, sample_rate_hz: rate, gyro_density: a.arw.to_radians() / 60.0, accel_density: a.vrw / 60.0 };
     if let Some(path) = &a.noise_from {
         // A unit's folder of the store: its newest profile.
         let newest;

@@ -140,6 +140,7 @@ impl RunSpec {
             note: None,
             rows,
             start_s: None,
+            duration_s: None,
         }
     }
 
@@ -160,6 +161,9 @@ impl RunSpec {
             }
             if let Some(s) = self.start_s {
                 o.insert("start_s".into(), serde_json::json!(s));
+            }
+            if let Some(d) = self.duration_s {
+                o.insert("duration_s".into(), serde_json::json!(d));
             }
         }
         v
@@ -218,6 +222,9 @@ pub struct RunSpec {
     /// for sessions whose runs each restart their time stamps; without it the session clock
     /// is `t` as recorded.
     pub start_s: Option<f64>,
+    /// Planned duration, s (optional `duration_s`): for `plan --design` on runs not yet
+    /// recorded; ignored by every other command (a recorded run's duration is its CSV's).
+    pub duration_s: Option<f64>,
 }
 
 /// A parsed manifest.
@@ -625,7 +632,12 @@ fn parse_run(i: usize, r: &Value, bad_kind: &Bad<'_>) -> Result<RunSpec, Session
             ))
         }
     };
-    kinds_ok(&name, r, &["temperature_c"], &[], &bad)?;
+    kinds_ok(&name, r, &["temperature_c", "duration_s"], &[], &bad)?;
+    let duration_s = match num(r, "duration_s") {
+        Some(d) if d > 0.0 && d <= 1e7 => Some(d),
+        Some(d) => return Err(bad("duration_s", format!("run '{name}': duration_s is {d}: expected 0 < s ≤ 1e7"))),
+        None => None,
+    };
     let temperature_c = match num(r, "temperature_c") {
         Some(t) => Some(
             within(&name, "temperature_c", t, LIMITS.temperature_c.0, LIMITS.temperature_c.1, "degC")
@@ -641,6 +653,7 @@ fn parse_run(i: usize, r: &Value, bad_kind: &Bad<'_>) -> Result<RunSpec, Session
         None => None,
     };
     Ok(RunSpec {
+        duration_s,
         start_s,
         rows: run_rows(&name, r, &bad)?,
         mount: run_mount(&name, r, bad_kind)?,
