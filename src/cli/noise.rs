@@ -72,9 +72,9 @@ struct Source {
 }
 
 /// Reads and analyses the recording `a` names (a session's static run or a plain CSV):
-/// the report and the local gravity of its units.
-pub(super) fn analyse_one(a: &Args, chans: &[usize]) -> anyhow::Result<(NoiseReport, f64)> {
-    let Source { csv, span, units, g, label, .. } = locate(a)?;
+/// the report, the local gravity of its units and the unit's serial when known.
+pub(super) fn analyse_one(a: &Args, chans: &[usize]) -> anyhow::Result<(NoiseReport, f64, Option<String>)> {
+    let Source { csv, span, units, g, serial, label } = locate(a)?;
     if units.gyro == GyroUnit::Raw || units.accel == AccelUnit::Raw {
         anyhow::bail!("{label}: raw (uncalibrated) units have no physical noise density; record in deg/s and g");
     }
@@ -82,7 +82,7 @@ pub(super) fn analyse_one(a: &Args, chans: &[usize]) -> anyhow::Result<(NoiseRep
     for w in &data.warnings {
         eprintln!("warning: {w}");
     }
-    Ok((analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?, g))
+    Ok((analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?, g, serial))
 }
 
 /// The recording (or the part of a session's run) to analyse.
@@ -152,15 +152,8 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if a.lot {
         return super::noise_lot::run(&a, &chans);
     }
-    let Source { csv, span, units, g, serial, label } = locate(&a)?;
-    if units.gyro == GyroUnit::Raw || units.accel == AccelUnit::Raw {
-        anyhow::bail!("{label}: raw (uncalibrated) units have no physical noise density; record in deg/s and g");
-    }
-    let data = read_channels(&csv, &units, g, &chans, span).with_context(|| format!("reading {}", csv.display()))?;
-    for w in &data.warnings {
-        eprintln!("warning: {w}");
-    }
-    let r: NoiseReport = analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?;
+    let (r, g, serial) = analyse_one(&a, &chans)?;
+    let label = r.source.clone();
     if a.json {
         outln!("{}", serde_json::to_string_pretty(&r)?);
     } else {

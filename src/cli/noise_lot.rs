@@ -41,7 +41,7 @@ pub(super) fn run(a: &Args, chans: &[usize]) -> anyhow::Result<Outcome> {
         let mut one = a.clone();
         (one.recording, one.lot, one.rules) = (d.join("session.json"), false, None);
         let name = d.file_name().map_or_else(|| d.display().to_string(), |n| n.to_string_lossy().into_owned());
-        let (r, g) = analyse_one(&one, chans).map_err(|e| e.context(format!("unit {name}")))?;
+        let (r, g, _) = analyse_one(&one, chans).map_err(|e| e.context(format!("unit {name}")))?;
         units.push((name, r, g));
     }
     outln!(

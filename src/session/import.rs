@@ -54,7 +54,8 @@ pub(super) struct Table {
     pub(super) accel: Vec<[f64; 3]>,
 }
 
-fn csv_err(path: &Path, line: usize, column: &str, problem: Problem, msg: String) -> SessionError {
+/// A reading error at `path:line`, `column` (a number and name, or `-`).
+pub(super) fn csv_err(path: &Path, line: usize, column: &str, problem: Problem, msg: String) -> SessionError {
     SessionError::Csv { problem, path: path.to_path_buf(), line: line as u64, column: column.to_string(), msg }
 }
 

@@ -5,7 +5,7 @@
 //! says which delimiter the file seems to use. One run: a multi-position recording (with its
 //! initial rest) or a static recording (for `crosscal noise`).
 
-use super::import::{ImportOptions, Imported};
+use super::import::{csv_err as err, ImportOptions, Imported};
 use super::{MotionSpec, Problem, SessionError};
 use crate::units::{TimeUnit, Units};
 use std::path::Path;
@@ -104,10 +104,6 @@ const ALIASES: [(&str, &[&str]); 7] = [
     ("ay", &["ay", "acc_y", "accel_y", "accy", "ay_m_s2"]),
     ("az", &["az", "acc_z", "accel_z", "accz", "az_m_s2"]),
 ];
-
-fn err(path: &Path, line: usize, column: &str, problem: Problem, msg: String) -> SessionError {
-    SessionError::Csv { problem, path: path.to_path_buf(), line: line as u64, column: column.to_string(), msg }
-}
 
 fn is_number(s: &str) -> bool {
     s.parse::<f64>().is_ok()

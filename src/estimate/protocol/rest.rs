@@ -38,16 +38,6 @@ pub(super) enum RestCheck {
     },
 }
 
-/// Median of the finite values.
-fn median(v: &mut [f64]) -> Option<f64> {
-    let mut f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
-    if f.is_empty() {
-        return None;
-    }
-    f.sort_by(f64::total_cmp);
-    Some(f[f.len() / 2])
-}
-
 /// Checks the first `n_rest` samples of a recording (accelerometer and gyro, any units) with
 /// the detector's `window`.
 pub(super) fn check_rest(accel: &[[f64; 3]], gyro: &[[f64; 3]], n_rest: usize, window: usize) -> RestCheck {
@@ -62,7 +52,9 @@ pub(super) fn check_rest(accel: &[[f64; 3]], gyro: &[[f64; 3]], n_rest: usize, w
     let mut first: Option<(usize, &'static str, f64)> = None;
     for (sensor, x, ratio) in [("accelerometer", &accel[..span], ACCEL_RATIO), ("gyro", &gyro[..span], GYRO_RATIO)] {
         let norms = moving_variance_norm(x, w);
-        let Some(reference) = median(&mut norms[h..(n_rest / 2).max(h + 1)].to_vec()) else { continue };
+        let mut first_half: Vec<f64> =
+            norms[h..(n_rest / 2).max(h + 1)].iter().copied().filter(|v| v.is_finite()).collect();
+        let Some(reference) = crate::stats::median(&mut first_half) else { continue };
         if reference <= 0.0 {
             continue;
         }
