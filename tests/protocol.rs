@@ -302,3 +302,31 @@ fn motion_inside_the_declared_rest_is_found_and_reported_or_trimmed() {
         assert!((b - expect).abs() < 5.0 * truth.noise.0 / (19.0 * truth.rate_hz).sqrt(), "b_{i}: {b} vs {expect}");
     }
 }
+
+/// Protocol diagnose is "adequate" only when no pose or turn stands out beyond the noise and
+/// the pose-to-pose scatter: clean sessions are adequate; a motion recorded with a 10 % gyro
+/// glitch (one turn integrates wrong) is "not adequate" and the turn is named.
+#[test]
+fn protocol_diagnose_names_a_turn_that_stands_out_and_is_not_adequate_then() {
+    use crosscal::diagnose::protocol::diagnose_protocol;
+    let mut clean = ProtocolTruth::mems(true);
+    clean.g_gyro = nalgebra::Matrix3::zeros();
+    for seed in [2, 3, 4] {
+        let d = diagnose_protocol(&multi_position(&clean, 20.0, 24, 3.0, seed).session(), &Model::tedaldi()).unwrap();
+        assert!(d.adequate(), "seed {seed}: {:?}", d.standing_out());
+    }
+    let mut sim = multi_position(&clean, 20.0, 24, 3.0, 2);
+    // The first turn runs from 20 s to 21.5 s at 100 Hz.
+    for w in &mut sim.recording.gyro[2000..2150] {
+        for v in w.iter_mut() {
+            *v *= 1.1;
+        }
+    }
+    let d = diagnose_protocol(&sim.session(), &Model::tedaldi()).unwrap();
+    assert!(!d.adequate(), "a glitched turn passed");
+    assert!(
+        d.outlier_turns.iter().any(|t| t.starts_with("pose 0 → 1") || t.starts_with("pose 1 → 2")),
+        "{:?}",
+        d.standing_out()
+    );
+}

@@ -43,7 +43,7 @@ pub fn acceptance(
         let model = profile.fitted_model().map_err(|e| AppError::Correct { what: what.clone(), source: e.into() })?;
         let d = crate::diagnose::protocol::diagnose_protocol(session, &model)
             .map_err(|source| AppError::Fit { what: what.clone(), source })?;
-        let mut why: Vec<String> = d.outlier_poses.iter().map(|p| format!("pose {p} stands out")).collect();
+        let mut why: Vec<String> = d.standing_out().iter().map(|p| format!("{p} stands out")).collect();
         if let Some(p) = &d.proposal {
             why.push(format!("missing effect: {p}"));
         }

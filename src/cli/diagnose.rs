@@ -200,6 +200,12 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
     for o in &d.outlier_poses {
         outln!("  OUTLIER {o}: did the unit move, or was the pose cut too wide?");
     }
+    for o in &d.outlier_rates {
+        outln!("  OUTLIER {o}: the unit moved in this pose, or the gyro bias (from the rest) does not hold here");
+    }
+    for o in &d.outlier_turns {
+        outln!("  OUTLIER {o}: a motion the calibrated gyro does not integrate to the next pose");
+    }
     if !d.candidates.is_empty() {
         outln!("\ncandidate effects on the static poses, best first:");
         outln!("  {:<26} {:>6} {:>12} {:>11}  fit on this session", "effect", "params", "rss change", "p-value");
@@ -226,8 +232,12 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
                 Err(why) => outln!("next: {why}"),
             }
         }
+        None if !d.adequate() => outln!(
+            "\nverdict: not adequate: {} pose(s) or turn(s) stand out beyond the noise and the pose-to-pose scatter (listed above as OUTLIER); no catalogued effect explains them. What would fix it: a longer, truly still initial rest (the gyro bias), poses held longer and still, more poses, and an orientation repeated late in the recording (it separates a drifting bias from g-sensitivity)",
+            d.standing_out().len()
+        ),
         None => outln!(
-            "\nverdict: adequate: no catalogued effect explains the pose residuals (p ≥ {:.0e} for all)",
+            "\nverdict: adequate: no catalogued effect explains the pose residuals (p ≥ {:.0e} for all), and no pose or turn stands out",
             crosscal::diagnose::protocol::P_PROPOSE
         ),
     }

@@ -52,6 +52,12 @@ pub struct ProtocolDiagnosis {
     pub report: ProtocolReport,
     /// Poses whose |a| − g stands out (robust z > 5 against the others).
     pub outlier_poses: Vec<String>,
+    /// Poses whose calibrated rate at rest stands out (robust z > 5 of its norm).
+    #[serde(default)]
+    pub outlier_rates: Vec<String>,
+    /// Turns or motions whose misfit stands out (robust z > 5 of |error| against the others).
+    #[serde(default)]
+    pub outlier_turns: Vec<String>,
     /// Candidates, best first.
     pub candidates: Vec<PoseCandidate>,
     /// The proposed effect, if any candidate is significant.
@@ -145,5 +151,58 @@ pub fn diagnose_protocol_with(
         .filter(|p| mad > 0.0 && (p.gravity_error_m_s2 - med).abs() > 5.0 * mad)
         .map(|p| format!("{}[{}..{}]: |a| − g = {:+.4} m/s^2", p.run, p.start, p.end, p.gravity_error_m_s2))
         .collect();
-    Ok(ProtocolDiagnosis { model: model.name.clone(), report, outlier_poses, candidates, proposal, indistinguishable })
+    let norm = |w: &[f64; 3]| (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+    let rates: Vec<f64> = report.poses.iter().map(|p| norm(&p.rate_at_rest_deg_s)).collect();
+    let outlier_rates = stand_out(&rates)
+        .into_iter()
+        .map(|k| {
+            let p = &report.poses[k];
+            let w = p.rate_at_rest_deg_s;
+            format!("{}[{}..{}]: rate at rest ({:+.4}, {:+.4}, {:+.4}) deg/s", p.run, p.start, p.end, w[0], w[1], w[2])
+        })
+        .collect();
+    let misfits: Vec<f64> = report.turns.iter().map(|t| t.error_deg.abs()).collect();
+    let outlier_turns = stand_out(&misfits)
+        .into_iter()
+        .map(|k| format!("{}: misfit {:+.4} deg", report.turns[k].name, report.turns[k].error_deg))
+        .collect();
+    Ok(ProtocolDiagnosis {
+        model: model.name.clone(),
+        report,
+        outlier_poses,
+        outlier_rates,
+        outlier_turns,
+        candidates,
+        proposal,
+        indistinguishable,
+    })
+}
+
+/// Indices of the non-negative sizes (rates at rest, misfits) that stand out of the others:
+/// above their median by more than 5 robust σ (1.4826·MAD) and twice the median; none with
+/// fewer than five values (no scatter to compare with).
+fn stand_out(v: &[f64]) -> Vec<usize> {
+    if v.len() < 5 {
+        return Vec::new();
+    }
+    let mut c = v.to_vec();
+    let med = crate::stats::median(&mut c).unwrap_or(0.0);
+    let sigma = crate::stats::robust_sigma(v, med).unwrap_or(0.0);
+    (0..v.len()).filter(|&k| v[k] > med + 5.0 * sigma && v[k] > 2.0 * med && v[k] > 0.0).collect()
+}
+
+impl ProtocolDiagnosis {
+    /// Adequate: no missing effect, and no pose or turn the noise and the pose-to-pose
+    /// scatter do not explain.
+    pub fn adequate(&self) -> bool {
+        self.proposal.is_none()
+            && self.outlier_poses.is_empty()
+            && self.outlier_rates.is_empty()
+            && self.outlier_turns.is_empty()
+    }
+
+    /// What stands out, one line each (poses, rates at rest, turns).
+    pub fn standing_out(&self) -> Vec<String> {
+        self.outlier_poses.iter().chain(&self.outlier_rates).chain(&self.outlier_turns).cloned().collect()
+    }
 }
