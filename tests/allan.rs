@@ -308,3 +308,45 @@ fn a_lot_of_static_units_is_characterised_and_judged() {
     assert!((median / 0.15 - 1.0).abs() < 0.05, "median ARW {median}");
     assert!(out.contains("3 of 4 units pass the noise rules"), "{out}");
 }
+
+/// `noise --profile`: the noise of the corrected outputs. A unit whose gyro x scale is 1.25
+/// (noise added at its output) shows 1/1.25 of its raw angle random walk on x once its
+/// profile is applied, the same on y (scale 1), and the report says it was corrected.
+#[test]
+fn noise_of_the_corrected_outputs_follows_the_profile() {
+    let d = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        let (code, out, err) = crate::common::run_in(d.path(), args);
+        assert_eq!(code, 0, "{args:?}: {out}{err}");
+        out
+    };
+    run(&["simulate", "-o", "stand", "--serial", "U1", "--gyro-noise", "0.002", "--set", "gyro.c_xx=1.25"]);
+    run(&["fit", "stand/session.json", "--out", "cp"]);
+    run(&[
+        "simulate",
+        "--preset",
+        "static",
+        "--serial",
+        "U1",
+        "--duration",
+        "600",
+        "--arw",
+        "0.15",
+        "--vrw",
+        "0.02",
+        "--set",
+        "gyro.c_xx=1.25",
+        "-o",
+        "still",
+    ]);
+    let arw = |out: &str, ch: &str| -> f64 {
+        out.lines().find(|l| l.starts_with(ch)).and_then(|l| l.split_whitespace().nth(2)).unwrap().parse().unwrap()
+    };
+    let raw = run(&["noise", "still/session.json", "--channels", "gx,gy"]);
+    let corrected = run(&["noise", "still/session.json", "--channels", "gx,gy", "--profile", "cp/U1"]);
+    assert!(corrected.contains("corrected with the profile of unit U1"), "{corrected}");
+    let (rx, cx) = (arw(&raw, "gx "), arw(&corrected, "gx "));
+    let (ry, cy) = (arw(&raw, "gy "), arw(&corrected, "gy "));
+    assert!((rx / cx / 1.25 - 1.0).abs() < 0.01, "gx {rx} → {cx}");
+    assert!((ry / cy - 1.0).abs() < 0.01, "gy {ry} → {cy}");
+}

@@ -56,6 +56,10 @@ pub struct Args {
     /// Add the result to the unit's latest profile in this store as a new revision.
     #[arg(long)]
     store: Option<PathBuf>,
+    /// Characterise the noise of the corrected outputs: the profile (a file or a unit's folder
+    /// of the store) is applied to the recording first, and the report says so.
+    #[arg(long, conflicts_with = "lot")]
+    profile: Option<PathBuf>,
     /// Serial of the unit (a plain CSV has none; a session's manifest gives it).
     #[arg(long)]
     serial: Option<String>,
@@ -78,10 +82,36 @@ pub(super) fn analyse_one(a: &Args, chans: &[usize]) -> anyhow::Result<(NoiseRep
     if units.gyro == GyroUnit::Raw || units.accel == AccelUnit::Raw {
         anyhow::bail!("{label}: raw (uncalibrated) units have no physical noise density; record in deg/s and g");
     }
-    let data = read_channels(&csv, &units, g, chans, span).with_context(|| format!("reading {}", csv.display()))?;
+    let Some(path) = &a.profile else {
+        let data = read_channels(&csv, &units, g, chans, span).with_context(|| format!("reading {}", csv.display()))?;
+        for w in &data.warnings {
+            eprintln!("warning: {w}");
+        }
+        return Ok((analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?, g, serial));
+    };
+    // Corrected outputs: all six channels are read (the correction couples them), corrected
+    // offline on the recording's own sample interval, then the chosen ones analysed.
+    let profile = super::read_profile(path)?;
+    let cal = crosscal::correct::Calibration::from_profile(&profile)?;
+    let mut data = read_channels(&csv, &units, g, &[0, 1, 2, 3, 4, 5], span)
+        .with_context(|| format!("reading {}", csv.display()))?;
     for w in &data.warnings {
         eprintln!("warning: {w}");
     }
+    let col = |c: usize| &data.columns[c].1;
+    let triad =
+        |o: usize| -> Vec<[f64; 3]> { (0..data.n).map(|k| [col(o)[k], col(o + 1)[k], col(o + 2)[k]]).collect() };
+    let (gyro, accel) = (triad(0), triad(3));
+    let t: Vec<f64> = (0..data.n).map(|k| k as f64 * data.tau0_s).collect();
+    let corrected = crosscal::correct::correct_offline(&cal, &t, &gyro, &accel, None)?;
+    data.columns = chans
+        .iter()
+        .map(|&c| {
+            let v = if c < 3 { &corrected.w_rad_s } else { &corrected.a_m_s2 };
+            (c, v.iter().map(|x| x[c % 3]).collect())
+        })
+        .collect();
+    let label = format!("{label}, corrected with the profile of unit {} ({})", profile.serial, profile.created_utc);
     Ok((analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?, g, serial))
 }
 
