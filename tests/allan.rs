@@ -315,11 +315,7 @@ fn a_lot_of_static_units_is_characterised_and_judged() {
 #[test]
 fn noise_of_the_corrected_outputs_follows_the_profile() {
     let d = tempfile::tempdir().unwrap();
-    let run = |args: &[&str]| {
-        let (code, out, err) = crate::common::run_in(d.path(), args);
-        assert_eq!(code, 0, "{args:?}: {out}{err}");
-        out
-    };
+    let run = |args: &[&str]| crate::common::run_ok(d.path(), args);
     run(&["simulate", "-o", "stand", "--serial", "U1", "--gyro-noise", "0.002", "--set", "gyro.c_xx=1.25"]);
     run(&["fit", "stand/session.json", "--out", "cp"]);
     run(&[

@@ -204,12 +204,9 @@ fn killing_a_batch_never_leaves_a_partial_profile_and_resume_completes_it() {
 /// say that a protocol session has none instead of "could not be processed".
 #[test]
 fn a_lot_of_protocol_sessions_is_fitted_and_judged() {
-    use crosscal::simulate::protocol::{multi_position, ProtocolTruth};
+    use crosscal::simulate::protocol::multi_position;
     let d = tempfile::tempdir().unwrap();
-    let mut clean = ProtocolTruth::mems(true);
-    clean.g_gyro = nalgebra::Matrix3::zeros();
-    let mut hidden = clean.clone();
-    hidden.g_gyro = nalgebra::Matrix3::new(0.5, -0.2, 0.1, 0.3, 0.4, -0.2, -0.1, 0.2, 0.6);
+    let (clean, hidden) = crate::common::clean_and_g_sensitive();
     for (i, truth) in [&clean, &clean, &hidden].into_iter().enumerate() {
         let mut sim = multi_position(truth, 20.0, 24, 3.0, 2 + i as u64);
         sim.manifest.serial = format!("HAND-{i}");

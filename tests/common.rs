@@ -34,6 +34,25 @@ pub fn run_in(dir: &std::path::Path, args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// Runs crosscal in `dir`, asserts it succeeded (naming the arguments and its output
+/// otherwise), and returns its stdout.
+pub fn run_ok(dir: &std::path::Path, args: &[&str]) -> String {
+    let (code, out, err) = run_in(dir, args);
+    assert_eq!(code, 0, "{args:?}: {out}{err}");
+    out
+}
+
+/// A multi-position MEMS unit without gyro g-sensitivity, and the same unit with a large
+/// one: the clean/hidden pair of the protocol diagnose and batch tests.
+pub fn clean_and_g_sensitive(
+) -> (crosscal::simulate::protocol::ProtocolTruth, crosscal::simulate::protocol::ProtocolTruth) {
+    let mut clean = crosscal::simulate::protocol::ProtocolTruth::mems(true);
+    clean.g_gyro = nalgebra::Matrix3::zeros();
+    let mut hidden = clean.clone();
+    hidden.g_gyro = nalgebra::Matrix3::new(0.5, -0.2, 0.1, 0.3, 0.4, -0.2, -0.1, 0.2, 0.6);
+    (clean, hidden)
+}
+
 /// Maps `f` over `items` on two threads, keeping the order.
 pub fn par_map<I: Sync, T: Send>(items: &[I], f: impl Fn(&I) -> T + Sync) -> Vec<T> {
     let mut out = Vec::with_capacity(items.len());

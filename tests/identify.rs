@@ -79,11 +79,7 @@ fn a_second_rate_or_direction_separates_epsilon_from_rate_coupling() {
 #[test]
 fn plan_predicts_the_design_a_manifest_describes() {
     let d = tempfile::tempdir().unwrap();
-    let run = |args: &[&str]| {
-        let (code, out, err) = crate::common::run_in(d.path(), args);
-        assert_eq!(code, 0, "{args:?}: {out}{err}");
-        out
-    };
+    let run = |args: &[&str]| crate::common::run_ok(d.path(), args);
     run(&["simulate", "-o", "s", "--gyro-noise", "0.002"]);
     let noise = ["--arw", "0.012", "--vrw", "0.0011768", "--json"];
     let factorial = run(&[&["plan"][..], &noise].concat());
