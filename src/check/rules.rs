@@ -400,8 +400,8 @@ fn noise_rule(
         .filter(|c| c.sensor() == sensor)
         .map(|c| {
             let v = match term {
-                "white" => c.white_density,
-                "bias_instability" => c.bias_instability_reading.map(|r| r.value).or(c.bias_instability),
+                "white" => c.white(),
+                "bias_instability" => c.bias(),
                 _ => c.random_walk,
             };
             (c.channel.clone(), v)

@@ -176,7 +176,7 @@ fn run_streaming(
     out_units: Units,
     scale: OutputScale,
 ) -> anyhow::Result<Outcome> {
-    let (input, _) = crosscal::session::open_regular(&a.input)?;
+    let (input, _) = crosscal::session::open_recording(&a.input)?;
     let opts = StreamCsvOptions { scale, strict: a.strict };
     let mut failed = None;
     let mut done = None;

@@ -7,7 +7,7 @@ use crosscal::noise::{analyse, read_channels, report, NoiseOptions, NoiseReport,
 use crosscal::profile::{latest, save};
 use crosscal::session::{read_manifest, MotionSpec};
 use crosscal::units::{AccelUnit, GyroUnit, Units};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Options of `noise`.
 #[derive(Debug, Clone, clap::Args)]
@@ -137,7 +137,6 @@ fn locate(a: &Args) -> anyhow::Result<Source> {
                     )
                 })?,
         };
-        let dir = a.recording.parent().unwrap_or(Path::new("."));
         // A multi-position run is at rest only during its initial rest.
         let first_s = match run.motion {
             MotionSpec::MultiPosition { init_rest_s, .. } => Some(init_rest_s),
@@ -145,7 +144,7 @@ fn locate(a: &Args) -> anyhow::Result<Source> {
         };
         let what = if first_s.is_some() { " (initial rest)" } else { "" };
         Ok(Source {
-            csv: dir.join(&run.file),
+            csv: crosscal::session::run_path(&a.recording, run)?,
             span: Span { rows: run.rows, first_s },
             units: m.units,
             g: m.g_m_s2,

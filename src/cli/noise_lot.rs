@@ -14,7 +14,7 @@ use crosscal::units::SensorKind;
 fn terms(c: &ChannelNoise, g: f64) -> [Option<f64>; 3] {
     let (_, k) = c.sensor().display_unit();
     let walk = c.white_display(g).map(|w| w.1);
-    let bi = c.bias_instability_reading.map(|r| r.value).or(c.bias_instability);
+    let bi = c.bias();
     match c.sensor() {
         SensorKind::Gyro => [walk, bi.map(|b| b * k * 3600.0), c.random_walk.map(|v| v * k * 3600.0 * 60.0)],
         SensorKind::Accel => [walk, bi.map(|b| b / g * 1e6), c.random_walk],

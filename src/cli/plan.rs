@@ -44,7 +44,7 @@ pub struct Args {
 /// The worst white-noise density of each sensor in a noise report (rad/s/√Hz, m/s²/√Hz).
 fn densities(r: &NoiseReport) -> (Option<f64>, Option<f64>) {
     let worst =
-        |s: SensorKind| r.channels.iter().filter(|c| c.sensor() == s).filter_map(|c| c.white_density).reduce(f64::max);
+        |s: SensorKind| r.channels.iter().filter(|c| c.sensor() == s).filter_map(|c| c.white()).reduce(f64::max);
     (worst(SensorKind::Gyro), worst(SensorKind::Accel))
 }
 

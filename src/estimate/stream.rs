@@ -239,7 +239,7 @@ impl StreamRun<'_> {
     /// records what it saw and spills the used rows (if no temporary file can be written,
     /// later reads parse the text again).
     fn read_text(&self, blocks: &mut Blocks<'_, '_>) -> Result<(), SessionError> {
-        let file = std::fs::File::open(&self.path).map_err(|e| self.io(e))?;
+        let (file, _) = crate::session::open_recording(&self.path)?;
         let mut rdr =
             RowReader::new(&self.path, file, &self.manifest.units, self.manifest.g_m_s2, ReadOptions::default())?;
         let has_temp = rdr.has_temp();

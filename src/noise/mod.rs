@@ -80,6 +80,12 @@ pub struct ChannelNoise {
     /// Present when the curve has a flat part (the fit finds a flicker floor).
     #[serde(default)]
     pub bias_instability_reading: Option<Reading>,
+    /// The standard reading of the white-noise density (IEEE 952 C.1.1 read off the measured
+    /// curve): σ(τ)·√τ at the well-determined point where the curve's log-log slope is
+    /// nearest −½ (within 0.1), with its τ and interval. The fit's `white_density` can sit
+    /// below it where the curve's knee is rounder than the five terms allow.
+    #[serde(default)]
+    pub white_density_reading: Option<Reading>,
     /// Cluster-time ranges where the measured curve leaves the fitted IEEE 952 model by more
     /// than its interval: a bump (a periodic disturbance), a shoulder, a slope the five terms
     /// do not have. Terms are not forced there; these say where and what it looks like.
@@ -171,6 +177,18 @@ impl ChannelNoise {
         self.coefficients.iter().zip(BASIS).map(|(c, f)| c * f(tau_s)).sum::<f64>().max(0.0).sqrt()
     }
 
+    /// The white-noise density to quote: the standard reading off the curve where there is
+    /// one, else the fitted term.
+    pub fn white(&self) -> Option<f64> {
+        self.white_density_reading.map(|r| r.value).or(self.white_density)
+    }
+
+    /// The bias instability to quote: the standard reading where there is one, else the
+    /// fitted model's floor.
+    pub fn bias(&self) -> Option<f64> {
+        self.bias_instability_reading.map(|r| r.value).or(self.bias_instability)
+    }
+
     /// The sensor this channel belongs to.
     pub fn sensor(&self) -> SensorKind {
         if self.channel.starts_with('g') {
@@ -180,9 +198,10 @@ impl ChannelNoise {
         }
     }
 
-    /// White-noise density in display units: (°/s/√Hz, °/√h) or (µg/√Hz, m/s/√h).
+    /// White-noise density ([`Self::white`]) in display units: (°/s/√Hz, °/√h) or
+    /// (µg/√Hz, m/s/√h).
     pub fn white_display(&self, g_m_s2: f64) -> Option<(f64, f64)> {
-        self.white_density.map(|n| match self.sensor() {
+        self.white().map(|n| match self.sensor() {
             SensorKind::Gyro => (n.to_degrees(), n.to_degrees() * 60.0),
             SensorKind::Accel => (n / g_m_s2 * 1e6, n * 60.0),
         })
@@ -244,6 +263,39 @@ fn fit_terms(tau: &[f64], avar: &[f64], weight: &[f64]) -> [f64; 5] {
     best.0
 }
 
+/// The fitted variance Σ c_j f_j(τ).
+fn model_avar(c: &[f64; 5], tau_s: f64) -> f64 {
+    c.iter().zip(BASIS).map(|(c, f)| c * f(tau_s)).sum()
+}
+
+/// Refits `c` so that the model variance stays at or below `upper` (the squared upper end of
+/// each point's 99.7 % band) everywhere: points the model overshoots get the bound, slightly
+/// inside, as their target and a hundredfold weight, and the fit is repeated until none
+/// overshoots (an active-set iteration for the inequality-constrained least squares). If
+/// that has not converged after 40 rounds the coefficients are scaled down by the largest
+/// overshoot, which satisfies every bound at once.
+fn fit_below(tau: &[f64], avar: &[f64], weight: &[f64], upper: &[f64], mut c: [f64; 5]) -> [f64; 5] {
+    let over = |c: &[f64; 5]| tau.iter().zip(upper).map(|(&t, &u)| model_avar(c, t) / u).fold(0.0, f64::max);
+    if over(&c) <= 1.0 {
+        return c;
+    }
+    let (mut target, mut w) = (avar.to_vec(), weight.to_vec());
+    for _ in 0..40 {
+        for (k, (&t, &u)) in tau.iter().zip(upper).enumerate() {
+            if model_avar(&c, t) > u {
+                target[k] = 0.97 * u;
+                w[k] *= 100.0;
+            }
+        }
+        c = fit_terms(tau, &target, &w);
+        if over(&c) <= 1.0 {
+            return c;
+        }
+    }
+    let s = over(&c);
+    c.map(|v| v / s)
+}
+
 /// Allan deviation and noise terms of one channel from its rate samples (SI), which are
 /// turned into phase in place (the buffer is the only memory that grows with length).
 pub fn analyse_channel(
@@ -295,6 +347,16 @@ pub fn analyse_channel(
             .collect();
         c = fit_terms(&tau, &avar, &w);
     }
+    // Requirement: the model never lies above the measured curve by more than the curve's
+    // band. Where the free fit does (a curve whose knees are rounder than the five terms
+    // allow, as on real units), it is refitted under that constraint.
+    let upper: Vec<f64> = used
+        .iter()
+        .zip(&tau)
+        .zip(&avar)
+        .map(|((&m, &t), &v)| allan::interval(v.sqrt(), allan::edf(n, m, dominant(&c, t)), WIDE).1.powi(2))
+        .collect();
+    c = fit_below(&tau, &avar, &w, &upper, c);
     let points = used
         .iter()
         .zip(&tau)
@@ -324,9 +386,11 @@ pub fn analyse_channel(
         ramp: visible(4).then(|| (2.0 * c[4]).sqrt()),
         coefficients: c,
         bias_instability_reading: None,
+        white_density_reading: None,
         departures: Vec::new(),
     };
     out.departures = departures(&out);
+    out.white_density_reading = white_reading(&out.points);
     if visible(2) {
         // The flat minimum of the fitted curve over the measured range (IEEE 952 C.1.3).
         let (t0, t1) = (tau[0].ln(), tau[tau.len() - 1].ln());
@@ -335,32 +399,50 @@ pub fn analyse_channel(
             out.bias_instability = Some(s / FLAT);
             out.bias_instability_tau_s = Some(t);
         }
-        // The standard reading: the smallest well-determined measured point (≥ READING_EDF
-        // degrees of freedom: the minimum of scattered long-τ points is biased low) / 0.664.
-        let eligible: Vec<usize> = (0..out.points.len()).filter(|&k| out.points[k].edf >= READING_EDF).collect();
-        let k = eligible.iter().copied().min_by(|&a, &b| out.points[a].adev.total_cmp(&out.points[b].adev));
-        // At the last of them the minimum counts only where the curve has flattened: a
-        // log-log slope above −0.2 over the factor of three of τ before it.
-        let flat_end = |k: usize| {
-            let t = out.points[k].tau_s / 3.0;
-            let j = eligible
-                .iter()
-                .copied()
-                .filter(|&j| out.points[j].tau_s <= t)
-                .max_by(|&a, &b| out.points[a].tau_s.total_cmp(&out.points[b].tau_s));
-            j.is_some_and(|j| {
-                let (a, b) = (out.points[j], out.points[k]);
-                (b.adev.ln() - a.adev.ln()) / (b.tau_s.ln() - a.tau_s.ln()) > -0.2
-            })
-        };
-        let interior = |k: usize| Some(&k) != eligible.first() && (Some(&k) != eligible.last() || flat_end(k));
-        if let Some(k) = k.filter(|&k| interior(k)) {
-            let p = out.points[k];
-            out.bias_instability_reading =
-                Some(Reading { value: p.adev / FLAT, tau_s: p.tau_s, low: p.low / FLAT, high: p.high / FLAT });
-        }
+        out.bias_instability_reading = bias_reading(&out.points);
     }
     Ok(out)
+}
+
+/// The standard bias-instability reading: the smallest well-determined measured point / 0.664
+/// (IEEE 952 C.1.3), when it is an interior minimum of the curve.
+fn bias_reading(pts: &[AdevPoint]) -> Option<Reading> {
+    // The standard reading: the smallest well-determined measured point (≥ READING_EDF
+    // degrees of freedom: the minimum of scattered long-τ points is biased low) / 0.664.
+    let eligible: Vec<usize> = (0..pts.len()).filter(|&k| pts[k].edf >= READING_EDF).collect();
+    let k = eligible.iter().copied().min_by(|&a, &b| pts[a].adev.total_cmp(&pts[b].adev));
+    // At the last of them the minimum counts only where the curve has flattened: a
+    // log-log slope above −0.2 over the factor of three of τ before it.
+    let flat_end = |k: usize| {
+        let t = pts[k].tau_s / 3.0;
+        let j = eligible
+            .iter()
+            .copied()
+            .filter(|&j| pts[j].tau_s <= t)
+            .max_by(|&a, &b| pts[a].tau_s.total_cmp(&pts[b].tau_s));
+        j.is_some_and(|j| {
+            let (a, b) = (pts[j], pts[k]);
+            (b.adev.ln() - a.adev.ln()) / (b.tau_s.ln() - a.tau_s.ln()) > -0.2
+        })
+    };
+    let interior = |k: usize| Some(&k) != eligible.first() && (Some(&k) != eligible.last() || flat_end(k));
+    let p = pts[k.filter(|&k| interior(k))?];
+    Some(Reading { value: p.adev / FLAT, tau_s: p.tau_s, low: p.low / FLAT, high: p.high / FLAT })
+}
+
+/// σ(τ)√τ at the well-determined point (≥ [`READING_EDF`]) whose local log-log slope (to
+/// its neighbours) is nearest −½, when within 0.1 of it (IEEE 952 C.1.1: the slope −½ line
+/// read at τ = 1 s is σ(τ)√τ anywhere on it).
+fn white_reading(pts: &[AdevPoint]) -> Option<Reading> {
+    let slope = |k: usize| {
+        let (a, b) = (pts[k - 1], pts[k + 1]);
+        (b.adev.ln() - a.adev.ln()) / (b.tau_s.ln() - a.tau_s.ln())
+    };
+    let k = (1..pts.len().saturating_sub(1))
+        .filter(|&k| pts[k + 1].edf >= READING_EDF && (slope(k) + 0.5).abs() < 0.1)
+        .min_by(|&a, &b| (slope(a) + 0.5).abs().total_cmp(&(slope(b) + 0.5).abs()))?;
+    let (p, r) = (pts[k], pts[k].tau_s.sqrt());
+    Some(Reading { value: p.adev * r, tau_s: p.tau_s, low: p.low * r, high: p.high * r })
 }
 
 /// Ranges of consecutive points where the fitted model leaves the measured point's 99.7 %
@@ -460,8 +542,8 @@ pub fn read_channels(
     channels: &[usize],
     span: Span,
 ) -> Result<StaticData, crate::session::SessionError> {
-    use crate::session::{ReadOptions, Row, RowReader, SessionError};
-    let file = std::fs::File::open(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
+    use crate::session::{ReadOptions, Row, RowReader};
+    let (file, _) = crate::session::open_recording(path)?;
     let mut rows = RowReader::new(path, file, units, g_m_s2, ReadOptions::default())?;
     let mut columns: Vec<(usize, Vec<f64>)> = channels.iter().map(|&c| (c, Vec::new())).collect();
     let mut row = Row::default();
@@ -529,7 +611,7 @@ impl NoiseReport {
         self.channels
             .iter()
             .filter(|c| c.sensor() == sensor)
-            .filter_map(|c| c.white_density)
+            .filter_map(|c| c.white())
             .map(|n| n / dt_s.sqrt())
             .reduce(f64::max)
     }

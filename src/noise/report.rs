@@ -70,6 +70,28 @@ pub fn table(r: &NoiseReport, g_m_s2: f64) -> String {
                 rd.tau_s
             );
         }
+        if let Some(rd) = c.white_density_reading {
+            let (u, f) = match c.sensor() {
+                SensorKind::Gyro => ("°/s/√Hz", 1f64.to_degrees()),
+                SensorKind::Accel => ("µg/√Hz", 1e6 / g_m_s2),
+            };
+            let _ = writeln!(
+                s,
+                "{}: white-noise reading {:.4e} {u} (68 % interval {:.4e}–{:.4e}) at τ = {:.3} s, where the curve runs at slope −½{}",
+                c.channel,
+                rd.value * f,
+                rd.low * f,
+                rd.high * f,
+                rd.tau_s,
+                match c.white_density {
+                    Some(n) if n < rd.low || n > rd.high => format!(
+                        "; the model's {:.4e} differs from it (the curve's knee is rounder than the five terms)",
+                        n * f
+                    ),
+                    _ => String::new(),
+                }
+            );
+        }
         if c.bias_instability.is_some() && c.bias_instability_reading.is_none() {
             let last = c.points.iter().filter(|p| p.edf >= super::READING_EDF).map(|p| p.tau_s).fold(0.0, f64::max);
             let _ = writeln!(

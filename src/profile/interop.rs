@@ -277,9 +277,9 @@ pub fn to_kalibr(p: &Profile, update_rate_hz: f64) -> (String, Vec<String>) {
             "0.0".to_string()
         }
     };
-    let gn = noise("gyroscope_noise_density", density(SensorKind::Gyro, |c| c.white_density));
+    let gn = noise("gyroscope_noise_density", density(SensorKind::Gyro, |c| c.white()));
     let gw = noise("gyroscope_random_walk", density(SensorKind::Gyro, |c| c.random_walk));
-    let an = noise("accelerometer_noise_density", density(SensorKind::Accel, |c| c.white_density));
+    let an = noise("accelerometer_noise_density", density(SensorKind::Accel, |c| c.white()));
     let aw = noise("accelerometer_random_walk", density(SensorKind::Accel, |c| c.random_walk));
     let m = |x: [[f64; 3]; 3]| {
         let rows: Vec<String> = x

@@ -1,6 +1,7 @@
 //! Reading one recording CSV into SI arrays, without a `String` per field.
 
 use super::error::{Problem, SessionError};
+use super::open::open_recording;
 use crate::frames::{Stand, V3};
 use crate::units::{AccelUnit, GyroUnit, Units};
 use sha2::{Digest, Sha256};
@@ -108,49 +109,12 @@ fn csv_err(
     SessionError::Csv { problem, path: path.to_path_buf(), line, column: column.into(), msg: msg.into() }
 }
 
-/// Reads a recording file. `g_m_s2` converts `g` to m/s².
+/// Reads a recording file (plain or gzip). `g_m_s2` converts `g` to m/s².
 pub fn read_recording(path: &Path, units: &Units, g_m_s2: f64, opts: ReadOptions) -> Result<Recording, SessionError> {
-    let (file, size) = open_regular(path)?;
+    let (file, size) = open_recording(path)?;
     // Streamed (the reader buffers it): never held whole. The first million samples' room
     // is reserved from the file's size; beyond that the arrays grow as samples arrive.
     read_stream(path, file, (size / 64).min(1 << 20) as usize, units, g_m_s2, opts)
-}
-
-/// Opens a file that must be a regular file (not a folder, FIFO or device, which would be
-/// refused late or block), with its size.
-pub fn open_regular(path: &Path) -> Result<(std::fs::File, u64), SessionError> {
-    let io = |source| SessionError::Io { path: path.to_path_buf(), source };
-    let meta = std::fs::metadata(path).map_err(io)?;
-    if !meta.is_file() {
-        return Err(SessionError::NotRegular { path: path.to_path_buf(), what: file_kind(&meta) });
-    }
-    let file = std::fs::File::open(path).map_err(io)?;
-    Ok((file, meta.len()))
-}
-
-/// What a file that is not a regular file is, in words.
-pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
-    let t = meta.file_type();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if t.is_fifo() {
-            return "a FIFO (named pipe)";
-        }
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-    }
-    if t.is_dir() {
-        "a folder"
-    } else if t.is_file() {
-        "a regular file"
-    } else {
-        "not a regular file"
-    }
 }
 
 /// One CSV row converted to SI (stand-frame reference columns when requested).

@@ -10,14 +10,16 @@ mod csvwrite;
 mod error;
 pub mod import;
 pub mod import_text;
+mod open;
 pub mod sanity;
 
 use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
 pub use csvread::{
-    open_regular, parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
+    parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
 };
 pub use csvwrite::{recording_csv, recording_header, CsvLine};
 pub use error::{Problem, SessionError};
+pub use open::{file_kind, open_recording, open_regular};
 
 use crate::frames::Mount;
 use serde::{Deserialize, Serialize};
@@ -367,7 +369,7 @@ pub fn rows_past_end(manifest_path: &Path, spec: &RunSpec, len: usize) -> Sessio
     }
 }
 
-/// The CSV of a run (relative to the manifest's folder); an error naming the manifest's
+/// The CSV of a run (relative to the manifest's folder; `FILE.gz` when only that exists); an error naming the manifest's
 /// line when it does not exist or is not a regular file (a folder, FIFO or device), and the
 /// operating system's reason when it cannot be looked at (e.g. a symbolic-link loop).
 pub fn run_path(manifest_path: &Path, spec: &RunSpec) -> Result<PathBuf, SessionError> {
@@ -383,9 +385,15 @@ pub fn run_path(manifest_path: &Path, spec: &RunSpec) -> Result<PathBuf, Session
             msg: format!("run '{}': file '{}' {what} (looked for {})", spec.name, spec.file, path.display()),
         }
     };
+    // A recording kept compressed beside its manifest (`static.csv.gz` for `static.csv`) is
+    // read as it is.
+    let gz = dir.join(format!("{}.gz", spec.file));
+    if !path.exists() && gz.is_file() {
+        return Ok(gz);
+    }
     match std::fs::metadata(&path) {
         Ok(m) if m.is_file() => Ok(path),
-        Ok(m) => Err(refuse(format!("is {}: expected the run's CSV recording", csvread::file_kind(&m)))),
+        Ok(m) => Err(refuse(format!("is {}: expected the run's CSV recording", file_kind(&m)))),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(refuse("does not exist".into())),
         Err(source) => Err(SessionError::Io { path, source }),
     }
