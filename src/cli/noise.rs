@@ -3,6 +3,7 @@
 use super::Outcome;
 use crate::{out, outln};
 use anyhow::Context;
+use crosscal::noise::deviations::Deviation;
 use crosscal::noise::{analyse, read_channels, report, NoiseOptions, NoiseReport, Span, CHANNELS};
 use crosscal::profile::{latest, save};
 use crosscal::session::{read_manifest, MotionSpec};
@@ -41,6 +42,11 @@ pub struct Args {
     /// Largest cluster time, s (default: a third of the recording).
     #[arg(long)]
     max_tau: Option<f64>,
+    /// Also compute this deviation, with its 68 % intervals: `hadamard` (blind to a linear
+    /// drift of the rate) or `modified` (modified Allan: tells white from flicker phase
+    /// noise). The noise terms are still read off the Allan deviation.
+    #[arg(long, value_enum, default_value = "allan")]
+    deviation: DeviationArg,
     /// Print the result as JSON.
     #[arg(long)]
     json: bool,
@@ -65,6 +71,28 @@ pub struct Args {
     serial: Option<String>,
 }
 
+/// `--deviation`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum DeviationArg {
+    /// The Allan deviation only.
+    Allan,
+    /// The overlapping Hadamard deviation beside it.
+    Hadamard,
+    /// The modified Allan deviation beside it.
+    Modified,
+}
+
+impl Args {
+    fn options(&self) -> NoiseOptions {
+        let deviation = match self.deviation {
+            DeviationArg::Allan => Deviation::Allan,
+            DeviationArg::Hadamard => Deviation::Hadamard,
+            DeviationArg::Modified => Deviation::Modified,
+        };
+        NoiseOptions { max_tau_s: self.max_tau, deviation }
+    }
+}
+
 /// What `noise` analyses: the CSV and its part, units, gravity, serial and a label.
 struct Source {
     csv: PathBuf,
@@ -87,7 +115,7 @@ pub(super) fn analyse_one(a: &Args, chans: &[usize]) -> anyhow::Result<(NoiseRep
         for w in &data.warnings {
             eprintln!("warning: {w}");
         }
-        return Ok((analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?, g, serial));
+        return Ok((analyse(&label, data, a.options())?, g, serial));
     };
     // Corrected outputs: all six channels are read (the correction couples them), corrected
     // offline on the recording's own sample interval, then the chosen ones analysed.
@@ -112,7 +140,7 @@ pub(super) fn analyse_one(a: &Args, chans: &[usize]) -> anyhow::Result<(NoiseRep
         })
         .collect();
     let label = format!("{label}, corrected with the profile of unit {} ({})", profile.serial, profile.created_utc);
-    Ok((analyse(&label, data, NoiseOptions { max_tau_s: a.max_tau })?, g, serial))
+    Ok((analyse(&label, data, a.options())?, g, serial))
 }
 
 /// The recording (or the part of a session's run) to analyse.

@@ -17,6 +17,7 @@
 //! gives display values in the units engineers quote (°/√h, °/h, µg/√Hz, m/s/√h).
 
 pub mod allan;
+pub mod deviations;
 pub mod report;
 
 use crate::units::SensorKind;
@@ -34,6 +35,8 @@ pub const LEVEL: f64 = 0.683;
 pub struct NoiseOptions {
     /// Largest cluster time, s (None: a third of the recording).
     pub max_tau_s: Option<f64>,
+    /// A deviation to compute beside the Allan deviation (Allan: none).
+    pub deviation: deviations::Deviation,
 }
 
 /// One point of an Allan deviation curve.
@@ -91,6 +94,9 @@ pub struct ChannelNoise {
     /// do not have. Terms are not forced there; these say where and what it looks like.
     #[serde(default)]
     pub departures: Vec<Departure>,
+    /// The Hadamard or modified Allan deviation when asked for (`NoiseOptions::deviation`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub other: Option<deviations::Curve>,
 }
 
 /// A value read off the measured curve, with the interval of the point it comes from.
@@ -388,6 +394,8 @@ pub fn analyse_channel(
         bias_instability_reading: None,
         white_density_reading: None,
         departures: Vec::new(),
+        other: (opts.deviation != deviations::Deviation::Allan)
+            .then(|| deviations::curve(opts.deviation, samples, tau0_s, &used, |t| dominant(&c, t))),
     };
     out.departures = departures(&out);
     out.white_density_reading = white_reading(&out.points);

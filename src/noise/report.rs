@@ -105,6 +105,7 @@ pub fn table(r: &NoiseReport, g_m_s2: f64) -> String {
             let _ = writeln!(s, "{}: {}", c.channel, d.describe());
         }
     }
+    other_table(&mut s, r);
     let _ = writeln!(
         s,
         "BI reading: the curve's measured minimum / 0.664 (IEEE 952 C.1.3, the standard reading); BI model fit: the flat\n\
@@ -113,6 +114,39 @@ pub fn table(r: &NoiseReport, g_m_s2: f64) -> String {
          accel white µg/√Hz, VRW m/s/√h, bias instability µg, random walk m/s²/√s, quantisation m/s"
     );
     s
+}
+
+/// The Hadamard or modified Allan deviation, when computed: one row per fourfold cluster
+/// time, one column per channel (display units, ± the 68 % interval's half-width in %).
+fn other_table(s: &mut String, r: &NoiseReport) {
+    let Some(first) = r.channels.iter().find_map(|c| c.other.as_ref()) else { return };
+    let _ = writeln!(
+        s,
+        "{} (gyro °/s, accel m/s²; ± half the 68 % interval, from its equivalent degrees of freedom):",
+        first.deviation.label()
+    );
+    let _ = write!(s, "{:>10}", "τ (s)");
+    for c in &r.channels {
+        let _ = write!(s, " {:>18}", c.channel);
+    }
+    s.push('\n');
+    let tau0 = r.sample_interval_s;
+    for (k, p) in first.points.iter().enumerate() {
+        let m = (p.tau_s / tau0).round() as u64;
+        if !(m.is_power_of_two() && m.trailing_zeros() % 2 == 0) && k + 1 != first.points.len() {
+            continue;
+        }
+        let _ = write!(s, "{:>10.3}", p.tau_s);
+        for c in &r.channels {
+            let (_, f) = c.sensor().display_unit();
+            let cell =
+                c.other.as_ref().and_then(|o| o.points.get(k)).map_or("-".to_string(), |q| {
+                    format!("{:.4e} ±{:.1}%", q.adev * f, 50.0 * (q.high - q.low) / q.adev)
+                });
+            let _ = write!(s, " {cell:>18}");
+        }
+        s.push('\n');
+    }
 }
 
 /// The HTML page: the table, then one Allan deviation plot per channel.
@@ -155,6 +189,25 @@ pub fn figures(r: &NoiseReport) -> Vec<Figure> {
         }
         if let Some(q) = c.quantization {
             series.push(("quantisation (slope −1)".into(), curve(&|t| 3f64.sqrt() * q / t)));
+        }
+        if let Some(o) = &c.other {
+            let points: Vec<(f64, f64, f64, f64)> =
+                o.points.iter().map(|p| (p.tau_s, p.low * k, p.adev * k, p.high * k)).collect();
+            let allan: Vec<(f64, f64)> = c.points.iter().map(|p| (p.tau_s, p.adev * k)).collect();
+            let stem = match o.deviation {
+                super::deviations::Deviation::Hadamard => "hdev",
+                _ => "mdev",
+            };
+            out.push(Figure {
+                stem: format!("{}-{stem}", slug(&c.channel)),
+                svg: loglog(
+                    &format!("{}: {}", c.channel, o.deviation.label()),
+                    "cluster time τ (s)",
+                    &format!("{} ({u})", o.deviation.label()),
+                    &points,
+                    &[("Allan deviation (measured)".to_string(), allan)],
+                ),
+            });
         }
         out.push(Figure {
             stem: format!("{}-adev", slug(&c.channel)),
