@@ -326,3 +326,51 @@ fn protocol_diagnose_names_a_turn_that_stands_out_and_is_not_adequate_then() {
         d.standing_out()
     );
 }
+
+/// Every detected pose and every static run is checked against the noise of the rest: a
+/// slow drift inside one pose (the gyro turning by 0.05 °/s, the accelerometer tilting) and
+/// a knock inside one Ferraris face are named — in the report, in `diagnose` (not adequate)
+/// — while the clean seeds' poses and faces all pass (no false alarm over 5 × 24 poses).
+#[test]
+fn every_pose_and_static_run_is_checked_against_the_rest() {
+    use crosscal::diagnose::protocol::diagnose_protocol;
+    let truth = ProtocolTruth::mems(true);
+    let model = Model::tedaldi();
+    for seed in 20..25 {
+        let sim = multi_position(&truth, 20.0, 24, 3.0, seed);
+        let (_, report) = fit_protocol(&sim.session(), &model, &ProtocolOptions::default()).unwrap();
+        let moving: Vec<_> = report.poses.iter().filter(|p| p.motion.is_some()).collect();
+        assert!(moving.is_empty(), "seed {seed}: clean poses flagged {moving:?}");
+        let sim = ferraris(&truth, 3.0, 360.0, seed);
+        let (_, report) = fit_protocol(&sim.session(), &Model::ferraris(), &ProtocolOptions::default()).unwrap();
+        assert!(report.poses.iter().all(|p| p.motion.is_none()), "seed {seed}: {:?}", report.poses);
+    }
+    // A drift inside the 6th pose.
+    let mut sim = multi_position(&truth, 20.0, 24, 3.0, 20);
+    let (_, report) = fit_protocol(&sim.session(), &model, &ProtocolOptions::default()).unwrap();
+    let run_start = sim.manifest.runs[0].rows.map_or(0, |r| r.0);
+    let p = report.poses[5].clone();
+    let (s, e) = (run_start + p.start, run_start + p.end);
+    let scale = truth.c_gyro[(2, 2)];
+    for k in s + (e - s) / 2..e {
+        sim.recording.gyro[k][2] += 0.05f64.to_radians() * scale;
+    }
+    let (_, report) = fit_protocol(&sim.session(), &model, &ProtocolOptions::default()).unwrap();
+    let flagged: Vec<_> = report.poses.iter().filter(|q| q.motion.is_some()).collect();
+    assert_eq!(flagged.len(), 1, "{flagged:?}");
+    assert_eq!((flagged[0].start, flagged[0].end), (p.start, p.end));
+    assert!(flagged[0].motion.as_deref().unwrap().contains("gyro mean drifts"), "{flagged:?}");
+    let d = diagnose_protocol(&sim.session(), &model).unwrap();
+    assert!(!d.adequate() && d.moving_poses.len() == 1, "{:?}", d.moving_poses);
+
+    // A knock (a 0.3 s burst on the accelerometer) in the middle of Ferraris face y_p.
+    let mut sim = ferraris(&truth, 3.0, 360.0, 20);
+    let face = sim.manifest.runs.iter().find(|r| r.name == "y_p").unwrap().rows.unwrap();
+    let mid = (face.0 + face.1) / 2;
+    for k in mid..mid + 30 {
+        sim.recording.accel[k][0] += 2000.0 * ((k - mid) as f64 * 1.3).sin();
+    }
+    let (_, report) = fit_protocol(&sim.session(), &Model::ferraris(), &ProtocolOptions::default()).unwrap();
+    let flagged: Vec<&str> = report.poses.iter().filter(|q| q.motion.is_some()).map(|q| q.run.as_str()).collect();
+    assert_eq!(flagged, ["y_p"], "{:?}", report.poses);
+}

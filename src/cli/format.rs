@@ -224,6 +224,19 @@ pub fn protocol(r: &crosscal::estimate::protocol::ProtocolReport) -> String {
     if let Some(c) = r.gyro_cost {
         let _ = writeln!(s, "  gyro cost ½Σ|Rᵀv₀ − v₁|²: {}", num(c));
     }
+    let moving: Vec<&crosscal::estimate::protocol::PoseResidual> =
+        r.poses.iter().filter(|p| p.motion.is_some()).collect();
+    if !moving.is_empty() {
+        let _ = writeln!(
+            s,
+            "  NOT AT REST: {} of {} poses by the noise of the rest (their means carry motion into the fit):",
+            moving.len(),
+            r.poses.len()
+        );
+        for p in moving {
+            let _ = writeln!(s, "    {}[{}..{}]: {}", p.run, p.start, p.end, p.motion.as_deref().unwrap_or(""));
+        }
+    }
     let worst_turn = r.turns.iter().map(|t| t.error_deg.abs()).fold(0.0, f64::max);
     if !r.turns.is_empty() {
         let _ = writeln!(s, "  worst turn/motion misfit: {} deg", num(worst_turn));

@@ -55,6 +55,9 @@ pub struct ProtocolDiagnosis {
     /// Poses whose calibrated rate at rest stands out (robust z > 5 of its norm).
     #[serde(default)]
     pub outlier_rates: Vec<String>,
+    /// Poses that were not at rest by the noise of the rest (see `PoseResidual::motion`).
+    #[serde(default)]
+    pub moving_poses: Vec<String>,
     /// Turns or motions whose misfit stands out (robust z > 5 of |error| against the others).
     #[serde(default)]
     pub outlier_turns: Vec<String>,
@@ -161,6 +164,11 @@ pub fn diagnose_protocol_with(
             format!("{}[{}..{}]: rate at rest ({:+.4}, {:+.4}, {:+.4}) deg/s", p.run, p.start, p.end, w[0], w[1], w[2])
         })
         .collect();
+    let moving_poses = report
+        .poses
+        .iter()
+        .filter_map(|p| p.motion.as_ref().map(|m| format!("{}[{}..{}]: not at rest ({m})", p.run, p.start, p.end)))
+        .collect();
     let misfits: Vec<f64> = report.turns.iter().map(|t| t.error_deg.abs()).collect();
     let outlier_turns = stand_out(&misfits)
         .into_iter()
@@ -172,6 +180,7 @@ pub fn diagnose_protocol_with(
         outlier_poses,
         outlier_rates,
         outlier_turns,
+        moving_poses,
         candidates,
         proposal,
         indistinguishable,
@@ -199,10 +208,17 @@ impl ProtocolDiagnosis {
             && self.outlier_poses.is_empty()
             && self.outlier_rates.is_empty()
             && self.outlier_turns.is_empty()
+            && self.moving_poses.is_empty()
     }
 
     /// What stands out, one line each (poses, rates at rest, turns).
     pub fn standing_out(&self) -> Vec<String> {
-        self.outlier_poses.iter().chain(&self.outlier_rates).chain(&self.outlier_turns).cloned().collect()
+        self.outlier_poses
+            .iter()
+            .chain(&self.outlier_rates)
+            .chain(&self.outlier_turns)
+            .chain(&self.moving_poses)
+            .cloned()
+            .collect()
     }
 }

@@ -208,6 +208,17 @@ fn report(
     mut warnings: Vec<String>,
 ) -> ProtocolReport {
     let cal = GyroCal::from_fit(&out.gyro);
+    // Each static run judged by the median noise of all of them (a window of 0.5 s).
+    let statics: Vec<&Obs<'_>> = obs.iter().filter(|o| o.turn.is_none()).collect();
+    let reference = statics.first().and_then(|o| {
+        let window = ((0.5 / median_dt(&o.run.rec.t_s)).round() as usize).clamp(5, 501);
+        let stretches: Vec<_> = statics.iter().map(|o| (&o.run.rec.accel[..], &o.run.rec.gyro[..])).collect();
+        super::rest::rest_noise(&stretches, window)
+    });
+    let motion = |o: &Obs<'_>| {
+        let rec = &o.run.rec;
+        reference.as_ref().and_then(|n| super::rest::check_span(&rec.accel, &rec.gyro, (0, rec.len()), n))
+    };
     let mut poses = Vec::new();
     let mut turns = Vec::new();
     for o in obs {
@@ -219,6 +230,7 @@ fn report(
                 end: o.run.rec.len(),
                 gravity_error_m_s2: norm(a) - g,
                 rate_at_rest_deg_s: cal.rate(o.gyro[0], a).map(f64::to_degrees),
+                motion: motion(o),
             }),
             Some((axis, angle)) => {
                 let w = cal.rate(o.gyro[0], a);

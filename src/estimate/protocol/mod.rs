@@ -113,6 +113,11 @@ pub struct PoseResidual {
     pub gravity_error_m_s2: f64,
     /// Calibrated mean rate at rest (should be 0), deg/s.
     pub rate_at_rest_deg_s: [f64; 3],
+    /// What shows the pose was not at rest by the noise of the rest (multi-position: the
+    /// initial rest; Ferraris: the static runs' median), when something does: a moving
+    /// variance above the rest's, or a sensor mean that drifts.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion: Option<String>,
 }
 
 /// One turn (Ferraris) or one motion between poses (multi-position).

@@ -396,6 +396,11 @@ pub(super) fn multi_position(
         let rate = w * (Vector3::from(u) - rest.b - rest.g * a);
         [rate[0].to_degrees(), rate[1].to_degrees(), rate[2].to_degrees()]
     };
+    let n_rest = detection.init_rest_samples;
+    let reference = super::rest::rest_noise(&[(&rec.accel[..n_rest], &rec.gyro[..n_rest])], detection.window);
+    let motion = |x: &crate::session::Recording, span: (usize, usize)| {
+        reference.as_ref().and_then(|n| super::rest::check_span(&x.accel, &x.gyro, span, n))
+    };
     let mut pose_rows = Vec::new();
     for (k, &(s, e)) in poses.iter().enumerate() {
         pose_rows.push(PoseResidual {
@@ -404,6 +409,7 @@ pub(super) fn multi_position(
             end: e,
             gravity_error_m_s2: pose_a[k].norm() - g,
             rate_at_rest_deg_s: rate_at(pose_u[k], &pose_a[k]),
+            motion: motion(rec, (s, e)),
         });
     }
     for r in session.runs.iter().filter(|r| matches!(r.spec.motion, MotionSpec::StaticUnknown)) {
@@ -414,6 +420,7 @@ pub(super) fn multi_position(
             end: r.rec.len(),
             gravity_error_m_s2: a.norm() - g,
             rate_at_rest_deg_s: rate_at(mean3(&r.rec.gyro), &a),
+            motion: motion(&r.rec, (0, r.rec.len())),
         });
     }
     let turns: Vec<TurnResidual> = segments

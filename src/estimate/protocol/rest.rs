@@ -75,16 +75,7 @@ pub(super) fn check_rest(accel: &[[f64; 3]], gyro: &[[f64; 3]], n_rest: usize, w
 /// The gyro's mean in the rest's first and second half, in standard errors from the scatter
 /// of block means (blocks of one window, so serial correlation within a window is allowed for).
 fn drift(gyro: &[[f64; 3]], n_rest: usize, w: usize) -> RestCheck {
-    let blocks: Vec<[f64; 3]> = gyro[..n_rest]
-        .chunks_exact(w)
-        .map(|b| {
-            let mut m = [0.0; 3];
-            for v in b {
-                (0..3).for_each(|i| m[i] += v[i] / w as f64);
-            }
-            m
-        })
-        .collect();
+    let blocks = block_means(&gyro[..n_rest], w);
     let k = blocks.len();
     if k < 8 {
         return RestCheck::Still;
@@ -108,6 +99,121 @@ fn drift(gyro: &[[f64; 3]], n_rest: usize, w: usize) -> RestCheck {
     } else {
         RestCheck::Still
     }
+}
+
+/// The noise of a stretch known to be at rest, to judge other stretches (poses, static
+/// runs) by: per sensor (accelerometer, gyro) the median moving-variance norm and the
+/// scatter of block means (blocks of one window).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct RestNoise {
+    window: usize,
+    var: [f64; 2],
+    block_sd: [[f64; 3]; 2],
+}
+
+/// Median moving-variance norm and per-axis scatter of block means of `x` (one sensor).
+fn stretch_noise(x: &[[f64; 3]], w: usize) -> Option<(f64, [f64; 3])> {
+    let h = w / 2;
+    if x.len() < 4 * w {
+        return None;
+    }
+    let norms = moving_variance_norm(x, w);
+    let mut inner: Vec<f64> = norms[h..x.len() - h].iter().copied().filter(|v| v.is_finite()).collect();
+    let var = crate::stats::median(&mut inner)?;
+    let blocks = block_means(x, w);
+    let k = blocks.len() as f64;
+    let sd = [0, 1, 2].map(|i| {
+        let m = blocks.iter().map(|b| b[i]).sum::<f64>() / k;
+        (blocks.iter().map(|b| (b[i] - m).powi(2)).sum::<f64>() / (k - 1.0)).sqrt()
+    });
+    Some((var, sd))
+}
+
+fn block_means(x: &[[f64; 3]], w: usize) -> Vec<[f64; 3]> {
+    x.chunks_exact(w)
+        .map(|b| {
+            let mut m = [0.0; 3];
+            for v in b {
+                (0..3).for_each(|i| m[i] += v[i] / w as f64);
+            }
+            m
+        })
+        .collect()
+}
+
+/// One stretch of samples: (accelerometer, gyro).
+pub(super) type Stretch<'a> = (&'a [[f64; 3]], &'a [[f64; 3]]);
+
+/// The noise of each stretch (accelerometer, gyro samples), combined by the median over the
+/// stretches that are long enough: a stretch that moves does not set the reference the
+/// others are judged by. None when none is long enough.
+pub(super) fn rest_noise(stretches: &[Stretch<'_>], window: usize) -> Option<RestNoise> {
+    let w = window | 1;
+    let mut each: Vec<[f64; 8]> = Vec::new();
+    for &(accel, gyro) in stretches {
+        let (Some((va, sa)), Some((vg, sg))) = (stretch_noise(accel, w), stretch_noise(gyro, w)) else {
+            continue;
+        };
+        each.push([va, vg, sa[0], sa[1], sa[2], sg[0], sg[1], sg[2]]);
+    }
+    let med = |j: usize| {
+        let mut v: Vec<f64> = each.iter().map(|r| r[j]).collect();
+        crate::stats::median(&mut v)
+    };
+    Some(RestNoise {
+        window: w,
+        var: [med(0)?, med(1)?],
+        block_sd: [[med(2)?, med(3)?, med(4)?], [med(5)?, med(6)?, med(7)?]],
+    })
+}
+
+/// Whether the interior of `span` (one window in from each end) is at rest by the reference
+/// noise: no moving variance above the ratios
+/// the declared rest is held to, and no drift of either sensor's mean between the stretch's
+/// halves beyond [`DRIFT_Z`] standard errors of the reference's block means. What was found,
+/// in words, when it is not.
+pub(super) fn check_span(
+    accel: &[[f64; 3]],
+    gyro: &[[f64; 3]],
+    span: (usize, usize),
+    noise: &RestNoise,
+) -> Option<String> {
+    // A detected pose's edges are uncertain by the detector's window (a turn's slow tail
+    // looks static to the accelerometer's variance): its interior is judged.
+    let w = noise.window;
+    let h = w / 2;
+    let (s, e) = (span.0 + w, span.1.saturating_sub(w));
+    if e <= s + 2 * w {
+        return None;
+    }
+    let sensors = [("accelerometer", &accel[s..e], ACCEL_RATIO), ("gyro", &gyro[s..e], GYRO_RATIO)];
+    for (j, (sensor, x, ratio)) in sensors.into_iter().enumerate() {
+        let reference = noise.var[j];
+        if reference > 0.0 {
+            let norms = moving_variance_norm(x, w);
+            let worst = norms[h..x.len() - h].iter().copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
+            if worst > ratio * reference {
+                return Some(format!("{sensor} moving variance {:.0}× the rest's", worst / reference));
+            }
+        }
+        let blocks = block_means(x, w);
+        let k = blocks.len();
+        if k < 2 {
+            continue;
+        }
+        let (a, b) = blocks.split_at(k / 2);
+        for i in 0..3 {
+            let mean = |v: &[[f64; 3]]| v.iter().map(|q| q[i]).sum::<f64>() / v.len() as f64;
+            let se = noise.block_sd[j][i] * (1.0 / a.len() as f64 + 1.0 / b.len() as f64).sqrt();
+            let z = (mean(b) - mean(a)).abs() / se;
+            if se > 0.0 && z > DRIFT_Z {
+                return Some(format!(
+                    "{sensor} mean drifts between its halves ({z:.1} standard errors of the rest's noise)"
+                ));
+            }
+        }
+    }
+    None
 }
 
 #[cfg(test)]
