@@ -374,3 +374,39 @@ fn every_pose_and_static_run_is_checked_against_the_rest() {
     let flagged: Vec<&str> = report.poses.iter().filter(|q| q.motion.is_some()).map(|q| q.run.as_str()).collect();
     assert_eq!(flagged, ["y_p"], "{:?}", report.poses);
 }
+
+/// Rates at rest judged against the noise, not only against each other: a gyro bias that
+/// warms up after the rest (a ramp of 4 counts, 0.06 °/s, over the recording) gives every
+/// pose a rate at rest none of them stands out from; diagnose says the rates are beyond the
+/// noise (χ²) and is not adequate. Clean seeds stay near χ²/dof = 1 on both tests.
+#[test]
+fn rates_at_rest_beyond_the_noise_are_not_adequate_even_when_none_stands_out() {
+    use crosscal::diagnose::protocol::diagnose_protocol;
+    let (clean, _) = crate::common::clean_and_g_sensitive();
+    let ratio = |r: &crosscal::estimate::protocol::ProtocolReport| {
+        let z: Vec<f64> = r
+            .poses
+            .iter()
+            .flat_map(|p| {
+                let se = p.rate_se_deg_s.unwrap();
+                (0..3).map(move |i| p.rate_at_rest_deg_s[i] / se[i])
+            })
+            .collect();
+        z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64
+    };
+    for seed in [2, 3, 4] {
+        let d = diagnose_protocol(&multi_position(&clean, 20.0, 24, 3.0, seed).session(), &Model::tedaldi()).unwrap();
+        assert!(d.beyond_noise.is_empty(), "seed {seed}: {:?}", d.beyond_noise);
+        let r = ratio(&d.report);
+        assert!(r < 2.0, "seed {seed}: clean rates at rest χ²/n = {r}");
+    }
+    let mut sim = multi_position(&clean, 20.0, 24, 3.0, 2);
+    let n = sim.recording.gyro.len() as f64;
+    for (k, w) in sim.recording.gyro.iter_mut().enumerate().skip(2000) {
+        w[1] += 4.0 * (k as f64 - 2000.0) / (n - 2000.0);
+    }
+    let d = diagnose_protocol(&sim.session(), &Model::tedaldi()).unwrap();
+    assert!(d.outlier_rates.is_empty(), "a ramp makes no single outlier: {:?}", d.outlier_rates);
+    assert!(!d.adequate(), "a warming bias passed as adequate");
+    assert!(d.beyond_noise.iter().any(|b| b.starts_with("calibrated rates at rest are")), "{:?}", d.standing_out());
+}

@@ -203,6 +203,9 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
     for o in &d.outlier_rates {
         outln!("  OUTLIER {o}: the unit moved in this pose, or the gyro bias (from the rest) does not hold here");
     }
+    for o in &d.beyond_noise {
+        outln!("  BEYOND NOISE: {o}");
+    }
     for o in &d.moving_poses {
         outln!("  MOVING {o}: hold the pose still (a fixture, not a hand), or leave it out");
     }

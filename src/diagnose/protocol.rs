@@ -14,7 +14,7 @@ use crate::model::{catalog, Model};
 use crate::session::Session;
 use crate::units::SensorKind;
 use serde::{Deserialize, Serialize};
-use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+use statrs::distribution::{ChiSquared, ContinuousCDF, FisherSnedecor};
 
 /// Fits exactly `model` to prepared runs through the one entry point.
 fn refit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
@@ -58,6 +58,10 @@ pub struct ProtocolDiagnosis {
     /// Poses that were not at rest by the noise of the rest (see `PoseResidual::motion`).
     #[serde(default)]
     pub moving_poses: Vec<String>,
+    /// Pose residuals that, together, are larger than the noise explains (χ² against each
+    /// pose's standard errors from its noise), with what would fix them.
+    #[serde(default)]
+    pub beyond_noise: Vec<String>,
     /// Turns or motions whose misfit stands out (robust z > 5 of |error| against the others).
     #[serde(default)]
     pub outlier_turns: Vec<String>,
@@ -169,6 +173,7 @@ pub fn diagnose_protocol_with(
         .iter()
         .filter_map(|p| p.motion.as_ref().map(|m| format!("{}[{}..{}]: not at rest ({m})", p.run, p.start, p.end)))
         .collect();
+    let beyond_noise = beyond_noise(&report);
     let misfits: Vec<f64> = report.turns.iter().map(|t| t.error_deg.abs()).collect();
     let outlier_turns = stand_out(&misfits)
         .into_iter()
@@ -181,10 +186,56 @@ pub fn diagnose_protocol_with(
         outlier_rates,
         outlier_turns,
         moving_poses,
+        beyond_noise,
         candidates,
         proposal,
         indistinguishable,
     })
+}
+
+/// Residuals larger than the noise explains, as a whole: the rates at rest and |a| − g of
+/// all poses against their standard errors from the noise, χ² = Σ (r/σ)² on (values −
+/// parameters fitted from them) degrees of freedom. Reported when p < 1e-3 and the residuals
+/// are more than twice the noise (χ²/dof > 4): a bias that wanders between the rest and the
+/// poses, or a systematic effect every pose shares, which no single outlier shows.
+fn beyond_noise(report: &ProtocolReport) -> Vec<String> {
+    let mut out = Vec::new();
+    let rates: Vec<f64> = report
+        .poses
+        .iter()
+        .filter_map(|p| p.rate_se_deg_s.map(|se| (p.rate_at_rest_deg_s, se)))
+        .flat_map(|(r, se)| (0..3).map(move |i| r[i] / se[i]))
+        .collect();
+    let gravity: Vec<f64> =
+        report.poses.iter().filter_map(|p| p.gravity_se_m_s2.map(|se| p.gravity_error_m_s2 / se)).collect();
+    for (what, z, params, fix) in [
+        (
+            "calibrated rates at rest",
+            rates,
+            report.pose_params[1],
+            "the gyro bias is not the same in the rest and in the poses (warm-up, bias instability, a rest that              was not still): a longer warm-up before recording, a repeated orientation late in the recording, or              gyro-g-sensitivity if the rates follow the pose",
+        ),
+        (
+            "pose |a| − g",
+            gravity,
+            report.pose_params[0],
+            "the accelerometer model misses something every pose shares, or the poses were not still: more poses              held longer, or an accelerometer effect from the catalogue",
+        ),
+    ] {
+        let dof = z.len().saturating_sub(params);
+        if dof < 3 || z.iter().any(|v| !v.is_finite()) {
+            continue;
+        }
+        let chi2 = z.iter().map(|v| v * v).sum::<f64>();
+        let p = ChiSquared::new(dof as f64).map_or(1.0, |d| d.sf(chi2));
+        if p < P_PROPOSE && chi2 / dof as f64 > 4.0 {
+            out.push(format!(
+                "{what} are {:.1}× what the noise explains (χ² = {chi2:.0} on {dof} degrees of freedom, p = {p:.1e}): {fix}",
+                (chi2 / dof as f64).sqrt()
+            ));
+        }
+    }
+    out
 }
 
 /// Indices of the non-negative sizes (rates at rest, misfits) that stand out of the others:
@@ -209,6 +260,7 @@ impl ProtocolDiagnosis {
             && self.outlier_rates.is_empty()
             && self.outlier_turns.is_empty()
             && self.moving_poses.is_empty()
+            && self.beyond_noise.is_empty()
     }
 
     /// What stands out, one line each (poses, rates at rest, turns).
@@ -218,6 +270,7 @@ impl ProtocolDiagnosis {
             .chain(&self.outlier_rates)
             .chain(&self.outlier_turns)
             .chain(&self.moving_poses)
+            .chain(&self.beyond_noise)
             .cloned()
             .collect()
     }

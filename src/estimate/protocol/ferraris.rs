@@ -219,6 +219,11 @@ fn report(
         let rec = &o.run.rec;
         reference.as_ref().and_then(|n| super::rest::check_span(&rec.accel, &rec.gyro, (0, rec.len()), n))
     };
+    let window = |o: &Obs<'_>| ((0.5 / median_dt(&o.run.rec.t_s)).round() as usize).clamp(5, 501);
+    let rate_se = |o: &Obs<'_>| {
+        let r = super::through(&cal.c_inv, super::mean_se(&o.run.rec.gyro, window(o)));
+        Some(r.map(f64::to_degrees)).filter(|v| v.iter().all(|x| x.is_finite()))
+    };
     let mut poses = Vec::new();
     let mut turns = Vec::new();
     for o in obs {
@@ -231,6 +236,10 @@ fn report(
                 gravity_error_m_s2: norm(a) - g,
                 rate_at_rest_deg_s: cal.rate(o.gyro[0], a).map(f64::to_degrees),
                 motion: motion(o),
+                rate_se_deg_s: rate_se(o),
+                // The faces fit the accelerometer's 12 parameters exactly or nearly: no
+                // degrees of freedom are left to compare |a| − g with the noise.
+                gravity_se_m_s2: None,
             }),
             Some((axis, angle)) => {
                 let w = cal.rate(o.gyro[0], a);
@@ -258,5 +267,6 @@ fn report(
         accel_cost: None,
         gyro_cost: None,
         warnings,
+        pose_params: [12, if cal.g.iter().any(|v| *v != 0.0) { 12 } else { 3 }],
     }
 }

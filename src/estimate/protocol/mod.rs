@@ -118,6 +118,13 @@ pub struct PoseResidual {
     /// variance above the rest's, or a sensor mean that drifts.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub motion: Option<String>,
+    /// Standard error of `rate_at_rest_deg_s` from the noise: the scatter of the pose's block
+    /// means through the calibration (and the rest's bias when the bias comes from it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rate_se_deg_s: Option<[f64; 3]>,
+    /// Standard error of `gravity_error_m_s2` from the noise, along the pose's gravity.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gravity_se_m_s2: Option<f64>,
 }
 
 /// One turn (Ferraris) or one motion between poses (multi-position).
@@ -179,6 +186,10 @@ pub struct ProtocolReport {
     pub gyro_cost: Option<f64>,
     /// Findings worth a look (e.g. turns whose sign contradicts the declared angle).
     pub warnings: Vec<String>,
+    /// Parameters fitted from the poses' (|a| − g, rates at rest): what their residuals lose
+    /// in degrees of freedom when compared with the noise.
+    #[serde(default)]
+    pub pose_params: [usize; 2],
 }
 
 fn norm(v: [f64; 3]) -> f64 {
@@ -280,6 +291,29 @@ fn pose_mean_noise(runs: &[&Run], data: impl Fn(&Run) -> &[[f64; 3]]) -> [f64; 3
         }
     }
     out
+}
+
+/// Per channel, the standard error of a stretch's mean: the scatter of its block means
+/// (blocks of `w` samples, which keeps the noise correlated within a window) / √blocks when
+/// there are at least four blocks, else the sample scatter / √n (white noise).
+fn mean_se(x: &[[f64; 3]], w: usize) -> [f64; 3] {
+    let w = w.max(1);
+    let k = x.len() / w;
+    let (rows, count): (Vec<[f64; 3]>, usize) =
+        if k >= 4 { (x.chunks_exact(w).map(mean3).collect(), k) } else { (x.to_vec(), x.len()) };
+    if count < 2 {
+        return [f64::NAN; 3];
+    }
+    let m = mean3(&rows);
+    [0, 1, 2].map(|i| {
+        let var = rows.iter().map(|r| (r[i] - m[i]).powi(2)).sum::<f64>() / (count - 1) as f64;
+        (var / count as f64).sqrt()
+    })
+}
+
+/// Standard errors of `m·x` for independent channels of `x` with standard errors `se`.
+fn through(m: &Matrix3<f64>, se: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|i| (0..3).map(|j| (m[(i, j)] * se[j]).powi(2)).sum::<f64>().sqrt())
 }
 
 /// Widens each channel's standard errors and covariance so that its σ is at least `floor`.

@@ -401,8 +401,20 @@ pub(super) fn multi_position(
     let motion = |x: &crate::session::Recording, span: (usize, usize)| {
         reference.as_ref().and_then(|n| super::rest::check_span(&x.accel, &x.gyro, span, n))
     };
+    // Noise of a pose's rate at rest and |a| − g: its block means through the calibration,
+    // with the rest's bias error when the bias comes from the rest.
+    let bias_se = if with_g { [0.0; 3] } else { super::through(&w, rest.b_se) };
+    let noise = |x: &crate::session::Recording, (s, e): (usize, usize), a: &Vector3<f64>| {
+        let r = super::through(&w, super::mean_se(&x.gyro[s..e], detection.window));
+        let rate = [0, 1, 2].map(|i| r[i].hypot(bias_se[i]).to_degrees());
+        let dir = a.normalize().transpose() * m_acc;
+        let sa = super::mean_se(&x.accel[s..e], detection.window);
+        let grav = (0..3).map(|j| (dir[j] * sa[j]).powi(2)).sum::<f64>().sqrt();
+        (Some(rate).filter(|v| v.iter().all(|x| x.is_finite())), Some(grav).filter(|v| v.is_finite()))
+    };
     let mut pose_rows = Vec::new();
     for (k, &(s, e)) in poses.iter().enumerate() {
+        let (rate_se_deg_s, gravity_se_m_s2) = noise(rec, (s, e), &pose_a[k]);
         pose_rows.push(PoseResidual {
             run: run.spec.name.clone(),
             start: s,
@@ -410,10 +422,13 @@ pub(super) fn multi_position(
             gravity_error_m_s2: pose_a[k].norm() - g,
             rate_at_rest_deg_s: rate_at(pose_u[k], &pose_a[k]),
             motion: motion(rec, (s, e)),
+            rate_se_deg_s,
+            gravity_se_m_s2,
         });
     }
     for r in session.runs.iter().filter(|r| matches!(r.spec.motion, MotionSpec::StaticUnknown)) {
         let a = a_cal(&mean3(&r.rec.accel));
+        let (rate_se_deg_s, gravity_se_m_s2) = noise(&r.rec, (0, r.rec.len()), &a);
         pose_rows.push(PoseResidual {
             run: r.spec.name.clone(),
             start: 0,
@@ -421,6 +436,8 @@ pub(super) fn multi_position(
             gravity_error_m_s2: a.norm() - g,
             rate_at_rest_deg_s: rate_at(mean3(&r.rec.gyro), &a),
             motion: motion(&r.rec, (0, r.rec.len())),
+            rate_se_deg_s,
+            gravity_se_m_s2,
         });
     }
     let turns: Vec<TurnResidual> = segments
@@ -446,6 +463,7 @@ pub(super) fn multi_position(
         accel_cost: Some(acc.cost),
         gyro_cost: Some(gyro.cost()),
         warnings: Vec::new(),
+        pose_params: [9, if with_g { 12 } else { 0 }],
     };
     let fit = forward_fit(model, &acc, &gyro, &rest, s0, with_g);
     Ok((fit, report))
