@@ -213,13 +213,13 @@ fn beyond_noise(report: &ProtocolReport) -> Vec<String> {
             "calibrated rates at rest",
             rates,
             report.pose_params[1],
-            "the gyro bias is not the same in the rest and in the poses (warm-up, bias instability, a rest that              was not still): a longer warm-up before recording, a repeated orientation late in the recording, or              gyro-g-sensitivity if the rates follow the pose",
+            "the gyro bias is not the same in the rest and in the poses (warm-up, bias instability, a rest that was not still): a longer warm-up before recording, a repeated orientation late in the recording, or gyro-g-sensitivity if the rates follow the pose",
         ),
         (
             "pose |a| − g",
             gravity,
             report.pose_params[0],
-            "the accelerometer model misses something every pose shares, or the poses were not still: more poses              held longer, or an accelerometer effect from the catalogue",
+            "the accelerometer model misses something every pose shares, or the poses were not still: more poses held longer, or an accelerometer effect from the catalogue",
         ),
     ] {
         let dof = z.len().saturating_sub(params);

@@ -10,8 +10,12 @@
 //! walk), B bias instability (rate; the flat part of σ is 0.664 B), K rate random walk
 //! (rate/√s), R rate ramp (rate/s). The five coefficients are fitted to σ²(τ) by
 //! non-negative weighted least squares, each cluster time weighted by its equivalent
-//! degrees of freedom (var σ̂² ≈ 2σ⁴/edf). A term is reported only where it is visible: it
-//! carries at least half of the fitted σ² at some measured cluster time.
+//! degrees of freedom (var σ̂² ≈ 2σ⁴/edf). A term stays in the model only if it carries at
+//! least half of the fitted σ² at a cluster time measured with ≥ 10 degrees of freedom, and
+//! the model is held under the measured curve's 99.7 % band everywhere (refitted under
+//! that constraint where it would overshoot). Beside the fit, white noise and bias
+//! instability are read off the measured curve itself (IEEE 952 C.1.1 and C.1.3: the
+//! standard readings), and those are the values quoted.
 //!
 //! Units: SI inside (rad/s for the gyro, m/s² for the accelerometer); [`ChannelNoise`]
 //! gives display values in the units engineers quote (°/√h, °/h, µg/√Hz, m/s/√h).
@@ -173,6 +177,8 @@ const BASIS: [fn(f64) -> f64; 5] = [|t| 1.0 / (t * t), |t| 1.0 / t, |_| 1.0, |t|
 const FLAT: f64 = 0.664_282_4; // sqrt(2 ln 2 / π), IEEE 952 table C.1
 /// Degrees of freedom a point needs to be read as the curve's minimum (±10 % at 68 %).
 pub const READING_EDF: f64 = 50.0;
+/// Degrees of freedom of the points where a term must dominate to be in the model.
+const MEASURED_EDF: f64 = 10.0;
 /// The band a fitted model must stay inside at every measured point (99.7 %: with tens of
 /// correlated points a 68 % band is left by chance).
 const WIDE: f64 = 0.997;
@@ -227,10 +233,11 @@ fn dominant(c: &[f64; 5], tau: f64) -> NoiseType {
 }
 
 /// Non-negative weighted least squares of σ² = Σ c_j f_j(τ) over the 2⁵ subsets of active
-/// terms (exact for five terms): the feasible subset with the least weighted residual.
-fn fit_terms(tau: &[f64], avar: &[f64], weight: &[f64]) -> [f64; 5] {
+/// terms within `allowed` (a bit per term; exact for five terms): the feasible subset with the
+/// least weighted residual.
+fn fit_terms(tau: &[f64], avar: &[f64], weight: &[f64], allowed: u32) -> [f64; 5] {
     let mut best = ([0.0; 5], f64::INFINITY);
-    for mask in 1u32..32 {
+    for mask in (1u32..32).filter(|m| m & !allowed == 0) {
         let act: Vec<usize> = (0..5).filter(|j| mask & (1 << j) != 0).collect();
         if act.len() > tau.len() {
             continue;
@@ -269,6 +276,17 @@ fn fit_terms(tau: &[f64], avar: &[f64], weight: &[f64]) -> [f64; 5] {
     best.0
 }
 
+/// The terms of `c` (a bit each) that dominate the model nowhere the curve is measured with
+/// at least [`MEASURED_EDF`] degrees of freedom.
+fn unmeasured(c: &[f64; 5], tau: &[f64], used: &[usize], n: usize) -> u32 {
+    let well = |j: usize| {
+        used.iter().zip(tau).any(|(&m, &t)| {
+            c[j] * BASIS[j](t) >= 0.5 * model_avar(c, t) && allan::edf(n, m, dominant(c, t)) >= MEASURED_EDF
+        })
+    };
+    (0..5).filter(|&j| c[j] > 0.0 && !well(j)).fold(0, |a, j| a | 1 << j)
+}
+
 /// The fitted variance Σ c_j f_j(τ).
 fn model_avar(c: &[f64; 5], tau_s: f64) -> f64 {
     c.iter().zip(BASIS).map(|(c, f)| c * f(tau_s)).sum()
@@ -280,7 +298,7 @@ fn model_avar(c: &[f64; 5], tau_s: f64) -> f64 {
 /// overshoots (an active-set iteration for the inequality-constrained least squares). If
 /// that has not converged after 40 rounds the coefficients are scaled down by the largest
 /// overshoot, which satisfies every bound at once.
-fn fit_below(tau: &[f64], avar: &[f64], weight: &[f64], upper: &[f64], mut c: [f64; 5]) -> [f64; 5] {
+fn fit_below(tau: &[f64], avar: &[f64], weight: &[f64], upper: &[f64], mut c: [f64; 5], allowed: u32) -> [f64; 5] {
     let over = |c: &[f64; 5]| tau.iter().zip(upper).map(|(&t, &u)| model_avar(c, t) / u).fold(0.0, f64::max);
     if over(&c) <= 1.0 {
         return c;
@@ -293,13 +311,66 @@ fn fit_below(tau: &[f64], avar: &[f64], weight: &[f64], upper: &[f64], mut c: [f
                 w[k] *= 100.0;
             }
         }
-        c = fit_terms(tau, &target, &w);
+        c = fit_terms(tau, &target, &w, allowed);
         if over(&c) <= 1.0 {
             return c;
         }
     }
     let s = over(&c);
     c.map(|v| v / s)
+}
+
+/// The five IEEE 952 terms fitted to a measured curve (cluster sizes `used`, times `tau`,
+/// variances `avar` of `n` samples), held under the curve's band and without terms nothing
+/// measures.
+fn fit_model(n: usize, used: &[usize], tau: &[f64], avar: &[f64]) -> [f64; 5] {
+    // Pass 1: relative errors weighted as white rate noise; pass 2 and 3: degrees of
+    // freedom by the dominant fitted term, relative to the fitted variance. Where the five
+    // terms cannot follow the measured curve the misfit is reported (`departures`), and the
+    // bias instability is also read off the measured curve (`bias_instability_reading`).
+    let mut w: Vec<f64> =
+        used.iter().zip(avar).map(|(&m, v)| allan::edf(n, m, NoiseType::WhiteRate) / (v * v)).collect();
+    let mut allowed = 0b11111;
+    let mut c = fit_terms(tau, avar, &w, allowed);
+    for pass in 0..4 {
+        w = used
+            .iter()
+            .zip(tau)
+            .zip(avar)
+            .map(|((&m, &t), &v)| {
+                let model: f64 = c.iter().zip(BASIS).map(|(c, f)| c * f(t)).sum();
+                let s = if model > 0.0 { model } else { v };
+                allan::edf(n, m, dominant(&c, t)) / (s * s)
+            })
+            .collect();
+        // A term that dominates only where the curve has a few degrees of freedom (its last
+        // points) is not measured, and left in it would bend the model away from the curve
+        // there: the terms are refitted without it.
+        if pass >= 1 {
+            allowed &= !unmeasured(&c, tau, used, n);
+        }
+        c = fit_terms(tau, avar, &w, allowed);
+    }
+    // Requirement: the model never lies above the measured curve by more than the curve's
+    // band. Where the free fit does (a curve whose knees are rounder than the five terms
+    // allow, as on real units), it is refitted under that constraint.
+    let upper: Vec<f64> = used
+        .iter()
+        .zip(tau)
+        .zip(avar)
+        .map(|((&m, &t), &v)| allan::interval(v.sqrt(), allan::edf(n, m, dominant(&c, t)), WIDE).1.powi(2))
+        .collect();
+    c = fit_below(tau, avar, &w, &upper, c, allowed);
+    // The constrained refit may bring in a term only the last points carry: out with it too.
+    for _ in 0..3 {
+        let drop = unmeasured(&c, tau, used, n);
+        if drop == 0 {
+            break;
+        }
+        allowed &= !drop;
+        c = fit_below(tau, avar, &w, &upper, fit_terms(tau, avar, &w, allowed), allowed);
+    }
+    c
 }
 
 /// Allan deviation and noise terms of one channel from its rate samples (SI), which are
@@ -333,36 +404,7 @@ pub fn analyse_channel(
             used.push(m);
         }
     }
-    // Pass 1: relative errors weighted as white rate noise; pass 2 and 3: degrees of
-    // freedom by the dominant fitted term, relative to the fitted variance. Where the five
-    // terms cannot follow the measured curve the misfit is reported (`departures`), and the
-    // bias instability is also read off the measured curve (`bias_instability_reading`).
-    let mut w: Vec<f64> =
-        used.iter().zip(&avar).map(|(&m, v)| allan::edf(n, m, NoiseType::WhiteRate) / (v * v)).collect();
-    let mut c = fit_terms(&tau, &avar, &w);
-    for _ in 0..2 {
-        w = used
-            .iter()
-            .zip(&tau)
-            .zip(&avar)
-            .map(|((&m, &t), &v)| {
-                let model: f64 = c.iter().zip(BASIS).map(|(c, f)| c * f(t)).sum();
-                let s = if model > 0.0 { model } else { v };
-                allan::edf(n, m, dominant(&c, t)) / (s * s)
-            })
-            .collect();
-        c = fit_terms(&tau, &avar, &w);
-    }
-    // Requirement: the model never lies above the measured curve by more than the curve's
-    // band. Where the free fit does (a curve whose knees are rounder than the five terms
-    // allow, as on real units), it is refitted under that constraint.
-    let upper: Vec<f64> = used
-        .iter()
-        .zip(&tau)
-        .zip(&avar)
-        .map(|((&m, &t), &v)| allan::interval(v.sqrt(), allan::edf(n, m, dominant(&c, t)), WIDE).1.powi(2))
-        .collect();
-    c = fit_below(&tau, &avar, &w, &upper, c);
+    let c = fit_model(n, &used, &tau, &avar);
     let points = used
         .iter()
         .zip(&tau)
@@ -407,9 +449,23 @@ pub fn analyse_channel(
             out.bias_instability = Some(s / FLAT);
             out.bias_instability_tau_s = Some(t);
         }
-        out.bias_instability_reading = bias_reading(&out.points);
     }
+    // The reading belongs to the curve, not the model: wherever the model has a flicker floor,
+    // or the measured curve is flat around its minimum (within 1.2× over a factor of three of
+    // τ each side; white noise meeting a random walk makes a valley 1.29× deep there).
+    out.bias_instability_reading =
+        bias_reading(&out.points).filter(|r| visible(2) || flat_around(&out.points, r.tau_s, r.value * FLAT));
     Ok(out)
+}
+
+/// Whether the measured points (≥ [`MEASURED_EDF`]) within a factor of three of `tau_s` stay
+/// within 1.2× of `at`, the curve's value there, with points on both sides.
+fn flat_around(pts: &[AdevPoint], tau_s: f64, at: f64) -> bool {
+    let near: Vec<&AdevPoint> =
+        pts.iter().filter(|p| p.edf >= MEASURED_EDF && p.tau_s >= tau_s / 3.0 && p.tau_s <= tau_s * 3.0).collect();
+    let below = near.iter().any(|p| p.tau_s <= tau_s / 2.5);
+    let above = near.iter().any(|p| p.tau_s >= tau_s * 2.5);
+    below && above && near.iter().all(|p| p.adev <= 1.2 * at)
 }
 
 /// The standard bias-instability reading: the smallest well-determined measured point / 0.664
@@ -635,7 +691,7 @@ mod tests {
         let tau: Vec<f64> = (0..40).map(|i| 0.01 * 10f64.powf(i as f64 / 6.0)).collect();
         let avar: Vec<f64> = tau.iter().map(|&t| c.iter().zip(BASIS).map(|(c, f)| c * f(t)).sum()).collect();
         let w: Vec<f64> = avar.iter().map(|v| 1.0 / (v * v)).collect();
-        let f = fit_terms(&tau, &avar, &w);
+        let f = fit_terms(&tau, &avar, &w, 0b11111);
         for j in 0..5 {
             assert!((f[j] - c[j]).abs() <= 1e-6 * c[j].max(1e-20), "{j}: {} vs {}", f[j], c[j]);
         }

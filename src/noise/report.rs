@@ -92,6 +92,18 @@ pub fn table(r: &NoiseReport, g_m_s2: f64) -> String {
                 }
             );
         }
+        if let Some(r) = c.ramp {
+            let (v, u) = match c.sensor() {
+                SensorKind::Gyro => (r.to_degrees() * 3600.0 * 3600.0, "°/h/h"),
+                SensorKind::Accel => (r / g_m_s2 * 1e6 * 3600.0, "µg/h"),
+            };
+            let _ = writeln!(
+                s,
+                "{}: rate ramp {v:.4e} {u} (the model's slope +1 at long τ: a drift over the recording, to which \
+                 --deviation hadamard is blind)",
+                c.channel
+            );
+        }
         if c.bias_instability.is_some() && c.bias_instability_reading.is_none() {
             let last = c.points.iter().filter(|p| p.edf >= super::READING_EDF).map(|p| p.tau_s).fold(0.0, f64::max);
             let _ = writeln!(
