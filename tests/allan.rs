@@ -523,6 +523,7 @@ fn an_ieee_952_mix_is_recovered_term_by_term() {
     // White meets the flicker floor near 2 s, the floor meets the random walk near 300 s.
     let (n_d, b, k) = (2e-4, 2e-4, 1.3e-5);
     let p = NoiseProcess { white_density: n_d, bias_instability: b, random_walk: k, ar1: None };
+    let (mut inside, mut total) = (0, 0);
     for seed in 60..64 {
         let mut y = series(&p, 1_000_000, seed);
         let c = analyse_channel("gx", "rad/s", &mut y, DT, NoiseOptions::default()).unwrap();
@@ -535,5 +536,16 @@ fn an_ieee_952_mix_is_recovered_term_by_term() {
         // K is measured by the last decade of τ only (tens of degrees of freedom): ±25 %.
         assert!((rw / k - 1.0).abs() < 0.25, "seed {seed}: K {rw} vs {k}");
         assert!(w.low < w.value && w.value < w.high && r.low < r.value && r.value < r.high);
+        // Every fitted term carries an interval; the design value lies inside it.
+        for (term, truth) in [("white", n_d), ("bias_instability", b), ("random_walk", k)] {
+            let i = c.term_intervals.iter().find(|i| i.term == term).unwrap_or_else(|| panic!("{term}: no interval"));
+            println!("  {term}: {} ({}–{}) at τ = {} s, truth {truth}", i.value, i.low, i.high, i.tau_s);
+            inside += usize::from(i.low <= truth && truth <= i.high);
+            total += 1;
+            let half = (i.high - i.low) / 2.0;
+            assert!((truth - i.value).abs() <= 3.0 * half.max(1e-3 * truth), "{term}: truth {truth} far outside {i:?}");
+        }
     }
+    // 68 % intervals: about two thirds of the twelve cover the truth.
+    assert!(inside >= 6, "{inside} of {total} intervals cover the design value");
 }

@@ -22,6 +22,7 @@
 
 pub mod allan;
 pub mod deviations;
+pub mod intervals;
 pub mod report;
 
 use crate::units::SensorKind;
@@ -98,6 +99,9 @@ pub struct ChannelNoise {
     /// do not have. Terms are not forced there; these say where and what it looks like.
     #[serde(default)]
     pub departures: Vec<Departure>,
+    /// A 68.3 % interval for every reported fitted term ([`intervals`]).
+    #[serde(default)]
+    pub term_intervals: Vec<intervals::TermInterval>,
     /// The Hadamard or modified Allan deviation when asked for (`NoiseOptions::deviation`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub other: Option<deviations::Curve>,
@@ -173,12 +177,12 @@ pub enum NoiseError {
     Interval(f64),
 }
 
-const BASIS: [fn(f64) -> f64; 5] = [|t| 1.0 / (t * t), |t| 1.0 / t, |_| 1.0, |t| t, |t| t * t];
-const FLAT: f64 = 0.664_282_4; // sqrt(2 ln 2 / π), IEEE 952 table C.1
+pub(crate) const BASIS: [fn(f64) -> f64; 5] = [|t| 1.0 / (t * t), |t| 1.0 / t, |_| 1.0, |t| t, |t| t * t];
+pub(crate) const FLAT: f64 = 0.664_282_4; // sqrt(2 ln 2 / π), IEEE 952 table C.1
 /// Degrees of freedom a point needs to be read as the curve's minimum (±10 % at 68 %).
 pub const READING_EDF: f64 = 50.0;
 /// Degrees of freedom of the points where a term must dominate to be in the model.
-const MEASURED_EDF: f64 = 10.0;
+pub(crate) const MEASURED_EDF: f64 = 10.0;
 /// The band a fitted model must stay inside at every measured point (99.7 %: with tens of
 /// correlated points a 68 % band is left by chance).
 const WIDE: f64 = 0.997;
@@ -436,6 +440,7 @@ pub fn analyse_channel(
         bias_instability_reading: None,
         white_density_reading: None,
         departures: Vec::new(),
+        term_intervals: Vec::new(),
         other: (opts.deviation != deviations::Deviation::Allan)
             .then(|| deviations::curve(opts.deviation, samples, tau0_s, &used, |t| dominant(&c, t))),
     };
@@ -455,6 +460,7 @@ pub fn analyse_channel(
     // τ each side; white noise meeting a random walk makes a valley 1.29× deep there).
     out.bias_instability_reading =
         bias_reading(&out.points).filter(|r| visible(2) || flat_around(&out.points, r.tau_s, r.value * FLAT));
+    out.term_intervals = intervals::term_intervals(&out);
     Ok(out)
 }
 
