@@ -42,7 +42,7 @@ fn term(j: usize, c: f64) -> f64 {
 /// An interval for every term the channel reports (a visible, non-zero coefficient).
 pub fn term_intervals(ch: &ChannelNoise) -> Vec<TermInterval> {
     let c = ch.coefficients;
-    let model = |t: f64| c.iter().zip(BASIS).map(|(c, f)| c * f(t)).sum::<f64>();
+    let model = |t: f64| super::model_avar(&c, t);
     let reported = [ch.quantization, ch.white_density, ch.bias_instability, ch.random_walk, ch.ramp];
     let mut out = Vec::new();
     for j in 0..5 {

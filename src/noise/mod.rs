@@ -190,7 +190,7 @@ const WIDE: f64 = 0.997;
 impl ChannelNoise {
     /// The fitted Allan deviation at τ.
     pub fn model_adev(&self, tau_s: f64) -> f64 {
-        self.coefficients.iter().zip(BASIS).map(|(c, f)| c * f(tau_s)).sum::<f64>().max(0.0).sqrt()
+        model_avar(&self.coefficients, tau_s).max(0.0).sqrt()
     }
 
     /// The white-noise density to quote: the standard reading off the curve where there is
@@ -292,7 +292,7 @@ fn unmeasured(c: &[f64; 5], tau: &[f64], used: &[usize], n: usize) -> u32 {
 }
 
 /// The fitted variance Σ c_j f_j(τ).
-fn model_avar(c: &[f64; 5], tau_s: f64) -> f64 {
+pub(crate) fn model_avar(c: &[f64; 5], tau_s: f64) -> f64 {
     c.iter().zip(BASIS).map(|(c, f)| c * f(tau_s)).sum()
 }
 
@@ -342,7 +342,7 @@ fn fit_model(n: usize, used: &[usize], tau: &[f64], avar: &[f64]) -> [f64; 5] {
             .zip(tau)
             .zip(avar)
             .map(|((&m, &t), &v)| {
-                let model: f64 = c.iter().zip(BASIS).map(|(c, f)| c * f(t)).sum();
+                let model = model_avar(&c, t);
                 let s = if model > 0.0 { model } else { v };
                 allan::edf(n, m, dominant(&c, t)) / (s * s)
             })
@@ -422,7 +422,7 @@ pub fn analyse_channel(
         .collect();
     let visible = |j: usize| {
         tau.iter().any(|&t| {
-            let total: f64 = c.iter().zip(BASIS).map(|(c, f)| c * f(t)).sum();
+            let total = model_avar(&c, t);
             c[j] * BASIS[j](t) >= 0.5 * total && c[j] > 0.0
         })
     };
@@ -695,7 +695,7 @@ mod tests {
     fn the_fit_recovers_exact_model_curves() {
         let c = [0.0, 4e-6, 1e-8, 3e-11, 0.0];
         let tau: Vec<f64> = (0..40).map(|i| 0.01 * 10f64.powf(i as f64 / 6.0)).collect();
-        let avar: Vec<f64> = tau.iter().map(|&t| c.iter().zip(BASIS).map(|(c, f)| c * f(t)).sum()).collect();
+        let avar: Vec<f64> = tau.iter().map(|&t| model_avar(&c, t)).collect();
         let w: Vec<f64> = avar.iter().map(|v| 1.0 / (v * v)).collect();
         let f = fit_terms(&tau, &avar, &w, 0b11111);
         for j in 0..5 {

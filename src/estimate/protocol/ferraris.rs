@@ -209,17 +209,16 @@ fn report(
 ) -> ProtocolReport {
     let cal = GyroCal::from_fit(&out.gyro);
     // Each static run judged by the median noise of all of them (a window of 0.5 s).
+    let window = |o: &Obs<'_>| ((0.5 / median_dt(&o.run.rec.t_s)).round() as usize).clamp(5, 501);
     let statics: Vec<&Obs<'_>> = obs.iter().filter(|o| o.turn.is_none()).collect();
     let reference = statics.first().and_then(|o| {
-        let window = ((0.5 / median_dt(&o.run.rec.t_s)).round() as usize).clamp(5, 501);
         let stretches: Vec<_> = statics.iter().map(|o| (&o.run.rec.accel[..], &o.run.rec.gyro[..])).collect();
-        super::rest::rest_noise(&stretches, window)
+        super::rest::rest_noise(&stretches, window(o))
     });
     let motion = |o: &Obs<'_>| {
         let rec = &o.run.rec;
         reference.as_ref().and_then(|n| super::rest::check_span(&rec.accel, &rec.gyro, (0, rec.len()), n))
     };
-    let window = |o: &Obs<'_>| ((0.5 / median_dt(&o.run.rec.t_s)).round() as usize).clamp(5, 501);
     let rate_se = |o: &Obs<'_>| {
         let r = super::through(&cal.c_inv, super::mean_se(&o.run.rec.gyro, window(o)));
         Some(r.map(f64::to_degrees)).filter(|v| v.iter().all(|x| x.is_finite()))
