@@ -549,3 +549,14 @@ fn an_ieee_952_mix_is_recovered_term_by_term() {
     // 68 % intervals: about two thirds of the twelve cover the truth.
     assert!(inside >= 6, "{inside} of {total} intervals cover the design value");
 }
+
+/// A channel that never changes (stuck, or coarser than its noise) reports no term and says
+/// why, instead of terms fitted to rounding errors (it reported a random walk of 1e-22).
+#[test]
+fn a_constant_channel_reports_no_term_and_says_why() {
+    let mut y = vec![0.25; 5000];
+    let c = analyse_channel("gx", "rad/s", &mut y, DT, NoiseOptions::default()).unwrap();
+    assert!(c.white().is_none() && c.bias().is_none() && c.random_walk.is_none() && c.ramp.is_none(), "{c:?}");
+    assert!(c.departures[0].describe().contains("the output is constant"), "{:?}", c.departures);
+    assert!(c.points.iter().all(|p| p.adev == 0.0));
+}

@@ -138,6 +138,9 @@ pub struct Departure {
 impl Departure {
     /// One line for people.
     pub fn describe(&self) -> String {
+        if (self.ratio - 1.0).abs() < 1e-12 {
+            return format!("τ {:.3}–{:.3} s: {}", self.tau_from_s, self.tau_to_s, self.looks_like);
+        }
         format!(
             "τ {:.3}–{:.3} s: the measured curve lies {} the IEEE 952 model by up to {:.2}× (local slope {:+.2}): {}",
             self.tau_from_s,
@@ -280,6 +283,39 @@ fn fit_terms(tau: &[f64], avar: &[f64], weight: &[f64], allowed: u32) -> [f64; 5
     best.0
 }
 
+/// A channel whose output never changes (stuck, or a resolution coarser than its noise): a
+/// zero curve, no term, and a departure that says so, rather than terms fitted to rounding.
+fn constant_channel(name: &str, unit: &str, ms: &[usize], tau0_s: f64) -> ChannelNoise {
+    let points: Vec<AdevPoint> =
+        ms.iter().map(|&m| AdevPoint { tau_s: m as f64 * tau0_s, adev: 0.0, low: 0.0, high: 0.0, edf: 1.0 }).collect();
+    let departures = vec![Departure {
+        tau_from_s: points.first().map_or(0.0, |p| p.tau_s),
+        tau_to_s: points.last().map_or(0.0, |p| p.tau_s),
+        ratio: 1.0,
+        slope: 0.0,
+        looks_like: "the output is constant: a stuck channel, or a resolution coarser than the noise; no noise \
+                     term can be read"
+            .to_string(),
+    }];
+    ChannelNoise {
+        channel: name.to_string(),
+        unit: unit.to_string(),
+        points,
+        white_density: None,
+        bias_instability: None,
+        bias_instability_tau_s: None,
+        random_walk: None,
+        quantization: None,
+        ramp: None,
+        coefficients: [0.0; 5],
+        bias_instability_reading: None,
+        white_density_reading: None,
+        departures,
+        term_intervals: Vec::new(),
+        other: None,
+    }
+}
+
 /// The terms of `c` (a bit each) that dominate the model nowhere the curve is measured with
 /// at least [`MEASURED_EDF`] degrees of freedom.
 fn unmeasured(c: &[f64; 5], tau: &[f64], used: &[usize], n: usize) -> u32 {
@@ -396,6 +432,10 @@ pub fn analyse_channel(
     }
     if ms.len() < 2 {
         return Err(NoiseError::TooShort(n));
+    }
+    let (lo, hi) = samples.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    if hi - lo <= 0.0 {
+        return Ok(constant_channel(name, unit, &ms, tau0_s));
     }
     allan::rate_to_phase(samples, tau0_s);
     let mut tau = Vec::with_capacity(ms.len());
