@@ -221,3 +221,68 @@ fn history_orders_profiles_by_time_not_by_text() {
     let (_, at) = crosscal::profile::latest(dir.path(), "I1426-0042", Some("2026-11-23T20:31:35.05Z")).unwrap();
     assert_eq!(at.created_utc, "2026-11-23T20:31:35Z");
 }
+
+/// VINS-Fusion and ORB-SLAM3 noise blocks: the continuous-time densities of the profile's
+/// noise section (white noise from the standard reading, bias random walk from the fitted
+/// term; worst axis, SI), under the keys each estimator's configuration uses, the simulated
+/// ARW and rate random walk recovered, and what the estimator cannot hold listed.
+#[test]
+fn vins_fusion_and_orb_slam3_noise_blocks_carry_the_profiles_densities() {
+    use crate::common::run_ok;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    run_ok(d, &["simulate", "-o", "s", "--duration", "12", "--rate-hz", "50"]);
+    // ARW 0.3 °/√h, rate random walk 20 °/h/√h; VRW 0.05 m/s/√h.
+    run_ok(
+        d,
+        &[
+            "simulate",
+            "--preset",
+            "static",
+            "--duration",
+            "3600",
+            "--arw",
+            "0.3",
+            "--rrw",
+            "20",
+            "--vrw",
+            "0.05",
+            "-o",
+            "still",
+        ],
+    );
+    run_ok(d, &["noise", "still/session.json", "--save", "n.json"]);
+    run_ok(d, &["fit", "s/session.json", "--noise", "n.json", "--out", "store"]);
+    let unit = std::fs::read_dir(d.join("store")).unwrap().next().unwrap().unwrap().path();
+    let (_, p) = crosscal::profile::Profile::read_or_latest(&unit).unwrap();
+    let worst = |s: crosscal::units::SensorKind, f: fn(&crosscal::noise::ChannelNoise) -> Option<f64>| {
+        p.noise.as_ref().unwrap().channels.iter().filter(|c| c.sensor() == s).filter_map(f).fold(0.0, f64::max)
+    };
+    use crosscal::units::SensorKind::{Accel, Gyro};
+    let (gn, gw, an) = (worst(Gyro, |c| c.white()), worst(Gyro, |c| c.random_walk), worst(Accel, |c| c.white()));
+    // The simulated unit, in SI: ARW 0.3 °/√h = 0.3/60 °/s/√Hz; RRW 20 °/h/√h.
+    let arw_si = (0.3f64 / 60.0).to_radians();
+    let rrw_si = (20.0f64 / 3600.0 / 60.0).to_radians();
+    assert!((gn / arw_si - 1.0).abs() < 0.05, "gyro white {gn} vs {arw_si}");
+    assert!((gw / rrw_si - 1.0).abs() < 0.35, "gyro walk {gw} vs {rrw_si}");
+    let unit_s = unit.to_str().unwrap();
+    let value = |text: &str, key: &str| -> f64 {
+        let line = text.lines().find(|l| l.starts_with(key)).unwrap_or_else(|| panic!("{key} missing:\n{text}"));
+        line[key.len()..].trim_start_matches(':').split_whitespace().next().unwrap().parse().unwrap()
+    };
+    let out = run_ok(d, &["profile", "export", unit_s, "--to", "vins-fusion", "-o", "vins.yaml"]);
+    assert!(out.contains("exported"), "{out}");
+    let v = std::fs::read_to_string(d.join("vins.yaml")).unwrap();
+    assert_eq!(value(&v, "gyr_n").to_bits(), gn.to_bits(), "gyr_n");
+    assert_eq!(value(&v, "gyr_w").to_bits(), gw.to_bits(), "gyr_w");
+    assert_eq!(value(&v, "acc_n").to_bits(), an.to_bits(), "acc_n");
+    assert_eq!(value(&v, "g_norm").to_bits(), p.g_m_s2.to_bits(), "g_norm");
+    assert!(v.contains("not represented: ") && v.contains("scale factors"), "{v}");
+    run_ok(d, &["profile", "export", unit_s, "--to", "orb-slam3", "--rate-hz", "200", "-o", "orb.yaml"]);
+    let o = std::fs::read_to_string(d.join("orb.yaml")).unwrap();
+    assert!(o.starts_with("%YAML:1.0\n"), "OpenCV FileStorage needs its header first: {o}");
+    assert_eq!(value(&o, "IMU.NoiseGyro").to_bits(), gn.to_bits(), "IMU.NoiseGyro");
+    assert_eq!(value(&o, "IMU.GyroWalk").to_bits(), gw.to_bits(), "IMU.GyroWalk");
+    assert_eq!(value(&o, "IMU.NoiseAcc").to_bits(), an.to_bits(), "IMU.NoiseAcc");
+    assert_eq!(value(&o, "IMU.Frequency").to_bits(), 200f64.to_bits(), "IMU.Frequency");
+}

@@ -58,13 +58,14 @@ enum Sub {
     Export {
         /// Profile file, or a unit's folder of the store (its newest profile).
         profile: PathBuf,
-        /// Target format: `imucal` or `kalibr`.
+        /// Target format: `imucal`, `kalibr` (imu.yaml), `vins-fusion` or `orb-slam3` (their IMU
+        /// noise blocks: continuous-time densities from the profile's noise section).
         #[arg(long)]
         to: String,
         /// Output file (never overwritten).
         #[arg(short, long)]
         output: PathBuf,
-        /// IMU update rate for Kalibr, Hz.
+        /// IMU update rate for Kalibr and ORB-SLAM3, Hz.
         #[arg(long, default_value_t = 100.0)]
         rate_hz: f64,
     },
@@ -174,7 +175,9 @@ fn export(profile: &Path, to: &str, output: &Path, rate_hz: f64) -> anyhow::Resu
             (serde_json::to_string_pretty(&v)? + "\n", lost)
         }
         "kalibr" => crosscal::profile::interop::to_kalibr(&p, rate_hz),
-        other => anyhow::bail!("--to {other}: expected imucal or kalibr"),
+        "vins-fusion" => crosscal::profile::estimators::to_vins_fusion(&p, p.g_m_s2),
+        "orb-slam3" => crosscal::profile::estimators::to_orb_slam3(&p, rate_hz),
+        other => anyhow::bail!("--to {other}: expected imucal, kalibr, vins-fusion or orb-slam3"),
     };
     crosscal::atomic::write_new(output, text.as_bytes())
         .map_err(|e| anyhow::anyhow!("writing {} (never overwritten): {e}", output.display()))?;

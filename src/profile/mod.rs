@@ -6,6 +6,7 @@
 //! standard error, the covariance of the fitted ones, residual statistics, the runs used
 //! (file name and SHA-256) and the conventions of the numbers.
 
+pub mod estimators;
 pub mod interop;
 mod store;
 mod validate;
