@@ -15,17 +15,19 @@ pub fn mean3(x: &[[f64; 3]]) -> [f64; 3] {
     m.map(|s| s / n)
 }
 
+/// Per-axis unbiased variance of a run of triads (zeros with fewer than two).
+pub fn var3(x: &[[f64; 3]]) -> [f64; 3] {
+    let n = x.len();
+    if n < 2 {
+        return [0.0; 3];
+    }
+    let m = mean3(x);
+    [0, 1, 2].map(|i| x.iter().map(|v| (v[i] - m[i]).powi(2)).sum::<f64>() / (n - 1) as f64)
+}
+
 /// Norm of the per-axis unbiased variance of `x[start..end]`.
 pub fn variance_norm(x: &[[f64; 3]], start: usize, end: usize) -> f64 {
-    let n = end.saturating_sub(start);
-    if n < 2 {
-        return 0.0;
-    }
-    let mut var = [0.0; 3];
-    for i in 0..3 {
-        let mean = x[start..end].iter().map(|v| v[i]).sum::<f64>() / n as f64;
-        var[i] = x[start..end].iter().map(|v| (v[i] - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-    }
+    let var = var3(&x[start..end.max(start)]);
     (var[0] * var[0] + var[1] * var[1] + var[2] * var[2]).sqrt()
 }
 

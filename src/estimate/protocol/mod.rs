@@ -299,16 +299,17 @@ fn pose_mean_noise(runs: &[&Run], data: impl Fn(&Run) -> &[[f64; 3]]) -> [f64; 3
 fn mean_se(x: &[[f64; 3]], w: usize) -> [f64; 3] {
     let w = w.max(1);
     let k = x.len() / w;
-    let (rows, count): (Vec<[f64; 3]>, usize) =
-        if k >= 4 { (x.chunks_exact(w).map(mean3).collect(), k) } else { (x.to_vec(), x.len()) };
-    if count < 2 {
+    let blocks;
+    let rows = if k >= 4 {
+        blocks = rest::block_means(x, w);
+        &blocks[..]
+    } else {
+        x
+    };
+    if rows.len() < 2 {
         return [f64::NAN; 3];
     }
-    let m = mean3(&rows);
-    [0, 1, 2].map(|i| {
-        let var = rows.iter().map(|r| (r[i] - m[i]).powi(2)).sum::<f64>() / (count - 1) as f64;
-        (var / count as f64).sqrt()
-    })
+    crate::stats::segment::var3(rows).map(|v| (v / rows.len() as f64).sqrt())
 }
 
 /// Standard errors of `m·x` for independent channels of `x` with standard errors `se`.

@@ -4,7 +4,7 @@
 //! variance of both sensors (window = the detector's) against the median over the rest's
 //! first half, and the drift of the gyro's block means between the rest's two halves.
 
-use crate::stats::segment::moving_variance_norm;
+use crate::stats::segment::{mean3, moving_variance_norm, var3};
 
 /// A gyro moving variance this many times the rest's own median is motion (for a window of
 /// ~50 samples or more the variance estimate scatters by ~20 %: 4× is a > 10σ event).
@@ -120,25 +120,12 @@ fn stretch_noise(x: &[[f64; 3]], w: usize) -> Option<(f64, [f64; 3])> {
     let norms = moving_variance_norm(x, w);
     let mut inner: Vec<f64> = norms[h..x.len() - h].iter().copied().filter(|v| v.is_finite()).collect();
     let var = crate::stats::median(&mut inner)?;
-    let blocks = block_means(x, w);
-    let k = blocks.len() as f64;
-    let sd = [0, 1, 2].map(|i| {
-        let m = blocks.iter().map(|b| b[i]).sum::<f64>() / k;
-        (blocks.iter().map(|b| (b[i] - m).powi(2)).sum::<f64>() / (k - 1.0)).sqrt()
-    });
-    Some((var, sd))
+    Some((var, var3(&block_means(x, w)).map(f64::sqrt)))
 }
 
-fn block_means(x: &[[f64; 3]], w: usize) -> Vec<[f64; 3]> {
-    x.chunks_exact(w)
-        .map(|b| {
-            let mut m = [0.0; 3];
-            for v in b {
-                (0..3).for_each(|i| m[i] += v[i] / w as f64);
-            }
-            m
-        })
-        .collect()
+/// Means of consecutive blocks of `w` samples (a partial last block is dropped).
+pub(super) fn block_means(x: &[[f64; 3]], w: usize) -> Vec<[f64; 3]> {
+    x.chunks_exact(w).map(mean3).collect()
 }
 
 /// One stretch of samples: (accelerometer, gyro).
