@@ -257,6 +257,7 @@ fn help_has_an_example_for_every_command_and_topics_print() {
         help.split("Commands:")
             .nth(1)
             .map(|s| s.split("Options:").next().unwrap_or_default())
+            .map(|s| s.split("Arguments:").next().unwrap_or_default())
             .unwrap_or_default()
             .lines()
             .filter_map(|l| l.split_whitespace().next().map(str::to_string))

@@ -11,6 +11,7 @@ mod diagnose_hard;
 mod docs;
 mod exit_codes;
 mod fixtures;
+mod formats;
 mod fuzz;
 mod fuzz_found;
 mod hostile;

@@ -10,9 +10,35 @@ use std::path::PathBuf;
 
 /// Options of `import`.
 #[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct Args {
     #[command(subcommand)]
-    layout: Layout,
+    layout: Option<Layout>,
+    /// A log or bag: ROS 1 bag, ROS 2 bag (its folder, or a .db3/.mcap), PX4 ULog (.ulg) or
+    /// ArduPilot DataFlash (.bin); the format is read from the content.
+    file: Option<PathBuf>,
+    /// List the IMU streams the file holds (samples, rate, span, temperature) and stop.
+    #[arg(long)]
+    list: bool,
+    /// The stream to import: a ROS topic, or a stream name as --list shows it.
+    #[arg(long)]
+    topic: Option<String>,
+    /// The IMU instance to import (PX4 multi_id, ArduPilot IMU number from 0).
+    #[arg(long)]
+    imu: Option<u32>,
+    /// Keep samples from this time on, s after the stream's first sample.
+    #[arg(long)]
+    from: Option<f64>,
+    /// Keep samples up to this time, s after the stream's first sample.
+    #[arg(long)]
+    to: Option<f64>,
+    /// Session kind: auto (static when at rest throughout, else multi-position), static or multi-position.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "static", "multi-position"])]
+    kind: String,
+    /// Definition of a ROS message type the bag does not carry: TYPE=FILE.msg (or FILE.msg
+    /// for every undefined type); MSG: sections in the file give the types it uses.
+    #[arg(long = "msg-def")]
+    msg_def: Vec<String>,
     /// Folder to write session.json and recording.csv into (must not hold them already).
     #[arg(long, global = true, default_value = "imported-session")]
     out: PathBuf,
@@ -110,6 +136,20 @@ enum Layout {
     },
 }
 
+impl Args {
+    fn log_args(&self) -> super::import_log::LogArgs {
+        super::import_log::LogArgs {
+            list: self.list,
+            topic: self.topic.clone(),
+            imu: self.imu,
+            from: self.from,
+            to: self.to,
+            kind: self.kind.clone(),
+            msg_def: self.msg_def.clone(),
+        }
+    }
+}
+
 fn parse_delimiter(s: &str) -> Result<Delimiter, String> {
     Delimiter::parse(s).ok_or_else(|| format!("'{s}': expected ',', ';', tab or space"))
 }
@@ -123,8 +163,11 @@ fn parse_accel_unit(s: &str) -> Result<AccelUnit, String> {
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
+    let Some(layout) = &a.layout else {
+        return super::import_log::run(&a.file, &a.out, &a.serial, a.g, &a.log_args());
+    };
     let mut opts = ImportOptions { serial: a.serial.clone(), ..ImportOptions::default() };
-    let done: Imported = match &a.layout {
+    let done: Imported = match layout {
         Layout::ImucalFerraris { csv, sections, rate_hz, turn_angle_deg } => {
             opts.rate_hz = Some(*rate_hz);
             opts.turn_angle_deg = *turn_angle_deg;

@@ -11,6 +11,7 @@ mod effects;
 mod fit;
 mod format;
 mod import;
+mod import_log;
 mod noise;
 mod noise_lot;
 mod plan;
@@ -213,8 +214,11 @@ enum Command {
     /// Calibrate a production lot in parallel: a profile per unit, acceptance, outliers, reports.
     #[command(after_help = "Example: crosscal batch lot/ --rules rules.json")]
     Batch(batch::Args),
-    /// Turn a recording laid out for imucal, imu_tk or a Tedaldi script into a crosscal session.
-    #[command(after_help = "Example: crosscal import imu-tk acc.mat gyro.mat --init-rest-s 50 --out tk/")]
+    /// Turn a ROS 1/2 bag, PX4 ULog or ArduPilot DataFlash log, or a recording laid out for
+    /// imucal, imu_tk or a Tedaldi script, into a crosscal session.
+    #[command(
+        after_help = "Example: crosscal import --list flight.ulg\nExample: crosscal import imu.bag --topic /imu/data_raw --out bag-session/\nExample: crosscal import imu-tk acc.mat gyro.mat --init-rest-s 50 --out tk/"
+    )]
     Import(import::Args),
     /// List the exit codes and what each means (as the guide's table).
     #[command(after_help = "Example: crosscal exit-codes")]

@@ -106,9 +106,27 @@ pub enum SessionError {
         /// What was found and what was expected.
         msg: String,
     },
+    /// A binary log or bag (ROS bag, ULog, DataFlash) that cannot be read: the byte offset
+    /// where reading stopped and what was expected there.
+    #[error("{path}: byte {offset}: {msg}")]
+    Log {
+        /// Kind of problem.
+        problem: Problem,
+        /// The file.
+        path: PathBuf,
+        /// Byte offset in the file (or in the decompressed chunk, as the message says).
+        offset: u64,
+        /// What was found and what was expected.
+        msg: String,
+    },
 }
 
 impl SessionError {
+    /// A log or bag that cannot be read at byte `offset`.
+    pub fn log(problem: Problem, path: &std::path::Path, offset: u64, msg: impl Into<String>) -> Self {
+        Self::Log { problem, path: path.to_path_buf(), offset, msg: msg.into() }
+    }
+
     /// The kind of problem.
     pub fn problem(&self) -> Problem {
         match self {
@@ -116,7 +134,7 @@ impl SessionError {
             Self::NotRegular { .. } => Problem::MissingFile,
             Self::Json { .. } => Problem::Json,
             Self::UnknownFormat { .. } => Problem::Format,
-            Self::Manifest { problem, .. } | Self::Csv { problem, .. } => *problem,
+            Self::Manifest { problem, .. } | Self::Csv { problem, .. } | Self::Log { problem, .. } => *problem,
         }
     }
 }

@@ -148,7 +148,7 @@ pub(super) fn write_table(
     let csv_path = out_dir.join("recording.csv");
     let text = super::recording_csv(&table.t, &table.gyro, &table.accel, None, [1.0, 1.0]);
     crate::atomic::write_new(&csv_path, &text).map_err(io(&csv_path))?;
-    let manifest = Manifest { serial: opts.serial.clone(), units, g_m_s2: opts.g_m_s2, runs, version: 2 };
+    let manifest = Manifest { serial: opts.serial.clone(), units, g_m_s2: opts.g_m_s2, runs, version: 2, source: None };
     let manifest_path = out_dir.join("session.json");
     crate::atomic::write_new(&manifest_path, manifest.to_json().as_bytes()).map_err(io(&manifest_path))?;
     Ok(Imported { manifest_path, runs: manifest.runs.len(), samples: table.t.len() })

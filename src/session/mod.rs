@@ -10,8 +10,10 @@ mod csvwrite;
 mod error;
 pub mod import;
 pub mod import_text;
+pub mod logs;
 mod open;
 pub mod sanity;
+mod source;
 
 use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
 pub use csvread::{
@@ -20,6 +22,7 @@ pub use csvread::{
 pub use csvwrite::{recording_csv, recording_header, CsvLine};
 pub use error::{Problem, SessionError};
 pub use open::{file_kind, open_recording, open_regular};
+pub use source::Source;
 
 use crate::frames::Mount;
 use serde::{Deserialize, Serialize};
@@ -177,13 +180,16 @@ impl Manifest {
     pub fn to_json(&self) -> String {
         let v2 = self.runs.iter().any(|r| r.rows.is_some() || r.motion.is_protocol());
         let runs: Vec<Value> = self.runs.iter().map(RunSpec::to_json).collect();
-        let manifest = serde_json::json!({
+        let mut manifest = serde_json::json!({
             "format": if v2 { SESSION_FORMAT_2 } else { SESSION_FORMAT },
             "serial": self.serial,
             "units": {"gyro": self.units.gyro.to_string(), "accel": self.units.accel.to_string(), "time": self.units.time.to_string()},
             "stand": {"g": self.g_m_s2},
             "runs": runs,
         });
+        if let (Some(src), Some(o)) = (&self.source, manifest.as_object_mut()) {
+            o.insert("source".into(), src.to_json());
+        }
         serde_json::to_string_pretty(&manifest).unwrap_or_default() + "\n"
     }
 }
@@ -242,6 +248,10 @@ pub struct Manifest {
     pub runs: Vec<RunSpec>,
     /// Format version (1 or 2).
     pub version: u8,
+    /// Where the recording came from when it was imported from a log or bag (optional
+    /// `"source"` object): format, stream, axis convention, the calibration the autopilot
+    /// had already applied.
+    pub source: Option<Source>,
 }
 
 /// One run: its declaration and its samples.
@@ -566,7 +576,8 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
     if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
         return Err(bad(w[0], format!("two runs are named '{}': run names must be unique", w[0])));
     }
-    Ok(Manifest { serial, units: Units { gyro, accel, time }, g_m_s2, runs, version })
+    let source = obj.get("source").and_then(Source::from_json);
+    Ok(Manifest { serial, units: Units { gyro, accel, time }, g_m_s2, runs, version, source })
 }
 
 /// A serial usable as a folder name.

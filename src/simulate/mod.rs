@@ -337,6 +337,7 @@ impl SimConfig {
                 g_m_s2: self.g_m_s2,
                 runs: runs.iter().map(|r| r.spec.clone()).collect(),
                 version: 1,
+                source: None,
             },
             runs,
         }

@@ -207,8 +207,14 @@ pub fn ferraris(truth: &ProtocolTruth, hold_s: f64, turn_deg: f64, seed: u64) ->
         let (_, end) = b.hold(1.0);
         runs.push(spec(name, MotionSpec::Rotation { axis_stand: axis, angle_deg: turn_deg }, Some((start, end))));
     }
-    let manifest =
-        Manifest { serial: "SIM-FERRARIS".into(), units: raw_units(), g_m_s2: truth.g_m_s2, runs, version: 2 };
+    let manifest = Manifest {
+        serial: "SIM-FERRARIS".into(),
+        units: raw_units(),
+        g_m_s2: truth.g_m_s2,
+        runs,
+        version: 2,
+        source: None,
+    };
     ProtocolSession { manifest, recording: b.finish() }
 }
 
@@ -250,6 +256,7 @@ pub fn multi_position(
         g_m_s2: truth.g_m_s2,
         runs: vec![spec("multi-position", motion, None)],
         version: 2,
+        source: None,
     };
     ProtocolSession { manifest, recording: b.finish() }
 }

@@ -1,0 +1,339 @@
+//! Logs and bags users bring (`../shared/data/formats/`, never copied here): every file is
+//! listed and imported, and what crosscal reads is checked against the numbers the
+//! folder's README gives (decoded there with pyulog, pymavlink and rosbags). Each test
+//! skips with a message when the data are absent. Generated files (`formats_gen`) cover
+//! what the samples lack: lz4 chunks, MCAP, a plain `sensor_msgs/msg/Imu` in a sqlite bag,
+//! ULog appended data, DataFlash garbage and FMTU multipliers.
+
+use crate::common::{run_in, run_ok};
+use crosscal::session::logs::{list, read, LogFormat, LogSample, ReadOptions, StreamStats};
+use std::path::{Path, PathBuf};
+
+fn shared(rel: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/formats").join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipping: {} is absent", p.display());
+        None
+    }
+}
+
+/// One stream as the README describes it: name, samples, rate (Hz), span (s), temperature
+/// range (°C) when reported, and one decoded sample (time ns or the first when None).
+struct Expect {
+    name: &'static str,
+    samples: u64,
+    rate_hz: f64,
+    span_s: f64,
+    temp_c: Option<(f64, f64)>,
+    sample: Option<(Option<i64>, [f64; 3], [f64; 3])>,
+}
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol
+}
+
+fn check_file(rel: &str, format: LogFormat, expect: &[Expect], applied: &[&str]) {
+    let Some(path) = shared(rel) else { return };
+    let (contents, stats) = list(&path, &ReadOptions::default()).unwrap_or_else(|e| panic!("{rel}: {e}"));
+    assert_eq!(contents.format, format, "{rel}");
+    let names: Vec<&str> = contents.streams.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(names.len(), expect.len(), "{rel}: streams {names:?}");
+    for e in expect {
+        let i = names.iter().position(|n| *n == e.name).unwrap_or_else(|| panic!("{rel}: no {} in {names:?}", e.name));
+        let s: &StreamStats = &stats[i];
+        assert_eq!(s.samples, e.samples, "{rel} {}: samples", e.name);
+        assert!(
+            close(s.rate_hz(), e.rate_hz, 0.05 + 0.001 * e.rate_hz),
+            "{rel} {}: rate {} vs {}",
+            e.name,
+            s.rate_hz(),
+            e.rate_hz
+        );
+        assert!(
+            close(s.span_s(), e.span_s, 0.01 + 0.001 * e.span_s),
+            "{rel} {}: span {} vs {}",
+            e.name,
+            s.span_s(),
+            e.span_s
+        );
+        match (s.temp_c, e.temp_c) {
+            (Some((lo, hi)), Some((elo, ehi))) => {
+                assert!(close(lo, elo, 0.06) && close(hi, ehi, 0.06), "{rel} {}: temperature {lo}..{hi}", e.name)
+            }
+            (None, None) => {}
+            (got, want) => panic!("{rel} {}: temperature {got:?}, README {want:?}", e.name),
+        }
+        if let Some((t, g, a)) = e.sample {
+            let found = match t {
+                None => s.first,
+                Some(t_ns) => {
+                    find_sample(&path, i, t_ns).unwrap_or_else(|| panic!("{rel} {}: no sample at {t_ns} ns", e.name))
+                }
+            };
+            for k in 0..3 {
+                assert!(
+                    close(found.gyro_rad_s[k], g[k], 6e-6),
+                    "{rel} {} gyro {k}: {:?} vs README {g:?}",
+                    e.name,
+                    found.gyro_rad_s
+                );
+                if !a[k].is_nan() {
+                    assert!(
+                        close(found.accel_m_s2[k], a[k], 6e-6),
+                        "{rel} {} accel {k}: {:?} vs {a:?}",
+                        e.name,
+                        found.accel_m_s2
+                    );
+                }
+            }
+        }
+    }
+    for p in applied {
+        assert!(
+            contents.applied.iter().any(|(n, _)| n == p),
+            "{rel}: applied calibration lacks {p}: {:?}",
+            contents.applied
+        );
+    }
+}
+
+fn find_sample(path: &Path, stream: usize, t_ns: i64) -> Option<LogSample> {
+    let mut hit = None;
+    read(path, &ReadOptions::default(), Some(stream), &mut |_, s| {
+        // The README prints stamps to the microsecond.
+        if (s.t_ns - t_ns).abs() < 1000 {
+            hit = Some(*s);
+        }
+        Ok(())
+    })
+    .ok()?;
+    hit
+}
+
+#[test]
+fn px4_ulogs_read_as_their_readme_says() {
+    check_file(
+        "ulog/px4_auav_x21_sensor_combined.ulg",
+        LogFormat::ULog,
+        &[Expect {
+            name: "sensor_combined",
+            samples: 17_070,
+            rate_hz: 250.0,
+            span_s: 68.88,
+            temp_c: None,
+            sample: Some((Some(113_048_707_000), [-0.00161, -0.00331, -0.00314], [1.12265, -0.49896, -9.60992])),
+        }],
+        &["CAL_ACC0_XOFF", "CAL_GYRO0_XOFF", "SENS_BOARD_ROT"],
+    );
+    let imu = |name: &'static str, t: (f64, f64)| Expect {
+        name,
+        samples: 6,
+        rate_hz: 1.0,
+        span_s: 5.0,
+        temp_c: Some(t),
+        sample: None,
+    };
+    check_file(
+        "ulog/px4_cubeorange_three_imus.ulg",
+        LogFormat::ULog,
+        &[
+            Expect {
+                name: "sensor_combined",
+                samples: 1298,
+                rate_hz: 204.6,
+                span_s: 6.50,
+                temp_c: None,
+                sample: Some((Some(20_971_931_000), [0.00184, -0.00114, -0.00328], [-0.04115, -0.17096, -9.59200])),
+            },
+            imu("sensor_accel+gyro[0]", (40.0, 40.4)),
+            imu("sensor_accel+gyro[1]", (28.2, 28.4)),
+            imu("sensor_accel+gyro[2]", (29.4, 29.7)),
+        ],
+        &["CAL_ACC0_XOFF", "TC_A_ENABLE", "SENS_BOARD_ROT"],
+    );
+    // The accelerometers' first samples as the README prints them (paired on the gyro's clock,
+    // 1 ms apart here, so the interpolated values agree to the README's 5 decimals only when
+    // the accelerometer sample itself is taken: compare with a tolerance of the change
+    // between neighbouring samples instead).
+    let Some(path) = shared("ulog/px4_cubeorange_three_imus.ulg") else { return };
+    let (_, stats) = list(&path, &ReadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    for (i, want) in [(1, [0.68213, 0.24334, -9.69695]), (2, [0.35674, 0.30861, -9.91271])] {
+        let a = stats[i].first.accel_m_s2;
+        assert!((0..3).all(|k| close(a[k], want[k], 0.02)), "IMU {}: first accel {a:?} vs README {want:?}", i - 1);
+    }
+}
+
+#[test]
+fn ardupilot_dataflash_logs_read_as_their_readme_says() {
+    check_file(
+        "dataflash/arducopter_imu_imu2_50s.bin",
+        LogFormat::DataFlash,
+        &[
+            Expect {
+                name: "IMU",
+                samples: 1258,
+                rate_hz: 24.8,
+                span_s: 50.86,
+                temp_c: Some((27.2, 27.7)),
+                sample: Some((Some(402_644_506_000), [-0.07747, -0.09213, 0.01890], [-0.11938, 0.24224, -10.21316])),
+            },
+            Expect {
+                name: "IMU2",
+                samples: 1258,
+                rate_hz: 24.8,
+                span_s: 50.86,
+                temp_c: None,
+                sample: Some((Some(402_644_506_000), [-0.03300, -0.07381, 0.04374], [-0.27693, 0.14753, -10.39236])),
+            },
+        ],
+        &["INS_ACCOFFS_X", "INS_GYROFFS_Z", "AHRS_ORIENTATION"],
+    );
+    check_file(
+        "dataflash/arducopter_4.6.2_truncated_80k.bin",
+        LogFormat::DataFlash,
+        &[
+            Expect {
+                name: "IMU[0]",
+                samples: 10,
+                rate_hz: 24.6,
+                span_s: 0.37,
+                temp_c: Some((37.3, 37.3)),
+                sample: Some((Some(140_209_868_000), [0.00534, -0.00323, -0.00053], [0.61293, 0.86727, -9.76368])),
+            },
+            Expect {
+                name: "IMU[1]",
+                samples: 10,
+                rate_hz: 24.6,
+                span_s: 0.37,
+                temp_c: Some((28.5, 28.5)),
+                sample: Some((Some(140_209_868_000), [0.00356, 0.00084, -0.00088], [0.48838, 0.91392, -9.73778])),
+            },
+            Expect { name: "ISBG[0]", samples: 576, rate_hz: 2000.3, span_s: 0.2875, temp_c: None, sample: None },
+        ],
+        &["INS_TCAL1_ENABLE", "INS_ACCSCAL_X"],
+    );
+    // The cut is reported with its byte offset, and the batch's mean matches the README.
+    let Some(path) = shared("dataflash/arducopter_4.6.2_truncated_80k.bin") else { return };
+    let mut sum = 0.0;
+    let mut n = 0.0;
+    let c = read(&path, &ReadOptions::default(), None, &mut |i, s| {
+        if i == 0 {
+            sum += s.gyro_rad_s[0];
+            n += 1.0;
+        }
+        Ok(())
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert!(c.warnings.iter().any(|w| w.contains("byte 81918") && w.contains("truncated")), "{:?}", c.warnings);
+    assert!(close(sum / n, 0.0043, 0.00005), "batch mean gyro x {}", sum / n);
+}
+
+#[test]
+fn ros_bags_read_as_their_readme_says() {
+    check_file(
+        "rosbag1/phidgets_imu_upside_down.bag",
+        LogFormat::Ros1Bag,
+        &[Expect {
+            name: "/imu/data_raw",
+            samples: 13_964,
+            rate_hz: 250.0,
+            span_s: 56.24,
+            temp_c: None,
+            sample: Some((Some(1_360_242_236_215_352_000), [0.00422, 0.0, 0.00187], [-0.20729, -0.10026, -9.86602])),
+        }],
+        &[],
+    );
+    check_file(
+        "rosbag1/imu_static_1.bag",
+        LogFormat::Ros1Bag,
+        &[Expect {
+            name: "/imu1",
+            samples: 1071,
+            rate_hz: 10.0,
+            span_s: 107.0,
+            temp_c: None,
+            sample: Some((None, [-0.01171, -0.01490, 0.04257], [0.20111, 0.26336, 9.73961])),
+        }],
+        &[],
+    );
+    for (bag, samples, rate, span, gyro, accel) in [
+        ("rosbag2/vn100_emulator_40hz", 624, 40.2, 15.58, [-0.00019, 0.00097, -0.00027], [-5.984, -0.164, -7.864]),
+        ("rosbag2/vn100_stationary_1hz", 329, 1.0, 328.0, [-0.00130, -0.00035, 0.00052], [0.128, -0.110, -9.673]),
+    ] {
+        let e = Expect {
+            name: "/imu",
+            samples,
+            rate_hz: rate,
+            span_s: span,
+            temp_c: None,
+            sample: Some((None, gyro, accel)),
+        };
+        check_file(bag, LogFormat::Ros2Sqlite, &[e], &[]);
+    }
+}
+
+/// The custom type given by its definition reads the same as the bytes-recognised guess,
+/// and the guess is said.
+#[test]
+fn a_custom_ros2_type_reads_from_its_definition_as_from_the_guess() {
+    let Some(bag) = shared("rosbag2/vn100_emulator_40hz") else { return };
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let def = dir.path().join("IMUmsg.msg");
+    std::fs::write(
+        &def,
+        "std_msgs/Header header\nsensor_msgs/Imu imu\nsensor_msgs/MagneticField mag_field\nstring raw_imu_string\n",
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let collect = |opts: &ReadOptions| {
+        let mut v = Vec::new();
+        let c = read(&bag, opts, None, &mut |_, s| {
+            v.push(*s);
+            Ok(())
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+        (c, v)
+    };
+    let (guessed, a) = collect(&ReadOptions::default());
+    let opts = ReadOptions { msg_defs: vec![("imu_msg/msg/IMUmsg".into(), def.clone())] };
+    let (given, b) = collect(&opts);
+    assert_eq!(a.len(), 624);
+    assert_eq!(a, b, "definition and guess must decode the same samples");
+    assert!(guessed.streams[0].note.as_deref().is_some_and(|n| n.contains("recognised from the bytes")));
+    assert!(given.streams[0].note.is_none(), "{:?}", given.streams[0].note);
+    // A definition that does not hold an Imu is refused with the type named.
+    std::fs::write(&def, "std_msgs/Header header\nstring raw\n").unwrap_or_else(|e| panic!("{e}"));
+    let bad = ReadOptions { msg_defs: vec![("imu_msg/msg/IMUmsg".into(), def)] };
+    let err = read(&bag, &bad, None, &mut |_, _| Ok(())).err().map(|e| e.to_string()).unwrap_or_default();
+    assert!(err.contains("IMUmsg") && err.contains("holds no sensor_msgs/Imu"), "{err}");
+}
+
+/// A static bag goes straight to `noise`, the format's provenance in the session.
+#[test]
+fn a_static_bag_is_imported_as_a_static_session_and_goes_through_noise() {
+    let Some(bag) = shared("rosbag1/imu_static_1.bag") else { return };
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    let bag = bag.to_string_lossy().to_string();
+    let out = run_ok(d, &["import", "--list", &bag]);
+    assert!(out.contains("/imu1") && out.contains("1071"), "{out}");
+    let out = run_ok(d, &["import", &bag, "--out", "s"]);
+    assert!(out.contains("at rest throughout") && out.contains("crosscal noise"), "{out}");
+    let manifest = std::fs::read_to_string(d.join("s/session.json")).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        manifest.contains("\"static\"") && manifest.contains("\"source\"") && manifest.contains("ROS 1 bag"),
+        "{manifest}"
+    );
+    let noise = run_ok(d, &["noise", "s/session.json", "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&noise).unwrap_or_else(|e| panic!("{e}: {noise}"));
+    assert!(v["channels"].as_array().is_some_and(|c| c.len() == 6), "{noise}");
+    // --from/--to cut a part: 20 s at 10 Hz.
+    run_ok(d, &["import", &bag, "--from", "10", "--to", "30", "--out", "cut"]);
+    let rows =
+        std::fs::read_to_string(d.join("cut/recording.csv")).unwrap_or_else(|e| panic!("{e}")).lines().count() - 1;
+    assert!((199..=201).contains(&rows), "{rows} rows between 10 and 30 s");
+    // An existing session is never overwritten.
+    let (code, _, err) = run_in(d, &["import", &bag, "--out", "s"]);
+    assert_ne!(code, 0, "{err}");
+}
