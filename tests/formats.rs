@@ -337,3 +337,56 @@ fn a_static_bag_is_imported_as_a_static_session_and_goes_through_noise() {
     let (code, _, err) = run_in(d, &["import", &bag, "--out", "s"]);
     assert_ne!(code, 0, "{err}");
 }
+
+/// Every sample file cut short or with bytes overwritten: an error naming the byte offset
+/// (or sqlite's complaint), or the samples before the damage with a warning; never a panic.
+#[test]
+fn damaged_logs_give_an_error_or_a_warning_never_a_panic() {
+    let files = [
+        "ulog/px4_auav_x21_sensor_combined.ulg",
+        "ulog/px4_cubeorange_three_imus.ulg",
+        "dataflash/arducopter_imu_imu2_50s.bin",
+        "dataflash/arducopter_4.6.2_truncated_80k.bin",
+        "rosbag1/phidgets_imu_upside_down.bag",
+        "rosbag1/imu_static_1.bag",
+        "rosbag2/vn100_emulator_40hz/rosbag2_2026_03_10-02_31_31_0.db3",
+    ];
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let mut outcomes = (0, 0, 0);
+    for rel in files {
+        let Some(path) = shared(rel) else { continue };
+        let bytes = std::fs::read(&path).unwrap_or_else(|e| panic!("{e}"));
+        let n = bytes.len();
+        let mut variants: Vec<(String, Vec<u8>)> = [n / 3, 2 * n / 3, n - 1, n - 7]
+            .iter()
+            .map(|&cut| (format!("cut at {cut}"), bytes[..cut].to_vec()))
+            .collect();
+        for at in [2 * n / 5, 3 * n / 4] {
+            let mut b = bytes.clone();
+            for x in &mut b[at..(at + 64).min(n)] {
+                *x ^= 0xA5;
+            }
+            variants.push((format!("64 bytes overwritten at {at}"), b));
+        }
+        for (what, b) in variants {
+            let name = Path::new(rel).file_name().unwrap_or_default();
+            let f = dir.path().join(name);
+            std::fs::write(&f, &b).unwrap_or_else(|e| panic!("{e}"));
+            match list(&f, &ReadOptions::default()) {
+                Ok((c, _)) => {
+                    outcomes.0 += 1;
+                    if what.starts_with("cut") && !rel.ends_with(".db3") && !c.warnings.is_empty() {
+                        outcomes.2 += 1;
+                        assert!(c.warnings.iter().any(|w| w.contains("byte")), "{rel} {what}: {:?}", c.warnings);
+                    }
+                }
+                Err(e) => {
+                    outcomes.1 += 1;
+                    let m = e.to_string();
+                    assert!(m.contains("byte") || m.contains("sqlite"), "{rel} {what}: {m}");
+                }
+            }
+        }
+    }
+    eprintln!("damaged files: {} read (of them {} cut with a warning), {} refused", outcomes.0, outcomes.2, outcomes.1);
+}

@@ -58,8 +58,8 @@ pub fn run(file: &Option<PathBuf>, out: &Path, serial: &str, g: Option<f64>, a: 
     for n in done.contents.notes.iter().chain(done.stream.note.iter()) {
         outln!("  note: {n}");
     }
-    if !done.contents.applied.is_empty() {
-        let list: Vec<String> = done.contents.applied.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    if !done.applied.is_empty() {
+        let list: Vec<String> = done.applied.iter().map(|(k, v)| format!("{k}={v}")).collect();
         outln!("  already applied by the autopilot: {}", list.join(" "));
     }
     for w in &done.contents.warnings {

@@ -352,7 +352,7 @@ impl State<'_, '_> {
             return i;
         }
         let note = if six {
-            "the INS library's output: the INS_* offsets and scales and AHRS_ORIENTATION were applied"
+            "ArduPilot's calibrated output: the INS_* offsets and scales and AHRS_ORIENTATION in the log were applied; a fit on it calibrates on top of them"
         } else {
             "one sensor only (batch sampler): listed, not importable as a six-axis session"
         };
@@ -460,6 +460,27 @@ impl State<'_, '_> {
         }
     }
 
+    }
+
+/// The parameters of `applied` that act on IMU `instance` (ArduPilot numbers the second
+/// IMU's `INS_ACC2OFFS_*`, `INS_GYR2OFFS_*` and `INS_TCAL2_*`), with `AHRS_ORIENTATION`.
+pub fn applied_to(applied: &[(String, f64)], instance: u32) -> Vec<(String, f64)> {
+    let (acc, gyr) = match instance {
+        0 => ("INS_ACC".to_string(), "INS_GYR".to_string()),
+        n => (format!("INS_ACC{}", n + 1), format!("INS_GYR{}", n + 1)),
+    };
+    let tcal = format!("INS_TCAL{}_", instance + 1);
+    applied
+        .iter()
+        .filter(|(n, _)| {
+            let rest = |p: &str| n.strip_prefix(p).is_some_and(|r| r.starts_with("OFFS") || r.starts_with("SCAL"));
+            n == "AHRS_ORIENTATION" || n.starts_with(&tcal) || n == "INS_TCAL_OPTIONS" || rest(&acc) || rest(&gyr)
+        })
+        .cloned()
+        .collect()
+}
+
+impl State<'_, '_> {
     /// One `ISBD` block: `x`, `y`, `z` int16[32] ÷ `mul`, at the header's rate from its
     /// `SampleUS`, block `seqno` × 32 samples in.
     fn batch_data(&mut self, f: &Fmt, b: &[u8]) {
@@ -488,6 +509,7 @@ impl State<'_, '_> {
     }
 
     fn finish(mut self) -> Result<Contents, SessionError> {
+        self.out.applied = std::mem::take(&mut self.params);
         let mut pairs: Vec<(usize, Pairer)> = self.raw_pairs.drain().map(|(_, v)| v).collect();
         pairs.sort_by_key(|p| p.0);
         for (stream, mut p) in pairs {
@@ -500,13 +522,6 @@ impl State<'_, '_> {
         if let Some(e) = self.err {
             return Err(e);
         }
-        if !self.params.is_empty() {
-            self.out.notes.push(
-                "IMU values are ArduPilot's calibrated output: the INS_* offsets and scales listed (and AHRS_ORIENTATION) were applied; a fit on them calibrates on top of these"
-                    .into(),
-            );
-        }
-        self.out.applied = self.params;
         Ok(self.out)
     }
 }

@@ -17,8 +17,9 @@ use std::io::Read;
 use std::path::Path;
 
 const MAGIC: &[u8] = b"#ROSBAG V2.0\n";
-/// The largest record (header or data) read into memory: a bigger claim is corruption.
-const MAX_RECORD: usize = 1 << 30;
+/// The largest record (header or data) read into memory, and the largest chunk unpacked: a
+/// bigger claim is corruption (rosbag writes 768 KiB chunks by default).
+const MAX_RECORD: usize = 1 << 28;
 
 const OP_MSG: u8 = 0x02;
 const OP_CHUNK: u8 = 0x05;

@@ -7,7 +7,8 @@
 //! A block moves when its gyro or accelerometer scatter exceeds 4× the median block's (with
 //! floors of 1e-3 rad/s and 1e-2 m/s² for quantised data), or its mean rate differs from
 //! the median block's by more than 5× that scatter + 0.01 rad/s (a slow smooth turn has
-//! little scatter). Orientations are the rests' mean gravity directions, merged within 5°.
+//! little scatter), or its scatter exceeds what no rest shows (0.05 rad/s, 0.3 m/s²: a
+//! flight vibrates throughout). Orientations are the rests' mean gravity directions, merged within 5°.
 
 fn median(v: &[f64]) -> f64 {
     crate::stats::median(&mut v.to_vec()).unwrap_or(0.0)
@@ -114,6 +115,11 @@ impl Summary {
     }
 }
 
+/// Block scatter no rest shows whatever the unit (rad/s, m/s²): a recording that vibrates
+/// throughout (a flight) has a median block as busy as its others.
+const GYRO_STD_REST: f64 = 0.05;
+const ACCEL_STD_REST: f64 = 0.3;
+
 fn unit(v: [f64; 3]) -> [f64; 3] {
     let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
     if n > 0.0 {
@@ -142,7 +148,8 @@ fn summarise(blocks: &[Block]) -> Summary {
         .iter()
         .map(|b| {
             let dg = (0..3).map(|k| (b.g_mean[k] - bias[k]).powi(2)).sum::<f64>().sqrt();
-            b.g_std > 4.0 * sg || b.a_std > 4.0 * sa || dg > 5.0 * sg + 0.01
+            let shaking = b.g_std > GYRO_STD_REST || b.a_std > ACCEL_STD_REST;
+            shaking || b.g_std > 4.0 * sg || b.a_std > 4.0 * sa || dg > 5.0 * sg + 0.01
         })
         .collect();
     let mut rests = Vec::new();

@@ -358,7 +358,7 @@ impl State<'_, '_> {
                 "sensor_combined".into(),
                 None,
                 false,
-                "the voted IMU, already calibrated by PX4 (CAL_* offsets and scales, SENS_BOARD_ROT, thermal compensation if TC_*_ENABLE)",
+                "the voted IMU, calibrated by PX4 with the log's CAL_* offsets and scales, SENS_BOARD_ROT and, if TC_*_ENABLE, thermal compensation; a fit on it calibrates on top of them",
             );
             return Some(Reader::Combined { t: find(f, &["timestamp"])?, gyro, accel, stream });
         }
@@ -455,12 +455,6 @@ impl State<'_, '_> {
                 "{} logging dropouts, {:.3} s in all (samples lost there)",
                 self.dropouts.0, self.dropouts.1
             ));
-        }
-        if !self.params.is_empty() {
-            self.out.notes.push(
-                "sensor_combined is calibrated by PX4 with the CAL_* parameters listed (and SENS_BOARD_ROT); a fit on it calibrates on top of them"
-                    .into(),
-            );
         }
         self.out.applied = self.params;
         Ok(self.out)

@@ -57,6 +57,8 @@ pub struct LogImported {
     pub summary: Summary,
     /// Samples dropped because their time stamp did not advance.
     pub dropped_time: u64,
+    /// The calibration the log says was applied to this stream (as in the manifest).
+    pub applied: Vec<(String, f64)>,
 }
 
 /// The stream `sel` names among `streams` (with their statistics).
@@ -174,7 +176,10 @@ pub fn import_log(
         stream: format!("{} ({})", stream.name, stream.message),
         frame: stream.frame.into(),
         start_ns: st.first_ns,
-        applied: contents.applied.clone(),
+        applied: match (contents.format, stream.instance) {
+            (super::LogFormat::DataFlash, Some(i)) => super::dataflash::applied_to(&contents.applied, i),
+            _ => contents.applied.clone(),
+        },
         notes,
     };
     let units = Units { gyro: GyroUnit::RadPerS, accel: AccelUnit::MPerS2, time: TimeUnit::S };
@@ -195,6 +200,7 @@ pub fn import_log(
         kind: (kind, why),
         summary,
         dropped_time: dropped,
+        applied: manifest.source.map(|s| s.applied).unwrap_or_default(),
     })
 }
 
