@@ -51,23 +51,29 @@ enum Sub {
         #[arg(long, default_value_t = 3.0)]
         threshold: f64,
     },
-    /// Export a profile to imucal's calibration JSON (Ferraris) or Kalibr's imu.yaml.
-    #[command(
-        after_help = "Example: crosscal profile export calib-profiles/I1426-0042/P.json --to kalibr -o imu.yaml"
-    )]
+    /// Export a profile to imucal's calibration JSON (Ferraris), Kalibr's imu.yaml, the VINS-Fusion/ORB-SLAM3 noise blocks or OpenVINS's kalibr_imu_chain.yaml.
+    #[command(after_help = "Example: crosscal profile export calib-profiles/I1426-0042/P.json --to kalibr -o imu.yaml
+Example: crosscal profile export calib-profiles/I1426-0042 --to openvins --openvins-model rpng -o kalibr_imu_chain.yaml
+
+What the target cannot hold is listed on stderr and in the file's header.")]
     Export {
         /// Profile file, or a unit's folder of the store (its newest profile).
         profile: PathBuf,
         /// Target format: `imucal`, `kalibr` (imu.yaml), `vins-fusion` or `orb-slam3` (their IMU
-        /// noise blocks: continuous-time densities from the profile's noise section).
+        /// noise blocks: continuous-time densities from the profile's noise section) or `openvins`
+        /// (kalibr_imu_chain.yaml: noise, Tw/Ta/Tg and the rotations).
         #[arg(long)]
         to: String,
         /// Output file (never overwritten).
         #[arg(short, long)]
         output: PathBuf,
-        /// IMU update rate for Kalibr and ORB-SLAM3, Hz.
+        /// IMU update rate for Kalibr, ORB-SLAM3 and OpenVINS, Hz.
         #[arg(long, default_value_t = 100.0)]
         rate_hz: f64,
+        /// OpenVINS IMU model: `kalibr` or `calibrated` (Tw, Ta lower-triangular) or `rpng`
+        /// (upper-triangular); the rotations carry the rest of each matrix.
+        #[arg(long, default_value = "kalibr")]
+        openvins_model: String,
     },
     /// Import an imucal Ferraris calibration JSON as a profile of a unit in the store.
     #[command(after_help = "Example: crosscal profile import-imucal cal.json --serial I1426-0042")]
@@ -155,7 +161,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 return Ok(Outcome::CheckFailed);
             }
         }
-        Sub::Export { profile, to, output, rate_hz } => export(&profile, &to, &output, rate_hz)?,
+        Sub::Export { profile, to, output, rate_hz, openvins_model } => {
+            export(&profile, &to, &output, Target { rate_hz, openvins_model: &openvins_model })?
+        }
         Sub::ImportImucal { file, serial, g, store } => {
             let text =
                 std::fs::read_to_string(&file).map_err(|e| anyhow::anyhow!("reading {}: {e}", file.display()))?;
@@ -167,17 +175,30 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     Ok(Outcome::Ok)
 }
 
-fn export(profile: &Path, to: &str, output: &Path, rate_hz: f64) -> anyhow::Result<()> {
+/// The target's settings besides its name.
+struct Target<'a> {
+    rate_hz: f64,
+    openvins_model: &'a str,
+}
+
+fn export(profile: &Path, to: &str, output: &Path, t: Target<'_>) -> anyhow::Result<()> {
+    use crosscal::profile::{estimators, interop, openvins};
     let p = super::read_profile(profile)?;
     let (text, lost) = match to {
         "imucal" => {
-            let (v, lost) = crosscal::profile::interop::to_imucal(&p);
+            let (v, lost) = interop::to_imucal(&p);
             (serde_json::to_string_pretty(&v)? + "\n", lost)
         }
-        "kalibr" => crosscal::profile::interop::to_kalibr(&p, rate_hz),
-        "vins-fusion" => crosscal::profile::estimators::to_vins_fusion(&p, p.g_m_s2),
-        "orb-slam3" => crosscal::profile::estimators::to_orb_slam3(&p, rate_hz),
-        other => anyhow::bail!("--to {other}: expected imucal, kalibr, vins-fusion or orb-slam3"),
+        "kalibr" => interop::to_kalibr(&p, t.rate_hz),
+        "vins-fusion" => estimators::to_vins_fusion(&p, p.g_m_s2),
+        "orb-slam3" => estimators::to_orb_slam3(&p, t.rate_hz),
+        "openvins" => {
+            let model = openvins::OpenVinsModel::parse(t.openvins_model).ok_or_else(|| {
+                anyhow::anyhow!("--openvins-model {}: expected kalibr, rpng or calibrated", t.openvins_model)
+            })?;
+            openvins::to_openvins(&p, model, t.rate_hz)
+        }
+        other => anyhow::bail!("--to {other}: expected imucal, kalibr, vins-fusion, orb-slam3 or openvins"),
     };
     crosscal::atomic::write_new(output, text.as_bytes())
         .map_err(|e| anyhow::anyhow!("writing {} (never overwritten): {e}", output.display()))?;
