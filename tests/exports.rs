@@ -1,14 +1,16 @@
-//! Exports to OpenVINS: each file parsed back and checked against the
+//! Exports to OpenVINS, ArduPilot and PX4: each file parsed back and checked against the
 //! profile, against the simulated truth and against the target's documented equations.
 
 use crate::common::fit_session;
 use crosscal::correct::Calibration;
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
+use crosscal::profile::autopilot::{to_ardupilot, to_px4, AutopilotImu};
 use crosscal::profile::openvins::{to_openvins, OpenVinsModel};
 use crosscal::profile::Profile;
 use crosscal::simulate::{SimConfig, UnitTruth};
 use nalgebra::{Matrix3, Vector3};
+use std::collections::BTreeMap;
 
 type M3 = [[f64; 3]; 3];
 const AXES: [char; 3] = ['x', 'y', 'z'];
@@ -63,6 +65,123 @@ fn inputs(n: usize) -> Vec<([f64; 3], [f64; 3])> {
     (0..n)
         .map(|_| ([3.0 * next(), 3.0 * next(), 3.0 * next()], [20.0 * next(), 20.0 * next(), 20.0 * next()]))
         .collect()
+}
+
+/// ArduPilot (`NAME,VALUE`) and PX4 (QGroundControl, tab-separated) files of a unit with
+/// biases and diagonal accelerometer scales only: the values are the profile's offsets and
+/// 1/k_ii bit for bit, nothing is lost (besides PX4's device ids), and the autopilots' own
+/// arithmetic — a = (u − OFFS)·SCAL, ω = u − OFFS — on simulated raw outputs gives crosscal's
+/// correction to 1e-12 and the true inputs to the fit's accuracy. A unit with couplings names
+/// them, with their size, as not represented.
+#[test]
+fn ardupilot_and_px4_parameters_reproduce_crosscal_correction() {
+    let (bg, ba, ks) = ([0.01, -0.02, 0.005], [0.15, -0.08, 0.2], [1.02, 0.985, 1.01]);
+    let mut values = Vec::new();
+    let mut held = Vec::new();
+    for i in 0..3 {
+        values.push((name("gyro", "b", i, None), bg[i]));
+        values.push((name("accel", "b", i, None), ba[i]));
+        values.push((name("accel", "k", i, Some(i)), ks[i]));
+        for j in 0..3 {
+            held.push((name("gyro", "c", i, Some(j)), if i == j { 1.0 } else { 0.0 }));
+            if i != j {
+                held.push((name("accel", "k", i, Some(j)), 0.0));
+            }
+        }
+    }
+    let effects = ["gyro-bias", "gyro-scale-coupling", "accel-bias", "accel-scale-coupling"];
+    let p = fitted(&effects, &values, &held);
+    let (pk, pba, pbg) = (profile_matrix(&p, "accel", "k"), profile_bias(&p, "accel"), profile_bias(&p, "gyro"));
+    for i in 0..3 {
+        assert!((pk[(i, i)] - ks[i]).abs() < 1e-4, "k_{i}{i} {} vs truth {}", pk[(i, i)], ks[i]);
+        assert!((pba[i] - ba[i]).abs() < 2e-3, "accel bias {i}: {} vs truth {}", pba[i], ba[i]);
+        assert!((pbg[i] - bg[i]).abs() < 1e-4, "gyro bias {i}: {} vs truth {}", pbg[i], bg[i]);
+    }
+
+    let (ap, ap_lost) = to_ardupilot(&p, AutopilotImu::new(2).unwrap());
+    assert!(ap_lost.is_empty(), "a diagonal unit loses nothing in ArduPilot: {ap_lost:?}");
+    let ap_params: BTreeMap<String, f64> = ap
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| {
+            let (k, v) = l.split_once(',').unwrap_or_else(|| panic!("not NAME,VALUE: {l}"));
+            (k.to_string(), v.parse().unwrap())
+        })
+        .collect();
+    let (px, px_lost) = to_px4(&p, AutopilotImu::FIRST);
+    assert_eq!(px_lost.len(), 1, "PX4 loses only the device ids: {px_lost:?}");
+    assert!(px.starts_with("# Onboard parameters for Vehicle 1\n"), "{px}");
+    assert!(px.contains("\n# Vehicle-Id Component-Id Name Value Type\n"), "{px}");
+    let px_params: BTreeMap<String, f64> = px
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| {
+            let f: Vec<&str> = l.split('\t').collect();
+            assert_eq!((f.len(), f[0], f[1], f[4]), (5, "1", "1", "9"), "{l}");
+            (f[2].to_string(), f[3].parse().unwrap())
+        })
+        .collect();
+    assert_eq!(ap_params.len(), 9);
+    assert_eq!(px_params.len(), 9);
+    for (i, ax) in ["X", "Y", "Z"].iter().enumerate() {
+        for (params, off, scale, goff) in [
+            (&ap_params, format!("INS_ACC2OFFS_{ax}"), format!("INS_ACC2SCAL_{ax}"), format!("INS_GYR2OFFS_{ax}")),
+            (&px_params, format!("CAL_ACC0_{ax}OFF"), format!("CAL_ACC0_{ax}SCALE"), format!("CAL_GYRO0_{ax}OFF")),
+        ] {
+            assert_eq!(params[&off].to_bits(), pba[i].to_bits(), "{off}");
+            assert_eq!(params[&scale].to_bits(), (1.0 / pk[(i, i)]).to_bits(), "{scale}");
+            assert_eq!(params[&goff].to_bits(), pbg[i].to_bits(), "{goff}");
+        }
+    }
+    // The autopilots' arithmetic on the simulated unit's raw outputs.
+    let cal = Calibration::from_profile(&p).unwrap();
+    let mut worst = [0.0f64; 2];
+    for (w, a) in inputs(500) {
+        let ua: [f64; 3] = std::array::from_fn(|i| ba[i] + ks[i] * a[i]);
+        let ug: [f64; 3] = std::array::from_fn(|i| bg[i] + w[i]);
+        let (wc, ac, _) = cal.invert_state(ug, ua, [0.0; 3], 0.0, f64::NAN).unwrap();
+        for (params, acc, gyr) in [(&ap_params, "INS_ACC2", "INS_GYR2"), (&px_params, "CAL_ACC0_", "CAL_GYRO0_")] {
+            for (i, ax) in ["X", "Y", "Z"].iter().enumerate() {
+                let (off, scale, goff) = if acc.starts_with("INS") {
+                    (format!("{acc}OFFS_{ax}"), format!("{acc}SCAL_{ax}"), format!("{gyr}OFFS_{ax}"))
+                } else {
+                    (format!("{acc}{ax}OFF"), format!("{acc}{ax}SCALE"), format!("{gyr}{ax}OFF"))
+                };
+                let a_ap = (ua[i] - params[&off]) * params[&scale];
+                let w_ap = ug[i] - params[&goff];
+                assert!(
+                    (a_ap - ac[i]).abs() <= 1e-12 * ac[i].abs().max(1.0),
+                    "{acc} {ax}: {a_ap} vs crosscal {}",
+                    ac[i]
+                );
+                assert!(
+                    (w_ap - wc[i]).abs() <= 1e-12 * wc[i].abs().max(1.0),
+                    "{gyr} {ax}: {w_ap} vs crosscal {}",
+                    wc[i]
+                );
+                worst[0] = worst[0].max((a_ap - a[i]).abs());
+                worst[1] = worst[1].max((w_ap - w[i]).abs());
+            }
+        }
+    }
+    assert!(
+        worst[0] < 5e-3 && worst[1] < 1e-4,
+        "against the truth: accel {:.2e} m/s², gyro {:.2e} rad/s",
+        worst[0],
+        worst[1]
+    );
+
+    // The paper's unit has couplings (0.01) and C_ε: each is named with its size.
+    let coupled = crate::common::fit_and_calibrate(&SimConfig::paper().generate(), &Model::default_model()).1;
+    let (_, lost) = to_ardupilot(&coupled, AutopilotImu::FIRST);
+    let size = |key: &str| -> f64 {
+        let l = lost.iter().find(|l| l.contains(key)).unwrap_or_else(|| panic!("{key} not listed: {lost:?}"));
+        l.split("= ").nth(1).and_then(|r| r.split(')').next()).unwrap().parse().unwrap()
+    };
+    assert!((size("cross-axis") - 0.01).abs() < 1e-6, "{lost:?}");
+    assert!((size("gyro scale factors") - 0.01).abs() < 1e-6, "{lost:?}");
+    let eps = lost.iter().find(|l| l.contains("'gyro-angular-acceleration'")).unwrap();
+    assert!(eps.contains("1.000e-3 s"), "C_ε's largest term (e_xz = 0.001 s): {eps}");
 }
 
 fn yaml_matrix(text: &str, key: &str) -> Matrix3<f64> {

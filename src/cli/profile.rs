@@ -51,17 +51,20 @@ enum Sub {
         #[arg(long, default_value_t = 3.0)]
         threshold: f64,
     },
-    /// Export a profile to imucal's calibration JSON (Ferraris), Kalibr's imu.yaml, the VINS-Fusion/ORB-SLAM3 noise blocks or OpenVINS's kalibr_imu_chain.yaml.
+    /// Export a profile to imucal's calibration JSON (Ferraris), Kalibr's imu.yaml, the VINS-Fusion/ORB-SLAM3 noise blocks, OpenVINS's kalibr_imu_chain.yaml or an ArduPilot/PX4 parameter file.
     #[command(after_help = "Example: crosscal profile export calib-profiles/I1426-0042/P.json --to kalibr -o imu.yaml
 Example: crosscal profile export calib-profiles/I1426-0042 --to openvins --openvins-model rpng -o kalibr_imu_chain.yaml
+Example: crosscal profile export calib-profiles/I1426-0042 --to ardupilot --imu 2 -o imu2.param
 
 What the target cannot hold is listed on stderr and in the file's header.")]
     Export {
         /// Profile file, or a unit's folder of the store (its newest profile).
         profile: PathBuf,
         /// Target format: `imucal`, `kalibr` (imu.yaml), `vins-fusion` or `orb-slam3` (their IMU
-        /// noise blocks: continuous-time densities from the profile's noise section) or `openvins`
-        /// (kalibr_imu_chain.yaml: noise, Tw/Ta/Tg and the rotations).
+        /// noise blocks: continuous-time densities from the profile's noise section), `openvins`
+        /// (kalibr_imu_chain.yaml: noise, Tw/Ta/Tg and the rotations), `ardupilot` (.param:
+        /// INS_ACCOFFS/INS_ACCSCAL/INS_GYROFFS) or `px4` (QGroundControl .params: CAL_ACCn_*OFF,
+        /// CAL_ACCn_*SCALE, CAL_GYROn_*OFF).
         #[arg(long)]
         to: String,
         /// Output file (never overwritten).
@@ -74,6 +77,9 @@ What the target cannot hold is listed on stderr and in the file's header.")]
         /// (upper-triangular); the rotations carry the rest of each matrix.
         #[arg(long, default_value = "kalibr")]
         openvins_model: String,
+        /// Which autopilot IMU (ArduPilot INS_, INS_ACC2/GYR2, INS_ACC3/GYR3; PX4 slot 0, 1, 2).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=3))]
+        imu: u8,
     },
     /// Import an imucal Ferraris calibration JSON as a profile of a unit in the store.
     #[command(after_help = "Example: crosscal profile import-imucal cal.json --serial I1426-0042")]
@@ -161,8 +167,8 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 return Ok(Outcome::CheckFailed);
             }
         }
-        Sub::Export { profile, to, output, rate_hz, openvins_model } => {
-            export(&profile, &to, &output, Target { rate_hz, openvins_model: &openvins_model })?
+        Sub::Export { profile, to, output, rate_hz, openvins_model, imu } => {
+            export(&profile, &to, &output, Target { rate_hz, openvins_model: &openvins_model, imu })?
         }
         Sub::ImportImucal { file, serial, g, store } => {
             let text =
@@ -179,11 +185,14 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
 struct Target<'a> {
     rate_hz: f64,
     openvins_model: &'a str,
+    imu: u8,
 }
 
 fn export(profile: &Path, to: &str, output: &Path, t: Target<'_>) -> anyhow::Result<()> {
-    use crosscal::profile::{estimators, interop, openvins};
+    use crosscal::profile::{autopilot, estimators, interop, openvins};
     let p = super::read_profile(profile)?;
+    let imu =
+        autopilot::AutopilotImu::new(t.imu).ok_or_else(|| anyhow::anyhow!("--imu {}: expected 1, 2 or 3", t.imu))?;
     let (text, lost) = match to {
         "imucal" => {
             let (v, lost) = interop::to_imucal(&p);
@@ -198,7 +207,11 @@ fn export(profile: &Path, to: &str, output: &Path, t: Target<'_>) -> anyhow::Res
             })?;
             openvins::to_openvins(&p, model, t.rate_hz)
         }
-        other => anyhow::bail!("--to {other}: expected imucal, kalibr, vins-fusion, orb-slam3 or openvins"),
+        "ardupilot" => autopilot::to_ardupilot(&p, imu),
+        "px4" => autopilot::to_px4(&p, imu),
+        other => {
+            anyhow::bail!("--to {other}: expected imucal, kalibr, vins-fusion, orb-slam3, openvins, ardupilot or px4")
+        }
     };
     crosscal::atomic::write_new(output, text.as_bytes())
         .map_err(|e| anyhow::anyhow!("writing {} (never overwritten): {e}", output.display()))?;

@@ -8,8 +8,10 @@
 //!
 //! Exports to other tools, each a function returning the file's text and what the target
 //! cannot hold: [`interop`] (imucal, Kalibr), [`estimators`] (VINS-Fusion, ORB-SLAM3),
-//! [`openvins`] (OpenVINS's `kalibr_imu_chain.yaml`).
+//! [`openvins`] (OpenVINS's `kalibr_imu_chain.yaml`), [`autopilot`] (ArduPilot and PX4
+//! parameter files).
 
+pub mod autopilot;
 pub mod estimators;
 pub mod interop;
 pub mod openvins;
