@@ -1,8 +1,8 @@
-//! Exports to OpenVINS, ArduPilot and PX4: each file parsed back and checked against the
+//! Exports to OpenVINS, ArduPilot, PX4 and C: each file parsed back and checked against the
 //! profile, against the simulated truth and against the target's documented equations.
 
-use crate::common::fit_session;
-use crosscal::correct::Calibration;
+use crate::common::{fit_session, run_in, run_ok};
+use crosscal::correct::{Calibration, Streaming};
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
 use crosscal::profile::autopilot::{to_ardupilot, to_px4, AutopilotImu};
@@ -286,4 +286,133 @@ fn openvins_intrinsics_rebuild_the_profiles_forward_model() {
         assert!(!lost.iter().any(|l| l.contains("g-sensitivity") || l.contains("scale-coupling")), "{lost:?}");
         assert!(lost.iter().any(|l| l.contains("noise")), "no noise section: the densities are listed as 0");
     }
+}
+
+/// The C header of a linear profile, compiled with the system's C compiler (skipped without
+/// one) and run on 1000 samples, gives crosscal's streaming correction bit for bit; a profile
+/// with C_ε is exported with `CROSSCAL_CORRECT_EXACT 0` and C_ε listed as not applied.
+#[test]
+fn c_header_corrects_like_streaming_bit_for_bit() {
+    let mut values = vec![];
+    for i in 0..3 {
+        values.push((name("gyro", "b", i, None), [0.01, -0.02, 0.005][i]));
+        values.push((name("accel", "b", i, None), [0.15, -0.08, 0.2][i]));
+        values.push((name("gyro", "c", i, Some((i + 1) % 3)), 0.01));
+        values.push((name("accel", "k", i, Some((i + 2) % 3)), -0.012));
+        values.push((name("accel", "k", i, Some(i)), [1.02, 0.985, 1.01][i]));
+    }
+    let p = fitted(&["gyro-bias", "gyro-scale-coupling", "accel-bias", "accel-scale-coupling"], &values, &[]);
+    let (h, lost) = crosscal::correct::to_c_header(&p).unwrap();
+    assert!(lost.is_empty(), "{lost:?}");
+    assert!(h.contains("#define CROSSCAL_CORRECT_EXACT 1"), "{h}");
+    assert!(h.contains(&format!("unit {}", p.serial)), "the serial is named");
+    let (_, with_eps) = crosscal::correct::to_c_header(
+        &crate::common::fit_and_calibrate(&SimConfig::paper().generate(), &Model::default_model()).1,
+    )
+    .unwrap();
+    assert!(
+        with_eps.iter().any(|l| l.contains("'gyro-angular-acceleration'") && l.contains("derivative")),
+        "{with_eps:?}"
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("crosscal_correct.h"), &h).unwrap();
+    std::fs::write(
+        d.join("driver.c"),
+        r#"#include <stdio.h>
+#include <string.h>
+#include "crosscal_correct.h"
+static double from_bits(unsigned long long u) { double x; memcpy(&x, &u, sizeof x); return x; }
+static unsigned long long to_bits(double x) { unsigned long long u; memcpy(&u, &x, sizeof u); return u; }
+int main(void) {
+    unsigned long long v[6];
+    while (scanf("%llx %llx %llx %llx %llx %llx", &v[0], &v[1], &v[2], &v[3], &v[4], &v[5]) == 6) {
+        double g[3], a[3];
+        int i;
+        for (i = 0; i < 3; i++) { g[i] = from_bits(v[i]); a[i] = from_bits(v[3 + i]); }
+        crosscal_correct(g, a, g, a); /* in place: the outputs may alias the inputs */
+        printf("%016llx %016llx %016llx %016llx %016llx %016llx\n", to_bits(g[0]), to_bits(g[1]), to_bits(g[2]),
+               to_bits(a[0]), to_bits(a[1]), to_bits(a[2]));
+    }
+    return 0;
+}
+"#,
+    )
+    .unwrap();
+    let cc = std::process::Command::new("cc")
+        .args(["-O2", "-std=c99", "-ffp-contract=off", "-Wall", "-Wextra", "-pedantic", "-Werror"])
+        .args(["driver.c", "-o", "driver", "-lm"])
+        .current_dir(d)
+        .output();
+    let Ok(cc) = cc else {
+        eprintln!("skipped: no C compiler (cc) on PATH");
+        return;
+    };
+    assert!(cc.status.success(), "the header does not compile cleanly: {}", String::from_utf8_lossy(&cc.stderr));
+    let samples = inputs(1000);
+    let mut stdin = String::new();
+    for (w, a) in &samples {
+        let bits: Vec<String> = w.iter().chain(a).map(|x| format!("{:016x}", x.to_bits())).collect();
+        stdin.push_str(&(bits.join(" ") + "\n"));
+    }
+    let mut child = std::process::Command::new(d.join("driver"))
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    use std::io::Write;
+    child.stdin.take().unwrap().write_all(stdin.as_bytes()).unwrap();
+    let out = child.wait_with_output().unwrap();
+    let lines: Vec<&str> = std::str::from_utf8(&out.stdout).unwrap().lines().collect();
+    assert_eq!(lines.len(), samples.len());
+    let mut streaming = Streaming::new(Calibration::from_profile(&p).unwrap());
+    for (k, ((w, a), line)) in samples.iter().zip(&lines).enumerate() {
+        let (wc, ac) = streaming.push(k as f64 * 0.01, *w, *a, f64::NAN);
+        let c: Vec<u64> = line.split(' ').map(|x| u64::from_str_radix(x, 16).unwrap()).collect();
+        for i in 0..3 {
+            assert_eq!(c[i], wc[i].to_bits(), "sample {k} gyro {i}: C {} vs crosscal {}", f64::from_bits(c[i]), wc[i]);
+            assert_eq!(
+                c[3 + i],
+                ac[i].to_bits(),
+                "sample {k} accel {i}: C {} vs crosscal {}",
+                f64::from_bits(c[3 + i]),
+                ac[i]
+            );
+        }
+    }
+}
+
+/// `crosscal profile export` writes each new target, prints what it leaves out and names the
+/// targets and models it knows when given another.
+#[test]
+fn export_command_writes_openvins_autopilot_and_c_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let p = crate::common::fit_and_calibrate(&SimConfig::paper().generate(), &Model::default_model()).1;
+    let path = crosscal::profile::save(&p, d).unwrap();
+    let path = path.to_str().unwrap();
+    for (to, file, key) in [
+        ("openvins", "kalibr_imu_chain.yaml", "R_IMUtoGYRO:"),
+        ("ardupilot", "imu.param", "INS_ACCSCAL_X,"),
+        ("px4", "imu.params", "\tCAL_ACC0_XSCALE\t"),
+        ("c-header", "crosscal_correct.h", "static inline void crosscal_correct("),
+    ] {
+        let (code, out, err) = run_in(d, &["profile", "export", path, "--to", to, "-o", file]);
+        assert_eq!(code, 0, "{to}: {out}{err}");
+        assert!(err.contains("not represented: "), "{to}: {err}");
+        let text = std::fs::read_to_string(d.join(file)).unwrap();
+        assert!(text.contains(key), "{to}: {text}");
+    }
+    run_ok(d, &["profile", "export", path, "--to", "openvins", "--openvins-model", "rpng", "-o", "rpng.yaml"]);
+    assert!(std::fs::read_to_string(d.join("rpng.yaml")).unwrap().contains("model: \"rpng\""));
+    let (code, _, err) = run_in(d, &["profile", "export", path, "--to", "betaflight", "-o", "x"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("openvins, ardupilot, px4 or c-header"), "{err}");
+    let (code, _, err) =
+        run_in(d, &["profile", "export", path, "--to", "openvins", "--openvins-model", "x", "-o", "y"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("expected kalibr, rpng or calibrated"), "{err}");
+    let (code, _, _) = run_in(d, &["profile", "export", path, "--to", "ardupilot", "--imu", "4", "-o", "z"]);
+    assert_ne!(code, 0, "there is no fourth ArduPilot IMU in the INS_ names");
 }

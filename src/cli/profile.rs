@@ -51,10 +51,11 @@ enum Sub {
         #[arg(long, default_value_t = 3.0)]
         threshold: f64,
     },
-    /// Export a profile to imucal's calibration JSON (Ferraris), Kalibr's imu.yaml, the VINS-Fusion/ORB-SLAM3 noise blocks, OpenVINS's kalibr_imu_chain.yaml or an ArduPilot/PX4 parameter file.
+    /// Export a profile to another tool: imucal, Kalibr, VINS-Fusion, ORB-SLAM3, OpenVINS, ArduPilot, PX4 or a C header.
     #[command(after_help = "Example: crosscal profile export calib-profiles/I1426-0042/P.json --to kalibr -o imu.yaml
 Example: crosscal profile export calib-profiles/I1426-0042 --to openvins --openvins-model rpng -o kalibr_imu_chain.yaml
 Example: crosscal profile export calib-profiles/I1426-0042 --to ardupilot --imu 2 -o imu2.param
+Example: crosscal profile export calib-profiles/I1426-0042 --to c-header -o crosscal_correct.h
 
 What the target cannot hold is listed on stderr and in the file's header.")]
     Export {
@@ -63,8 +64,9 @@ What the target cannot hold is listed on stderr and in the file's header.")]
         /// Target format: `imucal`, `kalibr` (imu.yaml), `vins-fusion` or `orb-slam3` (their IMU
         /// noise blocks: continuous-time densities from the profile's noise section), `openvins`
         /// (kalibr_imu_chain.yaml: noise, Tw/Ta/Tg and the rotations), `ardupilot` (.param:
-        /// INS_ACCOFFS/INS_ACCSCAL/INS_GYROFFS) or `px4` (QGroundControl .params: CAL_ACCn_*OFF,
-        /// CAL_ACCn_*SCALE, CAL_GYROn_*OFF).
+        /// INS_ACCOFFS/INS_ACCSCAL/INS_GYROFFS), `px4` (QGroundControl .params: CAL_ACCn_*OFF,
+        /// CAL_ACCn_*SCALE, CAL_GYROn_*OFF) or `c-header` (a C99 function correcting like
+        /// crosscal's streaming corrector).
         #[arg(long)]
         to: String,
         /// Output file (never overwritten).
@@ -209,9 +211,10 @@ fn export(profile: &Path, to: &str, output: &Path, t: Target<'_>) -> anyhow::Res
         }
         "ardupilot" => autopilot::to_ardupilot(&p, imu),
         "px4" => autopilot::to_px4(&p, imu),
-        other => {
-            anyhow::bail!("--to {other}: expected imucal, kalibr, vins-fusion, orb-slam3, openvins, ardupilot or px4")
-        }
+        "c-header" => crosscal::correct::to_c_header(&p)?,
+        other => anyhow::bail!(
+            "--to {other}: expected imucal, kalibr, vins-fusion, orb-slam3, openvins, ardupilot, px4 or c-header"
+        ),
     };
     crosscal::atomic::write_new(output, text.as_bytes())
         .map_err(|e| anyhow::anyhow!("writing {} (never overwritten): {e}", output.display()))?;

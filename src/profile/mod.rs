@@ -9,7 +9,8 @@
 //! Exports to other tools, each a function returning the file's text and what the target
 //! cannot hold: [`interop`] (imucal, Kalibr), [`estimators`] (VINS-Fusion, ORB-SLAM3),
 //! [`openvins`] (OpenVINS's `kalibr_imu_chain.yaml`), [`autopilot`] (ArduPilot and PX4
-//! parameter files).
+//! parameter files); the C header that repeats the correction is
+//! [`crate::correct::to_c_header`].
 
 pub mod autopilot;
 pub mod estimators;
