@@ -10,6 +10,7 @@ mod diagnose;
 mod diagnose_hard;
 mod docs;
 mod exit_codes;
+mod exports;
 mod fixtures;
 mod formats;
 mod fuzz;

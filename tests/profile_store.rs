@@ -222,7 +222,7 @@ fn history_orders_profiles_by_time_not_by_text() {
     assert_eq!(at.created_utc, "2026-11-23T20:31:35Z");
 }
 
-/// VINS-Fusion and ORB-SLAM3 noise blocks: the continuous-time densities of the profile's
+/// VINS-Fusion and ORB-SLAM3 noise blocks (and OpenVINS's noise keys): the continuous-time densities of the profile's
 /// noise section (white noise from the standard reading, bias random walk from the fitted
 /// term; worst axis, SI), under the keys each estimator's configuration uses, the simulated
 /// ARW and rate random walk recovered, and what the estimator cannot hold listed.
@@ -285,4 +285,10 @@ fn vins_fusion_and_orb_slam3_noise_blocks_carry_the_profiles_densities() {
     assert_eq!(value(&o, "IMU.GyroWalk").to_bits(), gw.to_bits(), "IMU.GyroWalk");
     assert_eq!(value(&o, "IMU.NoiseAcc").to_bits(), an.to_bits(), "IMU.NoiseAcc");
     assert_eq!(value(&o, "IMU.Frequency").to_bits(), 200f64.to_bits(), "IMU.Frequency");
+    // OpenVINS reads the same densities under Kalibr's names.
+    run_ok(d, &["profile", "export", unit_s, "--to", "openvins", "-o", "ov.yaml"]);
+    let ov = std::fs::read_to_string(d.join("ov.yaml")).unwrap();
+    assert_eq!(value(&ov, "  gyroscope_noise_density").to_bits(), gn.to_bits(), "gyroscope_noise_density");
+    assert_eq!(value(&ov, "  gyroscope_random_walk").to_bits(), gw.to_bits(), "gyroscope_random_walk");
+    assert_eq!(value(&ov, "  accelerometer_noise_density").to_bits(), an.to_bits(), "accelerometer_noise_density");
 }

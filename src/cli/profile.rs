@@ -51,23 +51,37 @@ enum Sub {
         #[arg(long, default_value_t = 3.0)]
         threshold: f64,
     },
-    /// Export a profile to imucal's calibration JSON (Ferraris) or Kalibr's imu.yaml.
-    #[command(
-        after_help = "Example: crosscal profile export calib-profiles/I1426-0042/P.json --to kalibr -o imu.yaml"
-    )]
+    /// Export a profile to another tool: imucal, Kalibr, VINS-Fusion, ORB-SLAM3, OpenVINS, ArduPilot, PX4 or a C header.
+    #[command(after_help = "Example: crosscal profile export calib-profiles/I1426-0042/P.json --to kalibr -o imu.yaml
+Example: crosscal profile export calib-profiles/I1426-0042 --to openvins --openvins-model rpng -o kalibr_imu_chain.yaml
+Example: crosscal profile export calib-profiles/I1426-0042 --to ardupilot --imu 2 -o imu2.param
+Example: crosscal profile export calib-profiles/I1426-0042 --to c-header -o crosscal_correct.h
+
+What the target cannot hold is listed on stderr and in the file's header.")]
     Export {
         /// Profile file, or a unit's folder of the store (its newest profile).
         profile: PathBuf,
         /// Target format: `imucal`, `kalibr` (imu.yaml), `vins-fusion` or `orb-slam3` (their IMU
-        /// noise blocks: continuous-time densities from the profile's noise section).
+        /// noise blocks: continuous-time densities from the profile's noise section), `openvins`
+        /// (kalibr_imu_chain.yaml: noise, Tw/Ta/Tg and the rotations), `ardupilot` (.param:
+        /// INS_ACCOFFS/INS_ACCSCAL/INS_GYROFFS), `px4` (QGroundControl .params: CAL_ACCn_*OFF,
+        /// CAL_ACCn_*SCALE, CAL_GYROn_*OFF) or `c-header` (a C99 function correcting like
+        /// crosscal's streaming corrector).
         #[arg(long)]
         to: String,
         /// Output file (never overwritten).
         #[arg(short, long)]
         output: PathBuf,
-        /// IMU update rate for Kalibr and ORB-SLAM3, Hz.
+        /// IMU update rate for Kalibr, ORB-SLAM3 and OpenVINS, Hz.
         #[arg(long, default_value_t = 100.0)]
         rate_hz: f64,
+        /// OpenVINS IMU model: `kalibr` or `calibrated` (Tw, Ta lower-triangular) or `rpng`
+        /// (upper-triangular); the rotations carry the rest of each matrix.
+        #[arg(long, default_value = "kalibr")]
+        openvins_model: String,
+        /// Which autopilot IMU (ArduPilot INS_, INS_ACC2/GYR2, INS_ACC3/GYR3; PX4 slot 0, 1, 2).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=3))]
+        imu: u8,
     },
     /// Import an imucal Ferraris calibration JSON as a profile of a unit in the store.
     #[command(after_help = "Example: crosscal profile import-imucal cal.json --serial I1426-0042")]
@@ -155,7 +169,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 return Ok(Outcome::CheckFailed);
             }
         }
-        Sub::Export { profile, to, output, rate_hz } => export(&profile, &to, &output, rate_hz)?,
+        Sub::Export { profile, to, output, rate_hz, openvins_model, imu } => {
+            export(&profile, &to, &output, Target { rate_hz, openvins_model: &openvins_model, imu })?
+        }
         Sub::ImportImucal { file, serial, g, store } => {
             let text =
                 std::fs::read_to_string(&file).map_err(|e| anyhow::anyhow!("reading {}: {e}", file.display()))?;
@@ -167,17 +183,38 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     Ok(Outcome::Ok)
 }
 
-fn export(profile: &Path, to: &str, output: &Path, rate_hz: f64) -> anyhow::Result<()> {
+/// The target's settings besides its name.
+struct Target<'a> {
+    rate_hz: f64,
+    openvins_model: &'a str,
+    imu: u8,
+}
+
+fn export(profile: &Path, to: &str, output: &Path, t: Target<'_>) -> anyhow::Result<()> {
+    use crosscal::profile::{autopilot, estimators, interop, openvins};
     let p = super::read_profile(profile)?;
+    let imu =
+        autopilot::AutopilotImu::new(t.imu).ok_or_else(|| anyhow::anyhow!("--imu {}: expected 1, 2 or 3", t.imu))?;
     let (text, lost) = match to {
         "imucal" => {
-            let (v, lost) = crosscal::profile::interop::to_imucal(&p);
+            let (v, lost) = interop::to_imucal(&p);
             (serde_json::to_string_pretty(&v)? + "\n", lost)
         }
-        "kalibr" => crosscal::profile::interop::to_kalibr(&p, rate_hz),
-        "vins-fusion" => crosscal::profile::estimators::to_vins_fusion(&p, p.g_m_s2),
-        "orb-slam3" => crosscal::profile::estimators::to_orb_slam3(&p, rate_hz),
-        other => anyhow::bail!("--to {other}: expected imucal, kalibr, vins-fusion or orb-slam3"),
+        "kalibr" => interop::to_kalibr(&p, t.rate_hz),
+        "vins-fusion" => estimators::to_vins_fusion(&p, p.g_m_s2),
+        "orb-slam3" => estimators::to_orb_slam3(&p, t.rate_hz),
+        "openvins" => {
+            let model = openvins::OpenVinsModel::parse(t.openvins_model).ok_or_else(|| {
+                anyhow::anyhow!("--openvins-model {}: expected kalibr, rpng or calibrated", t.openvins_model)
+            })?;
+            openvins::to_openvins(&p, model, t.rate_hz)
+        }
+        "ardupilot" => autopilot::to_ardupilot(&p, imu),
+        "px4" => autopilot::to_px4(&p, imu),
+        "c-header" => crosscal::correct::to_c_header(&p)?,
+        other => anyhow::bail!(
+            "--to {other}: expected imucal, kalibr, vins-fusion, orb-slam3, openvins, ardupilot, px4 or c-header"
+        ),
     };
     crosscal::atomic::write_new(output, text.as_bytes())
         .map_err(|e| anyhow::anyhow!("writing {} (never overwritten): {e}", output.display()))?;

@@ -28,11 +28,13 @@
 use crate::units::SensorKind;
 use nalgebra::{Matrix3, Vector3};
 
+mod c_header;
 mod csvstream;
 mod inverse;
 mod offline;
 mod streaming;
 
+pub use c_header::to_c_header;
 pub use csvstream::{correct_csv_streaming, OutputScale, StreamCsvError, StreamCsvOptions, StreamedCsv};
 pub use inverse::{Calibration, NonlinearPart, SensorInverse};
 pub use offline::{correct_offline, resample_to_stamps};

@@ -114,6 +114,20 @@ impl GyroStep {
     }
 }
 
+/// The constants of [`Streaming::push`] for a calibration whose gyro has no C_ε and no
+/// other terms, row-major: the gyro's M = (A + h₀E)⁻¹ with E = 0 (the same matrix for every
+/// h₀) and −M b, the accelerometer's A⁻¹ and −A⁻¹ b. Computed by the same code `push` uses,
+/// so an export holding them gives the same bits: each output is then
+/// `fma(m_i2, u_2, fma(m_i1, u_1, fma(m_i0, u_0, c_i)))` ([`Cols::apply_from`]).
+pub(super) fn linear_constants(cal: &super::Calibration) -> [([[f64; 3]; 3], [f64; 3]); 2] {
+    let rows = |c: &Cols| -> [[f64; 3]; 3] { std::array::from_fn(|i| std::array::from_fn(|j| c.0[j][i])) };
+    let three = |l: Lanes| [l[0], l[1], l[2]];
+    let step = GyroStep::new(&cal.gyro);
+    let accel = Cols::of(cal.accel.scale_inv.matrix());
+    let accel_neg = Cols::neg_apply(cal.accel.scale_inv.matrix(), cal.accel.bias);
+    [(rows(&step.m), three(step.neg_mb)), (rows(&accel), three(accel_neg))]
+}
+
 /// Stores a time stamp in the doubled ring of stamps (entry `slot` and `slot + window`).
 #[inline(always)]
 fn stamp(times: &mut [f64], slot: usize, t_s: f64) {

@@ -14,15 +14,22 @@ use crate::units::SensorKind;
 use std::fmt::Write;
 
 /// White density and bias random walk of both sensors (gyro, accel), SI, and what is missing.
-struct Densities {
-    gyro_white: f64,
-    gyro_walk: f64,
-    accel_white: f64,
-    accel_walk: f64,
-    lost: Vec<String>,
+pub(super) struct Densities {
+    /// Gyro white noise, rad/s/√Hz.
+    pub gyro_white: f64,
+    /// Gyro bias random walk, rad/s²/√Hz.
+    pub gyro_walk: f64,
+    /// Accelerometer white noise, m/s²/√Hz.
+    pub accel_white: f64,
+    /// Accelerometer bias random walk, m/s³/√Hz.
+    pub accel_walk: f64,
+    /// The terms the noise section lacks (written as 0).
+    pub lost: Vec<String>,
 }
 
-fn densities(p: &Profile) -> Densities {
+/// The worst axis of each sensor's white noise (standard reading) and bias random walk
+/// (fitted K) from the profile's noise section; a missing term is 0 and listed.
+pub(super) fn densities(p: &Profile) -> Densities {
     let mut lost = Vec::new();
     let mut worst = |name: &str, s: SensorKind, f: fn(&ChannelNoise) -> Option<f64>| {
         let v =
@@ -38,17 +45,23 @@ fn densities(p: &Profile) -> Densities {
     let gyro_walk = worst("gyro bias random walk", SensorKind::Gyro, |c| c.random_walk);
     let accel_white = worst("accelerometer white noise", SensorKind::Accel, |c| c.white());
     let accel_walk = worst("accelerometer bias random walk", SensorKind::Accel, |c| c.random_walk);
-    lost.push(
+    Densities { gyro_white, gyro_walk, accel_white, accel_walk, lost }
+}
+
+/// [`densities`] and what a noise-only block cannot hold of the calibration.
+fn noise_block(p: &Profile) -> Densities {
+    let mut d = densities(p);
+    d.lost.push(
         "scale factors, couplings and the other effects of the profile (correct the data with crosscal correct first)"
             .into(),
     );
-    Densities { gyro_white, gyro_walk, accel_white, accel_walk, lost }
+    d
 }
 
 /// The IMU block of a VINS-Fusion configuration (`acc_n`, `gyr_n`, `acc_w`, `gyr_w`,
 /// `g_norm`), to paste into the estimator's YAML, and what it cannot hold.
 pub fn to_vins_fusion(p: &Profile, g_m_s2: f64) -> (String, Vec<String>) {
-    let d = densities(p);
+    let d = noise_block(p);
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -67,7 +80,7 @@ pub fn to_vins_fusion(p: &Profile, g_m_s2: f64) -> (String, Vec<String>) {
 /// The IMU noise block of an ORB-SLAM3 settings file (OpenCV `%YAML:1.0`; `IMU.NoiseGyro`,
 /// `IMU.NoiseAcc`, `IMU.GyroWalk`, `IMU.AccWalk`, `IMU.Frequency`), and what it cannot hold.
 pub fn to_orb_slam3(p: &Profile, rate_hz: f64) -> (String, Vec<String>) {
-    let d = densities(p);
+    let d = noise_block(p);
     let mut s = String::from("%YAML:1.0\n");
     let _ = writeln!(s, "# ORB-SLAM3 IMU noise exported by crosscal from unit {} profile {}", p.serial, p.created_utc);
     let _ = writeln!(s, "# continuous-time densities, SI; not represented: {}", d.lost.join("; "));

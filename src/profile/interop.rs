@@ -23,7 +23,9 @@ const DEG: f64 = std::f64::consts::PI / 180.0;
 const IMUCAL_EFFECTS: [&str; 5] =
     ["gyro-bias", "gyro-scale-coupling", "accel-bias", "accel-scale-coupling", "gyro-g-sensitivity"];
 
-fn matrix(p: &Profile, sensor: SensorKind, letter: &str) -> [[f64; 3]; 3] {
+/// A 3×3 coefficient matrix of the profile (`letter` c, k, g, e), row-major; entries the
+/// model lacks are those of the identity for c and k, 0 otherwise.
+pub(super) fn matrix(p: &Profile, sensor: SensorKind, letter: &str) -> [[f64; 3]; 3] {
     let sf = p.sensor(sensor);
     std::array::from_fn(|i| {
         std::array::from_fn(|j| {
@@ -33,7 +35,8 @@ fn matrix(p: &Profile, sensor: SensorKind, letter: &str) -> [[f64; 3]; 3] {
     })
 }
 
-fn vector(p: &Profile, sensor: SensorKind) -> [f64; 3] {
+/// The sensor's bias b (0 where the model has none).
+pub(super) fn vector(p: &Profile, sensor: SensorKind) -> [f64; 3] {
     std::array::from_fn(|i| p.sensor(sensor).value(&format!("{}.b_{}", sensor.as_str(), AXES[i])).unwrap_or(0.0))
 }
 
@@ -42,6 +45,25 @@ fn split(m: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
     let s: [f64; 3] = std::array::from_fn(|i| m[i].iter().map(|v| v * v).sum::<f64>().sqrt());
     let r = std::array::from_fn(|i| std::array::from_fn(|j| if s[i] > 0.0 { m[i][j] / s[i] } else { 0.0 }));
     (s, r)
+}
+
+/// The effects of the profile a target cannot hold, one line each: every effect whose id is
+/// not in `held` and whose coefficients (or nonlinear parameters) are not all exactly zero —
+/// a term held at 0 loses nothing — named with its largest coefficient and `why`.
+pub(crate) fn unheld(p: &Profile, held: &[&str], why: &str) -> Vec<String> {
+    p.effects
+        .iter()
+        .filter(|e| !held.contains(&e.as_str()))
+        .filter_map(|e| {
+            let linear = p.gyro.coefficients.iter().chain(&p.accel.coefficients).filter(|c| c.effect == **e);
+            let nonlinear = p.nonlinear.iter().filter(|q| q.effect == **e);
+            let (largest, unit) = linear
+                .map(|c| (c.value.abs(), c.unit.as_str()))
+                .chain(nonlinear.map(|q| (q.value.abs(), q.unit.as_str())))
+                .reduce(|a, b| if b.0 > a.0 { b } else { a })?;
+            (largest > 0.0).then(|| format!("effect '{e}' (largest |coefficient| {largest:.3e} {unit}): {why}"))
+        })
+        .collect()
 }
 
 fn diag(s: [f64; 3]) -> [[f64; 3]; 3] {

@@ -5,9 +5,17 @@
 //! the model (effects and which coefficients were fitted), every coefficient with its
 //! standard error, the covariance of the fitted ones, residual statistics, the runs used
 //! (file name and SHA-256) and the conventions of the numbers.
+//!
+//! Exports to other tools, each a function returning the file's text and what the target
+//! cannot hold: [`interop`] (imucal, Kalibr), [`estimators`] (VINS-Fusion, ORB-SLAM3),
+//! [`openvins`] (OpenVINS's `kalibr_imu_chain.yaml`), [`autopilot`] (ArduPilot and PX4
+//! parameter files); the C header that repeats the correction is
+//! [`crate::correct::to_c_header`].
 
+pub mod autopilot;
 pub mod estimators;
 pub mod interop;
+pub mod openvins;
 mod store;
 mod validate;
 
