@@ -13,6 +13,7 @@ mod exit_codes;
 mod exports;
 mod fixtures;
 mod formats;
+mod formats_gen;
 mod fuzz;
 mod fuzz_found;
 mod hostile;

@@ -77,6 +77,19 @@ impl Fmt {
         Some(if is_time { v } else { v * self.mult.get(i).copied().unwrap_or(1.0) })
     }
 
+    /// Column `i` as an exact integer (time stamps: an f64 cannot hold every ns).
+    fn int(&self, b: &[u8], i: usize) -> Option<i64> {
+        let (_, off, c) = &self.cols[i];
+        let s = b.get(*off..*off + char_size(*c)?)?;
+        match c {
+            b'Q' => i64::try_from(u64::from_le_bytes(s.try_into().ok()?)).ok(),
+            b'q' => Some(i64::from_le_bytes(s.try_into().ok()?)),
+            b'I' => Some(i64::from(u32::from_le_bytes(s.try_into().ok()?))),
+            b'i' => Some(i64::from(i32::from_le_bytes(s.try_into().ok()?))),
+            _ => self.value(b, i).map(|v| v as i64),
+        }
+    }
+
     fn text(&self, b: &[u8], i: usize) -> String {
         let (_, off, c) = &self.cols[i];
         let n = char_size(*c).unwrap_or(0);
@@ -91,7 +104,7 @@ enum Kind {
     /// `IMU`/`IMU2`/`IMU3` (instance from the name or the `I` column).
     Imu {
         time: usize,
-        time_scale: f64,
+        time_scale: i64,
         inst: Option<usize>,
         base: u32,
         gyro: [usize; 3],
@@ -310,7 +323,7 @@ impl State<'_, '_> {
     fn kind(&self, ty: u8) -> Option<Kind> {
         let f = self.fmts.get(&ty)?;
         let c = |n: &str| f.col(n);
-        let time = c("TimeUS").map(|i| (i, 1.0)).or_else(|| c("TimeMS").map(|i| (i, 1000.0)));
+        let time = c("TimeUS").map(|i| (i, 1000)).or_else(|| c("TimeMS").map(|i| (i, 1_000_000)));
         match f.name.as_str() {
             "IMU" | "IMU2" | "IMU3" => {
                 let (time, time_scale) = time?;
@@ -388,8 +401,8 @@ impl State<'_, '_> {
                 let instance = inst.and_then(v).map_or(*base, |i| i as u32);
                 let name = if inst.is_some() { format!("IMU[{instance}]") } else { f.name.clone() };
                 let stream = self.stream(name, "IMU", instance, temp.is_some(), true);
-                let (Some(t), Some(g), Some(a)) = (v(*time), v3(gyro), v3(accel)) else { return };
-                let t_ns = (t * time_scale * 1000.0) as i64;
+                let (Some(t), Some(g), Some(a)) = (f.int(b, *time), v3(gyro), v3(accel)) else { return };
+                let t_ns = t.saturating_mul(*time_scale);
                 let temp_c = temp.and_then(v);
                 self.emit(stream, &LogSample { t_ns, gyro_rad_s: g, accel_m_s2: a, temp_c });
             }
@@ -406,8 +419,8 @@ impl State<'_, '_> {
                 if self.only.is_some_and(|o| o != stream) {
                     return;
                 }
-                let (Some(t), Some(x)) = (v(*time), v3(xyz)) else { return };
-                let t_ns = (t * 1000.0) as i64;
+                let (Some(t), Some(x)) = (f.int(b, *time), v3(xyz)) else { return };
+                let t_ns = t.saturating_mul(1000);
                 let mut out = Vec::new();
                 if let Some((_, p)) = self.raw_pairs.get_mut(&instance) {
                     if *accel {
@@ -459,8 +472,7 @@ impl State<'_, '_> {
             }
         }
     }
-
-    }
+}
 
 /// The parameters of `applied` that act on IMU `instance` (ArduPilot numbers the second
 /// IMU's `INS_ACC2OFFS_*`, `INS_GYR2OFFS_*` and `INS_TCAL2_*`), with `AHRS_ORIENTATION`.

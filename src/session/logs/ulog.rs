@@ -219,10 +219,13 @@ pub fn read(path: &Path, only: Option<usize>, sink: &mut Sink<'_>) -> Result<Con
         let n = super::read_up_to(&mut input, &mut h).map_err(io)?;
         let msg_size = usize::from(u16::from_le_bytes([h[0], h[1]]));
         if n < 3 || pos + 3 + msg_size as u64 > end {
-            st.out.warnings.push(format!(
-                "byte {pos}: the file ends inside a message (truncated); the messages before it were read"
-            ));
-            break;
+            let what =
+                if segment < appended.len() { "the data before the appended segment end" } else { "the file ends" };
+            st.out
+                .warnings
+                .push(format!("byte {pos}: {what} inside a message (cut off); the messages before it were read"));
+            pos = end;
+            continue;
         }
         buf.resize(msg_size, 0);
         input.read_exact(&mut buf).map_err(io)?;
