@@ -390,3 +390,70 @@ fn damaged_logs_give_an_error_or_a_warning_never_a_panic() {
     }
     eprintln!("damaged files: {} read (of them {} cut with a warning), {} refused", outcomes.0, outcomes.2, outcomes.1);
 }
+
+/// A number as YAML 1.1 (PyYAML: Kalibr, allan_variance_ros) resolves a float: digits, a
+/// point, optional signed exponent.
+fn yaml11_float(s: &str) -> Option<f64> {
+    let (mant, exp) = match s.split_once(['e', 'E']) {
+        Some((m, e)) => (m, Some(e)),
+        None => (s, None),
+    };
+    let mant_ok =
+        mant.contains('.') && mant.trim_start_matches(['-', '+']).chars().all(|c| c.is_ascii_digit() || c == '.');
+    let exp_ok =
+        exp.is_none_or(|e| (e.starts_with('-') || e.starts_with('+')) && e[1..].chars().all(|c| c.is_ascii_digit()));
+    (mant_ok && exp_ok).then(|| s.parse().ok()).flatten()
+}
+
+fn value_of(text: &str, key: &str) -> f64 {
+    let line =
+        text.lines().find(|l| l.trim_start().starts_with(key)).unwrap_or_else(|| panic!("{key} missing:\n{text}"));
+    let raw = line.trim_start()[key.len()..].trim_start_matches(':').split_whitespace().next().unwrap_or_default();
+    yaml11_float(raw).unwrap_or_else(|| panic!("{key}: '{raw}' is not a YAML 1.1 float"))
+}
+
+/// A bag at rest → `noise` → the files Kalibr, OpenVINS, VINS-Fusion and ORB-SLAM3 read,
+/// each with the recording's white-noise readings (worst axis, SI) and its rate.
+#[test]
+fn a_bag_at_rest_goes_out_to_every_estimators_noise_file() {
+    let Some(bag) = shared("rosbag1/imu_static_1.bag") else { return };
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    run_ok(d, &["import", &bag.to_string_lossy(), "--out", "s"]);
+    let json = run_ok(d, &["noise", "s/session.json", "--json"]);
+    let r: crosscal::noise::NoiseReport = serde_json::from_str(&json).unwrap_or_else(|e| panic!("{e}"));
+    let worst = |s: crosscal::units::SensorKind| {
+        r.channels.iter().filter(|c| c.sensor() == s).filter_map(|c| c.white()).fold(0.0, f64::max)
+    };
+    let (gn, an) = (worst(crosscal::units::SensorKind::Gyro), worst(crosscal::units::SensorKind::Accel));
+    // The README's bag: ~0.05 °/s/√Hz gyro white noise at 10 Hz.
+    assert!(gn > 1e-4 && gn < 1e-2 && an > 1e-3 && an < 1.0, "gyro {gn} rad/s/√Hz, accel {an} m/s²/√Hz");
+    for (to, file, gkey, akey) in [
+        ("kalibr", "imu.yaml", "gyroscope_noise_density", "accelerometer_noise_density"),
+        ("openvins", "kalibr_imu_chain.yaml", "gyroscope_noise_density", "accelerometer_noise_density"),
+        ("vins-fusion", "vins.yaml", "gyr_n", "acc_n"),
+        ("orb-slam3", "orb.yaml", "IMU.NoiseGyro", "IMU.NoiseAcc"),
+    ] {
+        let (code, _, err) = run_in(d, &["noise", "s/session.json", "--save", file, "--to", to]);
+        assert_eq!(code, 0, "{to}: {err}");
+        let text = std::fs::read_to_string(d.join(file)).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(value_of(&text, gkey).to_bits(), gn.to_bits(), "{to} {gkey}:\n{text}");
+        assert_eq!(value_of(&text, akey).to_bits(), an.to_bits(), "{to} {akey}");
+        if to == "kalibr" || to == "openvins" {
+            assert!((value_of(&text, "update_rate") - 10.0).abs() < 0.01, "{to} update_rate");
+        }
+        if to == "kalibr" {
+            // PyYAML (Kalibr's reader), where installed, reads every number as a number.
+            let check = "import sys,yaml; d=yaml.safe_load(open(sys.argv[1]))['imu0']; \
+                         assert all(isinstance(d[k], float) for k in ['gyroscope_noise_density','accelerometer_noise_density','update_rate']), d; \
+                         assert all(isinstance(x, float) for r in d['gyroscope_M'] for x in r), d['gyroscope_M']";
+            match std::process::Command::new("python3").args(["-c", "import yaml"]).status() {
+                Ok(s) if s.success() => {
+                    let ok = std::process::Command::new("python3").args(["-c", check]).arg(d.join(file)).status();
+                    assert!(ok.is_ok_and(|s| s.success()), "PyYAML does not read {file} as numbers:\n{text}");
+                }
+                _ => eprintln!("skipping the PyYAML check: python3 with yaml is absent"),
+            }
+        }
+    }
+}

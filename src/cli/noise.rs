@@ -56,9 +56,17 @@ pub struct Args {
     /// Write the Allan deviation plots as SVG files into this folder (`gx-adev.svg`, …).
     #[arg(long)]
     figures: Option<PathBuf>,
-    /// Write the result as JSON to this file (for `fit --noise`).
+    /// Write the result to this file: crosscal's JSON (for `fit --noise`), or with --to the
+    /// noise parameters an estimator reads.
     #[arg(long)]
     save: Option<PathBuf>,
+    /// Format of --save: crosscal (JSON), kalibr (imu.yaml), openvins (kalibr_imu_chain.yaml),
+    /// vins-fusion or orb-slam3; continuous-time SI densities, worst axis.
+    #[arg(long, default_value = "crosscal", requires = "save")]
+    to: String,
+    /// The IMU rate written into kalibr, openvins and orb-slam3 files, Hz (default: the recording's).
+    #[arg(long)]
+    rate_hz: Option<f64>,
     /// Add the result to the unit's latest profile in this store as a new revision.
     #[arg(long)]
     store: Option<PathBuf>,
@@ -226,10 +234,23 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         super::write_figures(dir, &report::figures(&r))?;
     }
     if let Some(path) = &a.save {
-        let json = serde_json::to_string_pretty(&r)? + "\n";
-        crosscal::atomic::write_new(path, json.as_bytes())
+        let (text, lost) = if a.to == "crosscal" {
+            (serde_json::to_string_pretty(&r)? + "\n", Vec::new())
+        } else {
+            let rate_hz = a.rate_hz.unwrap_or(1.0 / r.sample_interval_s);
+            let p = crosscal::profile::Profile::noise_only(serial.as_deref().unwrap_or("unknown"), g, r.clone());
+            let t = super::profile::Target { rate_hz, openvins_model: "kalibr", imu: 1 };
+            match a.to.as_str() {
+                "kalibr" | "openvins" | "vins-fusion" | "orb-slam3" => super::profile::export_text(&p, &a.to, t)?,
+                other => anyhow::bail!("--to {other}: expected crosscal, kalibr, openvins, vins-fusion or orb-slam3"),
+            }
+        };
+        crosscal::atomic::write_new(path, text.as_bytes())
             .with_context(|| format!("writing {} (never overwritten)", path.display()))?;
-        eprintln!("saved: {}", path.display());
+        eprintln!("saved: {} ({})", path.display(), a.to);
+        for l in lost {
+            eprintln!("not represented: {l}");
+        }
     }
     if let Some(root) = &a.store {
         let serial = serial.ok_or_else(|| anyhow::anyhow!("--store needs --serial for a plain CSV"))?;

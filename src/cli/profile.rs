@@ -184,38 +184,15 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
 }
 
 /// The target's settings besides its name.
-struct Target<'a> {
-    rate_hz: f64,
-    openvins_model: &'a str,
-    imu: u8,
+pub(super) struct Target<'a> {
+    pub(super) rate_hz: f64,
+    pub(super) openvins_model: &'a str,
+    pub(super) imu: u8,
 }
 
 fn export(profile: &Path, to: &str, output: &Path, t: Target<'_>) -> anyhow::Result<()> {
-    use crosscal::profile::{autopilot, estimators, interop, openvins};
     let p = super::read_profile(profile)?;
-    let imu =
-        autopilot::AutopilotImu::new(t.imu).ok_or_else(|| anyhow::anyhow!("--imu {}: expected 1, 2 or 3", t.imu))?;
-    let (text, lost) = match to {
-        "imucal" => {
-            let (v, lost) = interop::to_imucal(&p);
-            (serde_json::to_string_pretty(&v)? + "\n", lost)
-        }
-        "kalibr" => interop::to_kalibr(&p, t.rate_hz),
-        "vins-fusion" => estimators::to_vins_fusion(&p, p.g_m_s2),
-        "orb-slam3" => estimators::to_orb_slam3(&p, t.rate_hz),
-        "openvins" => {
-            let model = openvins::OpenVinsModel::parse(t.openvins_model).ok_or_else(|| {
-                anyhow::anyhow!("--openvins-model {}: expected kalibr, rpng or calibrated", t.openvins_model)
-            })?;
-            openvins::to_openvins(&p, model, t.rate_hz)
-        }
-        "ardupilot" => autopilot::to_ardupilot(&p, imu),
-        "px4" => autopilot::to_px4(&p, imu),
-        "c-header" => crosscal::correct::to_c_header(&p)?,
-        other => anyhow::bail!(
-            "--to {other}: expected imucal, kalibr, vins-fusion, orb-slam3, openvins, ardupilot, px4 or c-header"
-        ),
-    };
+    let (text, lost) = export_text(&p, to, t)?;
     crosscal::atomic::write_new(output, text.as_bytes())
         .map_err(|e| anyhow::anyhow!("writing {} (never overwritten): {e}", output.display()))?;
     outln!("exported {} to {} ({to})", profile.display(), output.display());
@@ -223,4 +200,33 @@ fn export(profile: &Path, to: &str, output: &Path, t: Target<'_>) -> anyhow::Res
         eprintln!("not represented: {l}");
     }
     Ok(())
+}
+
+/// The text of `p` in the format `to` reads, and what it cannot hold.
+pub(super) fn export_text(p: &Profile, to: &str, t: Target<'_>) -> anyhow::Result<(String, Vec<String>)> {
+    use crosscal::profile::{autopilot, estimators, interop, openvins};
+    let imu =
+        autopilot::AutopilotImu::new(t.imu).ok_or_else(|| anyhow::anyhow!("--imu {}: expected 1, 2 or 3", t.imu))?;
+    let (text, lost) = match to {
+        "imucal" => {
+            let (v, lost) = interop::to_imucal(p);
+            (serde_json::to_string_pretty(&v)? + "\n", lost)
+        }
+        "kalibr" => interop::to_kalibr(p, t.rate_hz),
+        "vins-fusion" => estimators::to_vins_fusion(p, p.g_m_s2),
+        "orb-slam3" => estimators::to_orb_slam3(p, t.rate_hz),
+        "openvins" => {
+            let model = openvins::OpenVinsModel::parse(t.openvins_model).ok_or_else(|| {
+                anyhow::anyhow!("--openvins-model {}: expected kalibr, rpng or calibrated", t.openvins_model)
+            })?;
+            openvins::to_openvins(p, model, t.rate_hz)
+        }
+        "ardupilot" => autopilot::to_ardupilot(p, imu),
+        "px4" => autopilot::to_px4(p, imu),
+        "c-header" => crosscal::correct::to_c_header(p)?,
+        other => anyhow::bail!(
+            "--to {other}: expected imucal, kalibr, vins-fusion, orb-slam3, openvins, ardupilot, px4 or c-header"
+        ),
+    };
+    Ok((text, lost))
 }

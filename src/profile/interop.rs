@@ -35,6 +35,30 @@ pub(super) fn matrix(p: &Profile, sensor: SensorKind, letter: &str) -> [[f64; 3]
     })
 }
 
+/// A float as YAML 1.1 reads it as a float (PyYAML, which Kalibr and allan_variance_ros
+/// use, takes `1e-5` and `1e0` for strings: it needs a point in the mantissa and a signed
+/// exponent): shortest round-trip digits, `1.0e-5`, `2.5`, `-3.0e+16`.
+pub fn yaml_float(v: f64) -> String {
+    if !v.is_finite() {
+        return if v.is_nan() {
+            ".nan".into()
+        } else if v > 0.0 {
+            ".inf".into()
+        } else {
+            "-.inf".into()
+        };
+    }
+    // Debug gives the shortest round-trip digits: `200.0`, `0.001`, `1e-7`, `1.5e16`.
+    let s = format!("{v:?}");
+    let Some((mant, exp)) = s.split_once('e') else { return s };
+    let mant = if mant.contains('.') { mant.to_string() } else { format!("{mant}.0") };
+    if exp.starts_with('-') {
+        format!("{mant}e{exp}")
+    } else {
+        format!("{mant}e+{exp}")
+    }
+}
+
 /// The sensor's bias b (0 where the model has none).
 pub(super) fn vector(p: &Profile, sensor: SensorKind) -> [f64; 3] {
     std::array::from_fn(|i| p.sensor(sensor).value(&format!("{}.b_{}", sensor.as_str(), AXES[i])).unwrap_or(0.0))
@@ -291,7 +315,7 @@ pub fn to_kalibr(p: &Profile, update_rate_hz: f64) -> (String, Vec<String>) {
         p.noise.as_ref().and_then(|n| n.channels.iter().filter(|c| c.sensor() == s).filter_map(f).reduce(f64::max))
     };
     let mut noise = |name: &str, v: Option<f64>| match v {
-        Some(v) => format!("{v:e}"),
+        Some(v) => yaml_float(v),
         None => {
             lost.push(format!(
                 "{name}: the profile has no noise characterisation (crosscal noise --store); written as 0"
@@ -306,7 +330,7 @@ pub fn to_kalibr(p: &Profile, update_rate_hz: f64) -> (String, Vec<String>) {
     let m = |x: [[f64; 3]; 3]| {
         let rows: Vec<String> = x
             .iter()
-            .map(|r| format!("[{}]", r.iter().map(|v| format!("{v:e}")).collect::<Vec<_>>().join(", ")))
+            .map(|r| format!("[{}]", r.iter().map(|v| yaml_float(*v)).collect::<Vec<_>>().join(", ")))
             .collect();
         format!("[{}]", rows.join(", "))
     };
@@ -325,7 +349,7 @@ pub fn to_kalibr(p: &Profile, update_rate_hz: f64) -> (String, Vec<String>) {
     let _ = writeln!(s, "# Not represented: {}", lost.join("; "));
     let _ = writeln!(s, "imu0:");
     let _ = writeln!(s, "  rostopic: /imu0");
-    let _ = writeln!(s, "  update_rate: {update_rate_hz}");
+    let _ = writeln!(s, "  update_rate: {}", yaml_float(update_rate_hz));
     let _ = writeln!(s, "  accelerometer_noise_density: {an}");
     let _ = writeln!(s, "  accelerometer_random_walk: {aw}");
     let _ = writeln!(s, "  gyroscope_noise_density: {gn}");

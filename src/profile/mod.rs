@@ -313,6 +313,40 @@ impl Profile {
         }
     }
 
+    /// A profile holding only a noise characterisation (no coefficients: the identity
+    /// calibration), so that the estimator and autopilot exports can write the noise
+    /// parameters of a unit measured at rest (`crosscal noise --save … --to …`).
+    pub fn noise_only(serial: &str, g_m_s2: f64, noise: crate::noise::NoiseReport) -> Self {
+        let empty = |sensor| SensorFit {
+            sensor,
+            coefficients: Vec::new(),
+            channels: Vec::new(),
+            unidentifiable: Vec::new(),
+            correlated: Vec::new(),
+        };
+        Self {
+            format: PROFILE_FORMAT.into(),
+            serial: serial.to_string(),
+            created_utc: now_utc(),
+            tool: format!("crosscal {}", env!("CARGO_PKG_VERSION")),
+            input_units: Units::default(),
+            g_m_s2,
+            conventions: Conventions::default(),
+            model: "noise only".into(),
+            effects: Vec::new(),
+            gyro: empty(SensorKind::Gyro),
+            accel: empty(SensorKind::Accel),
+            nonlinear: Vec::new(),
+            stand: Vec::new(),
+            runs: Vec::new(),
+            correction: CorrectionSettings::default(),
+            validation: None,
+            notes: vec![format!("noise only, from {}", noise.source)],
+            noise: Some(noise),
+            protocol: None,
+        }
+    }
+
     /// The fit of one sensor.
     pub fn sensor(&self, s: SensorKind) -> &SensorFit {
         match s {

@@ -29,6 +29,7 @@
 //! with their values, as is every effect the model above lacks.
 
 use super::estimators::densities;
+use super::interop::yaml_float;
 use super::interop::{matrix, unheld, vector};
 use super::Profile;
 use crate::units::{AccelUnit, GyroUnit, SensorKind};
@@ -120,7 +121,7 @@ pub fn triangular_rotation(m: M3, lower: bool) -> Option<(M3, M3)> {
 fn yaml_matrix(s: &mut String, key: &str, m: &[Vec<f64>]) {
     let _ = writeln!(s, "  {key}:");
     for row in m {
-        let cells: Vec<String> = row.iter().map(|v| format!("{v:?}")).collect();
+        let cells: Vec<String> = row.iter().map(|v| yaml_float(*v)).collect();
         let _ = writeln!(s, "    - [{}]", cells.join(", "));
     }
 }
@@ -172,13 +173,13 @@ pub fn to_openvins(p: &Profile, model: OpenVinsModel, rate_hz: f64) -> (String, 
     let _ = writeln!(s, "imu0:");
     let eye4: Vec<Vec<f64>> = (0..4).map(|i| (0..4).map(|j| if i == j { 1.0 } else { 0.0 }).collect()).collect();
     yaml_matrix(&mut s, "T_i_b", &eye4);
-    let _ = writeln!(s, "  accelerometer_noise_density: {:?}  # m/s^2/sqrt(Hz)", d.accel_white);
-    let _ = writeln!(s, "  accelerometer_random_walk: {:?}  # m/s^3/sqrt(Hz)", d.accel_walk);
-    let _ = writeln!(s, "  gyroscope_noise_density: {:?}  # rad/s/sqrt(Hz)", d.gyro_white);
-    let _ = writeln!(s, "  gyroscope_random_walk: {:?}  # rad/s^2/sqrt(Hz)", d.gyro_walk);
+    let _ = writeln!(s, "  accelerometer_noise_density: {}  # m/s^2/sqrt(Hz)", yaml_float(d.accel_white));
+    let _ = writeln!(s, "  accelerometer_random_walk: {}  # m/s^3/sqrt(Hz)", yaml_float(d.accel_walk));
+    let _ = writeln!(s, "  gyroscope_noise_density: {}  # rad/s/sqrt(Hz)", yaml_float(d.gyro_white));
+    let _ = writeln!(s, "  gyroscope_random_walk: {}  # rad/s^2/sqrt(Hz)", yaml_float(d.gyro_walk));
     let _ = writeln!(s, "  rostopic: /imu0");
     let _ = writeln!(s, "  time_offset: 0.0");
-    let _ = writeln!(s, "  update_rate: {rate_hz:?}");
+    let _ = writeln!(s, "  update_rate: {}", yaml_float(rate_hz));
     let _ = writeln!(s, "  model: \"{}\"", model.name());
     let rows = |m: M3| -> Vec<Vec<f64>> { m.iter().map(|r| r.to_vec()).collect() };
     yaml_matrix(&mut s, "Tw", &rows(tw));
