@@ -457,3 +457,30 @@ fn a_bag_at_rest_goes_out_to_every_estimators_noise_file() {
         }
     }
 }
+
+/// A session whose manifest says the autopilot had calibrated the values: the fit says it
+/// calibrates on top of that calibration, and the profile keeps the note.
+#[test]
+fn a_fit_on_autopilot_calibrated_data_says_so() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    run_ok(d, &["simulate", "-o", "s", "--duration", "5"]);
+    let path = d.join("s/session.json");
+    let mut m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap_or_default()).unwrap_or_else(|e| panic!("{e}"));
+    m["source"] = serde_json::json!({"format": "PX4 ULog", "file": "f.ulg", "stream": "sensor_combined", "frame": "FRD",
+        "start_ns": 0, "applied_calibration": {"CAL_ACC0_XOFF": 0.125, "CAL_GYRO0_XOFF": -0.01}, "notes": []});
+    std::fs::write(&path, m.to_string()).unwrap_or_else(|e| panic!("{e}"));
+    let (code, out, err) = run_in(d, &["fit", "s/session.json", "--out", "store"]);
+    assert_eq!(code, 0, "{out}{err}");
+    let all = format!("{out}{err}");
+    assert!(all.contains("calibrated by the autopilot") && all.contains("CAL_ACC0_XOFF=0.125"), "{all}");
+    let unit = std::fs::read_dir(d.join("store"))
+        .unwrap_or_else(|e| panic!("{e}"))
+        .flatten()
+        .next()
+        .map(|e| e.path())
+        .unwrap_or_default();
+    let (_, p) = crosscal::profile::Profile::read_or_latest(&unit).unwrap_or_else(|e| panic!("{e}"));
+    assert!(p.notes.iter().any(|n| n.contains("calibrated by the autopilot")), "{:?}", p.notes);
+}

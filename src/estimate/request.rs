@@ -213,9 +213,10 @@ fn finish_streamed(
     req: &FitRequest<'_>,
     path: &Path,
     model: Model,
-    sf: stream::StreamedFit,
+    mut sf: stream::StreamedFit,
 ) -> Result<FitOutcome, EstimateError> {
     check_strict(req, &sf.fit)?;
+    sf.warnings.extend(sf.manifest.source.as_ref().and_then(crate::session::Source::applied_warning));
     let mut notes = sf.warnings.clone();
     for run in &sf.manifest.runs {
         let eps = match run.motion {

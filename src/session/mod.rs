@@ -361,7 +361,9 @@ impl Session {
 
     /// Non-fatal findings of all recordings.
     pub fn warnings(&self) -> Vec<String> {
-        self.runs.iter().flat_map(|r| r.rec.warnings.iter().cloned()).collect()
+        let mut w: Vec<String> = self.runs.iter().flat_map(|r| r.rec.warnings.iter().cloned()).collect();
+        w.extend(self.manifest.source.as_ref().and_then(Source::applied_warning));
+        w
     }
 }
 

@@ -33,6 +33,20 @@ impl Source {
         })
     }
 
+    /// The warning a fit on this recording carries when the log says a calibration was
+    /// already applied to its values (`None` when none was).
+    pub fn applied_warning(&self) -> Option<String> {
+        (!self.applied.is_empty()).then(|| {
+            format!(
+                "the recording ({}, {}) was calibrated by the autopilot before it was logged ({} parameters in the manifest's source, e.g. {}): this calibration is on top of it",
+                self.format,
+                self.stream,
+                self.applied.len(),
+                self.applied.iter().take(3).map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join(", ")
+            )
+        })
+    }
+
     /// Reads a `"source"` object (unknown keys ignored: it is information, not input).
     pub fn from_json(v: &Value) -> Option<Self> {
         let o = v.as_object()?;
