@@ -29,6 +29,7 @@
 //! which convention the file used.
 
 pub mod dataflash;
+mod num;
 pub mod ros1;
 pub mod ros2;
 pub mod rosmsg;

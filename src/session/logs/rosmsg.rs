@@ -13,6 +13,7 @@
 //! wanted and reads the stamp, angular velocity, linear acceleration and (where present)
 //! a temperature field into fixed slots: no allocation per message.
 
+use super::num::Num as Prim;
 use std::collections::HashMap;
 
 /// Wire format of a serialised message.
@@ -39,47 +40,21 @@ enum Ty {
     Msg(String),
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Prim {
-    Bool,
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    I64,
-    U64,
-    F32,
-    F64,
-}
-
-impl Prim {
-    fn size(self) -> usize {
-        match self {
-            Prim::Bool | Prim::I8 | Prim::U8 => 1,
-            Prim::I16 | Prim::U16 => 2,
-            Prim::I32 | Prim::U32 | Prim::F32 => 4,
-            Prim::I64 | Prim::U64 | Prim::F64 => 8,
-        }
-    }
-
-    fn parse(s: &str) -> Option<Prim> {
-        Some(match s {
-            "bool" => Prim::Bool,
-            "int8" | "byte" => Prim::I8,
-            "uint8" | "char" => Prim::U8,
-            "int16" => Prim::I16,
-            "uint16" => Prim::U16,
-            "int32" => Prim::I32,
-            "uint32" => Prim::U32,
-            "int64" => Prim::I64,
-            "uint64" => Prim::U64,
-            "float32" => Prim::F32,
-            "float64" => Prim::F64,
-            _ => return None,
-        })
-    }
+/// A ROS primitive type name's number type (`bool` and `char` are bytes).
+fn prim(s: &str) -> Option<Prim> {
+    Some(match s {
+        "bool" | "uint8" | "char" => Prim::U8,
+        "int8" | "byte" => Prim::I8,
+        "int16" => Prim::I16,
+        "uint16" => Prim::U16,
+        "int32" => Prim::I32,
+        "uint32" => Prim::U32,
+        "int64" => Prim::I64,
+        "uint64" => Prim::U64,
+        "float32" => Prim::F32,
+        "float64" => Prim::F64,
+        _ => return None,
+    })
 }
 
 /// The standard types an IMU message is made of (ROS 2 spelling; ROS 1 differences are
@@ -279,7 +254,7 @@ fn parse_type(ty: &str, pkg: &str, wire: Wire) -> Result<Ty, String> {
         return Ok(Ty::Array(Box::new(elem), len));
     }
     let base = ty.split("<=").next().unwrap_or(ty);
-    if let Some(p) = Prim::parse(base) {
+    if let Some(p) = prim(base) {
         return Ok(Ty::Prim(p));
     }
     Ok(match base {
@@ -422,18 +397,7 @@ impl Cursor<'_> {
         if big {
             a[..b.len()].reverse();
         }
-        Ok(match p {
-            Prim::Bool | Prim::U8 => f64::from(a[0]),
-            Prim::I8 => f64::from(a[0] as i8),
-            Prim::I16 => f64::from(i16::from_le_bytes([a[0], a[1]])),
-            Prim::U16 => f64::from(u16::from_le_bytes([a[0], a[1]])),
-            Prim::I32 => f64::from(i32::from_le_bytes([a[0], a[1], a[2], a[3]])),
-            Prim::U32 => f64::from(u32::from_le_bytes([a[0], a[1], a[2], a[3]])),
-            Prim::I64 => i64::from_le_bytes(a) as f64,
-            Prim::U64 => u64::from_le_bytes(a) as f64,
-            Prim::F32 => f64::from(f32::from_le_bytes([a[0], a[1], a[2], a[3]])),
-            Prim::F64 => f64::from_le_bytes(a),
-        })
+        Ok(p.value_le(a))
     }
 }
 

@@ -12,6 +12,7 @@
 //! Dropouts ('O') are counted; data appended after a crash (flag bits 'B', incompatible bit
 //! 0) is read from its offsets; a message cut by the end of the file is a warning.
 
+use super::num::Num as Basic;
 use super::{Contents, LogFormat, LogSample, Pairer, Sink, StreamDesc};
 use crate::session::error::{Problem, SessionError};
 use std::collections::HashMap;
@@ -27,60 +28,22 @@ struct Field {
     ty: Basic,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Basic {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    I64,
-    U64,
-    F32,
-    F64,
-}
-
-impl Basic {
-    fn parse(s: &str) -> Option<(Basic, usize)> {
-        Some(match s {
-            "int8_t" => (Basic::I8, 1),
-            "uint8_t" | "bool" | "char" => (Basic::U8, 1),
-            "int16_t" => (Basic::I16, 2),
-            "uint16_t" => (Basic::U16, 2),
-            "int32_t" => (Basic::I32, 4),
-            "uint32_t" => (Basic::U32, 4),
-            "int64_t" => (Basic::I64, 8),
-            "uint64_t" => (Basic::U64, 8),
-            "float" => (Basic::F32, 4),
-            "double" => (Basic::F64, 8),
-            _ => return None,
-        })
-    }
-
-    fn read(self, b: &[u8], at: usize) -> Option<f64> {
-        let n = match self {
-            Basic::I8 | Basic::U8 => 1,
-            Basic::I16 | Basic::U16 => 2,
-            Basic::I32 | Basic::U32 | Basic::F32 => 4,
-            Basic::I64 | Basic::U64 | Basic::F64 => 8,
-        };
-        let s = b.get(at..at + n)?;
-        let mut a = [0u8; 8];
-        a[..n].copy_from_slice(s);
-        Some(match self {
-            Basic::I8 => f64::from(a[0] as i8),
-            Basic::U8 => f64::from(a[0]),
-            Basic::I16 => f64::from(i16::from_le_bytes([a[0], a[1]])),
-            Basic::U16 => f64::from(u16::from_le_bytes([a[0], a[1]])),
-            Basic::I32 => f64::from(i32::from_le_bytes([a[0], a[1], a[2], a[3]])),
-            Basic::U32 => f64::from(u32::from_le_bytes([a[0], a[1], a[2], a[3]])),
-            Basic::I64 => i64::from_le_bytes(a) as f64,
-            Basic::U64 => u64::from_le_bytes(a) as f64,
-            Basic::F32 => f64::from(f32::from_le_bytes([a[0], a[1], a[2], a[3]])),
-            Basic::F64 => f64::from_le_bytes(a),
-        })
-    }
+/// A ULog basic type name's number type and size (`bool`, `char` are bytes).
+fn basic(s: &str) -> Option<(Basic, usize)> {
+    let b = match s {
+        "int8_t" => Basic::I8,
+        "uint8_t" | "bool" | "char" => Basic::U8,
+        "int16_t" => Basic::I16,
+        "uint16_t" => Basic::U16,
+        "int32_t" => Basic::I32,
+        "uint32_t" => Basic::U32,
+        "int64_t" => Basic::I64,
+        "uint64_t" => Basic::U64,
+        "float" => Basic::F32,
+        "double" => Basic::F64,
+        _ => return None,
+    };
+    Some((b, b.size()))
 }
 
 /// A topic's format: `name:type field;…`, flattened to leaf fields by dotted name.
@@ -124,7 +87,7 @@ fn flatten(
             } else {
                 format!("{prefix}{field}")
             };
-            match Basic::parse(base_ty) {
+            match basic(base_ty) {
                 Some((b, size)) => {
                     out.insert(leaf, Field { offset: off, ty: b });
                     off += size;
@@ -397,7 +360,7 @@ impl State<'_, '_> {
     }
 
     fn data(&mut self, r: &Reader, b: &[u8]) {
-        let get = |f: Field| f.ty.read(b, f.offset);
+        let get = |f: Field| f.ty.read_le(b, f.offset);
         match r {
             Reader::Combined { t, gyro, accel, stream } => {
                 if self.only.is_some_and(|o| o != *stream) {
