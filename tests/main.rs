@@ -29,5 +29,6 @@ mod reports;
 mod robust;
 mod stand;
 mod stream;
+mod thermal;
 mod uncertainty;
 mod validate;

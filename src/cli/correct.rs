@@ -58,6 +58,10 @@ pub struct Args {
     /// stamps (offline only) instead of re-stamping it.
     #[arg(long)]
     resample: bool,
+    /// Outside the temperature range the profile was calibrated over: clamp (hold the
+    /// temperature terms at the nearest edge; default), extrapolate, or error.
+    #[arg(long, default_value = "clamp", value_parser = ["clamp", "extrapolate", "error"])]
+    temperature_range: String,
     /// Warn when the profile is older than this many days.
     #[arg(long, default_value_t = 365.0)]
     max_age_days: f64,
@@ -72,7 +76,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             a.max_age_days
         );
     }
-    let cal = Calibration::from_profile(&profile).with_context(|| format!("using profile {}", a.profile.display()))?;
+    let mut cal =
+        Calibration::from_profile(&profile).with_context(|| format!("using profile {}", a.profile.display()))?;
+    cal.temp_policy = crosscal::correct::TempPolicy::parse(&a.temperature_range).unwrap_or_default();
     let mut units: Units = profile.input_units;
     if let Some(u) = &a.gyro_unit {
         units.gyro = GyroUnit::parse(u)
@@ -138,6 +144,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         Ok(())
     })
     .with_context(|| format!("writing {}", a.output.display()))?;
+    if let Some(w) = corrected.temp_outside.warning() {
+        eprintln!("warning: {w}");
+    }
     if has_flags {
         let n = corrected.flags.iter().filter(|f| **f != 0).count();
         eprintln!("note: {n} samples could not be inverted (inside a dead band or past the record's ends after a delay shift): their 'flags' column is non-zero (bits 0-2 gyro x,y,z; 3-5 accel x,y,z) and their values are 0, not estimates");
@@ -201,7 +210,7 @@ fn run_streaming(
         None => written.with_context(|| format!("writing {}", a.output.display()))?,
     }
     let s = done.ok_or_else(|| anyhow::anyhow!("writing {}: nothing was corrected", a.output.display()))?;
-    for w in &s.warnings {
+    for w in s.warnings.iter().cloned().chain(s.temp_outside.warning()) {
         eprintln!("warning: {w}");
     }
     if s.flagged > 0 {

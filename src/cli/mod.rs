@@ -52,7 +52,7 @@ pub const EXIT_CODES: &[(u8, &str)] = &[
     (20, "invalid rules file (unknown format version, rule kind, term or unit)"),
     (21, "invalid profile (a coefficient missing, repeated or not finite; g out of range; a scale matrix that cannot be inverted; in another unit's folder)"),
     (22, "the estimate failed (a nonlinear search did not converge, too few samples, values too large to compute with)"),
-    (23, "the correction cannot be made (a non-finite result; an offline correction that does not converge; no temperature for a temperature model)"),
+    (23, "the correction cannot be made (a non-finite result; an offline correction that does not converge; no temperature for a temperature model; temperatures outside the calibrated range with `--temperature-range error`)"),
     (24, "the output already exists (crosscal never overwrites without --force)"),
 ];
 
@@ -120,13 +120,14 @@ fn code_of(cause: &(dyn std::error::Error + 'static)) -> Option<u8> {
             CorrectError::Model(_) | CorrectError::Singular(_) => 21,
             CorrectError::NonFinite { .. }
             | CorrectError::MissingTemperature(_)
+            | CorrectError::OutOfRange(_)
             | CorrectError::NotConverged { .. } => 23,
             _ => EXIT_INPUT,
         });
     }
     if let Some(c) = cause.downcast_ref::<StreamCsvError>() {
         return match c {
-            StreamCsvError::NonFinite { .. } => Some(23),
+            StreamCsvError::NonFinite { .. } | StreamCsvError::Correct(CorrectError::OutOfRange(_)) => Some(23),
             StreamCsvError::Write(_) => Some(3),
             _ => None,
         };

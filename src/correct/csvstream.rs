@@ -53,6 +53,8 @@ pub struct StreamedCsv {
     pub time_offset_s: f64,
     /// Gaps, saturation and spikes found on the way (see [`StreamScan`]).
     pub warnings: Vec<String>,
+    /// Samples outside the profile's calibrated temperature range.
+    pub temp_outside: super::TempOutside,
 }
 
 /// Errors of [`correct_csv_streaming`].
@@ -133,6 +135,7 @@ pub fn correct_csv_streaming(
                 (w_out[k], a_out[k]) = corrector.push(t[k], gyro[k], accel[k], temp[k]);
                 flags[k] = corrector.last_flags();
             }
+            super::refuse_outside(corrector.temperature_outside())?;
         } else {
             corrector.push_block(&t, &gyro, &accel, &mut w_out, &mut a_out);
         }
@@ -164,5 +167,6 @@ pub fn correct_csv_streaming(
         has_flags,
         time_offset_s,
         warnings,
+        temp_outside: *corrector.temperature_outside(),
     })
 }

@@ -131,9 +131,19 @@ pub struct Calibration {
     pub nonlinear: Vec<NonlinearPart>,
     /// Noise standard deviation per channel (gyro, accel), SI: the dead-band flag threshold.
     pub noise: [[f64; 3]; 2],
+    /// The temperature range the profile was calibrated over, °C, when it has temperature
+    /// terms (None: no guard).
+    pub temp_range_c: Option<[f64; 2]>,
+    /// What to do outside that range.
+    pub temp_policy: super::TempPolicy,
 }
 
 impl Calibration {
+    /// A fresh guard of the calibrated temperature range (counts nothing yet).
+    pub fn temp_guard(&self) -> super::TempOutside {
+        super::TempOutside { range_c: self.temp_range_c, policy: self.temp_policy, ..super::TempOutside::default() }
+    }
+
     /// From a model whose coefficients are all fixed at their calibrated values.
     pub fn from_model(model: &Model, settings: CorrectionSettings) -> Result<Self, CorrectError> {
         Ok(Self {
@@ -146,6 +156,8 @@ impl Calibration {
                 .map(|e| NonlinearPart { effect: Arc::clone(&e.effect), params: e.values.clone() })
                 .collect(),
             noise: [[0.0; 3]; 2],
+            temp_range_c: None,
+            temp_policy: super::TempPolicy::Clamp,
         })
     }
 
@@ -158,6 +170,7 @@ impl Calibration {
                 c.noise[si][i] = ch.sigma;
             }
         }
+        c.temp_range_c = p.temperature_range_c().filter(|_| p.uses_temperature());
         Ok(c)
     }
 

@@ -33,12 +33,15 @@ mod csvstream;
 mod inverse;
 mod offline;
 mod streaming;
+mod temperature;
 
 pub use c_header::to_c_header;
 pub use csvstream::{correct_csv_streaming, OutputScale, StreamCsvError, StreamCsvOptions, StreamedCsv};
 pub use inverse::{Calibration, NonlinearPart, SensorInverse};
 pub use offline::{correct_offline, resample_to_stamps};
 pub use streaming::{correct_streaming, Streaming};
+use temperature::refuse_outside;
+pub use temperature::{TempOutside, TempPolicy};
 
 /// Correction errors.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -53,6 +56,9 @@ pub enum CorrectError {
     /// The profile has an effect the correction cannot invert yet.
     #[error("the profile contains '{0}', whose correction is not implemented yet; refit without it to correct")]
     Unsupported(String),
+    /// Samples lie outside the calibrated temperature range and the policy is `error`.
+    #[error("{0}")]
+    OutOfRange(String),
     /// The profile has a temperature effect but the data have no temperature.
     #[error("the profile's effect '{0}' needs temperatures: the recording has no temp column")]
     MissingTemperature(String),
@@ -103,6 +109,8 @@ pub struct Corrected {
     pub iterations: usize,
     /// Whether the last pass changed nothing beyond 1e-14 relative.
     pub converged: bool,
+    /// Samples outside the calibrated temperature range, and what was done with them.
+    pub temp_outside: TempOutside,
     /// Leading samples corrected before the causal derivative window was full (streaming
     /// warm-up: their ε̂ rests on fewer samples; the first has none). 0 offline.
     pub warmup: usize,

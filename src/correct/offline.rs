@@ -15,6 +15,12 @@ pub fn correct_offline(
 ) -> Result<Corrected, CorrectError> {
     let n = t_s.len();
     check_inputs(cal, n, gyro, accel, temp_c)?;
+    // Temperatures outside the calibrated range: guarded once (one copy of the column).
+    let mut temp_outside = cal.temp_guard();
+    let guarded: Option<Vec<f64>> =
+        temp_c.map(|t| t.iter().zip(t_s).map(|(&x, &ts)| temp_outside.guard(ts, x)).collect());
+    super::refuse_outside(&temp_outside)?;
+    let temp_c = guarded.as_deref();
     let g = &cal.gyro;
     let a = &cal.accel;
     const Z: [f64; 3] = [0.0; 3];
@@ -82,8 +88,16 @@ pub fn correct_offline(
     if !converged && (last_change.0 > 1e-9 * last_change.1 || last_change.0.is_nan()) {
         return Err(CorrectError::NotConverged { passes: iterations, change: last_change.0 / last_change.1 });
     }
-    let out =
-        Corrected { w_rad_s: w, a_m_s2: acc, iterations, converged, warmup: 0, flags, time_offset_s: cal.lag_s() };
+    let out = Corrected {
+        w_rad_s: w,
+        a_m_s2: acc,
+        iterations,
+        converged,
+        warmup: 0,
+        flags,
+        time_offset_s: cal.lag_s(),
+        temp_outside,
+    };
     ensure_finite(out, t_s)
 }
 
@@ -110,6 +124,7 @@ pub fn resample_to_stamps(c: &Corrected, t_s: &[f64]) -> Corrected {
         a_m_s2: t_s.iter().map(|&t| crate::model::nonlinear::interpolate(t_s, &c.a_m_s2, t + lag, &mut h2)).collect(),
         iterations: c.iterations,
         converged: c.converged,
+        temp_outside: c.temp_outside,
         warmup: c.warmup,
         flags,
         time_offset_s: 0.0,

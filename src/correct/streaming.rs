@@ -1,7 +1,9 @@
 //! Streaming correction: causal, one sample at a time, fixed memory, no allocation per
 //! sample (see the module documentation of [`super`]).
 
-use super::{check_inputs, ensure_finite, set_flags, Calibration, CorrectError, Corrected, SensorInverse};
+use super::{
+    check_inputs, ensure_finite, refuse_outside, set_flags, Calibration, CorrectError, Corrected, SensorInverse,
+};
 use crate::model::State;
 use crate::motion::SlopeWeights;
 use nalgebra::Matrix3;
@@ -176,11 +178,14 @@ pub struct Streaming {
     accel_neg_ab: Lanes,
     t_last: f64,
     last_flags: u8,
+    /// The calibrated temperature range's guard and what it met.
+    temp: super::TempOutside,
 }
 
 impl Streaming {
     /// A corrector for a calibration (allocates its buffers once).
     pub fn new(cal: Calibration) -> Self {
+        let cal_temp_guard = cal.temp_guard();
         let window = cal.settings.streaming_window.max(2);
         let degree = cal.settings.streaming_degree;
         let step = GyroStep::new(&cal.gyro);
@@ -203,6 +208,7 @@ impl Streaming {
             accel_neg_ab,
             t_last: f64::NAN,
             last_flags: 0,
+            temp: cal_temp_guard,
         }
     }
 
@@ -246,6 +252,7 @@ impl Streaming {
     /// The body of [`Self::push`].
     #[inline(always)]
     fn push_one(&mut self, t_s: f64, gyro: [f64; 3], accel: [f64; 3], temp_c: f64) -> ([f64; 3], [f64; 3]) {
+        let temp_c = self.temp.guard(t_s, temp_c);
         let n = self.window;
         // Uniform sampling: count consecutive steps equal to the last one.
         let step = t_s - self.t_last;
@@ -318,6 +325,11 @@ impl Streaming {
         remember(&mut self.past_w, &mut self.head, [w[0], w[1], w[2], 0.0]);
         self.filled = len;
         (w, acc)
+    }
+
+    /// The samples met so far outside the profile's calibrated temperature range.
+    pub fn temperature_outside(&self) -> &super::TempOutside {
+        &self.temp
     }
 
     /// Corrects a block of samples into caller-owned buffers (no allocation): `w_out[k]`,
@@ -600,6 +612,7 @@ pub fn correct_streaming(
         warmup: s.warmup_samples().min(n),
         flags: Vec::new(),
         time_offset_s: cal.lag_s(),
+        temp_outside: cal.temp_guard(),
     };
     if temp_c.is_none() && cal.nonlinear.is_empty() {
         // Nothing per sample but the samples: the block corrector (same bits as `push`).
@@ -614,5 +627,7 @@ pub fn correct_streaming(
         out.a_m_s2.push(a);
         set_flags(&mut out.flags, n, k, s.last_flags());
     }
+    out.temp_outside = *s.temperature_outside();
+    refuse_outside(&out.temp_outside)?;
     ensure_finite(out, t_s)
 }

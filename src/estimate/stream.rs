@@ -47,6 +47,8 @@ struct Seen {
     /// Gaps, saturation and spikes in the file (as [`crate::session::sanity::StreamScan`]
     /// finds them).
     warnings: Vec<String>,
+    /// Temperature range of the rows used, °C.
+    temp_range_c: Option<[f64; 2]>,
 }
 
 /// The rows of a run as parsed, in a closed temporary file (reopened for each later read,
@@ -101,8 +103,8 @@ impl<'a> StreamRun<'a> {
 
     /// What the profile records of this run (after a fit has read it).
     pub fn used(&self) -> RunUsed {
-        let Seen { sha256, samples, .. } = self.seen();
-        RunUsed { name: self.spec.name.clone(), file: self.spec.file.clone(), sha256, samples }
+        let Seen { sha256, samples, temp_range_c, .. } = self.seen();
+        RunUsed { name: self.spec.name.clone(), file: self.spec.file.clone(), sha256, samples, temp_range_c }
     }
 
     /// Non-fatal findings in the run's file (after a fit has read it).
@@ -260,6 +262,7 @@ impl StreamRun<'_> {
         let (start, end) = self.spec.rows.unwrap_or((0, usize::MAX));
         let mut row = Row::default();
         let mut k = 0usize;
+        let mut temps: Option<[f64; 2]> = None;
         while rdr.read_row(&mut row)? {
             if let Some(scan) = &mut scan {
                 if let Some(gap) = scan.push(rdr.line(), row.t_s, row.gyro, row.accel).filter(|_| self.strict) {
@@ -269,6 +272,10 @@ impl StreamRun<'_> {
             if k >= start && k < end {
                 if !has_temp {
                     row.temp_c = self.spec.temperature_c.unwrap_or(f64::NAN);
+                }
+                if row.temp_c.is_finite() {
+                    let t = row.temp_c;
+                    temps = Some(temps.map_or([t, t], |[lo, hi]| [lo.min(t), hi.max(t)]));
                 }
                 if let Some(w) = &mut spill {
                     if std::io::Write::write_all(w, &spill_record(&row)).is_err() {
@@ -292,7 +299,7 @@ impl StreamRun<'_> {
                 return Err(gap.to_error(&self.path, rdr.t_column()));
             }
             if let Ok(mut seen) = self.seen.lock() {
-                *seen = Some(Seen { sha256: rdr.sha256(), samples: blocks.used, warnings });
+                *seen = Some(Seen { sha256: rdr.sha256(), samples: blocks.used, warnings, temp_range_c: temps });
             }
             if let Some(file) = spill.and_then(|w| w.into_inner().ok()) {
                 if let Ok(mut s) = self.spill.lock() {

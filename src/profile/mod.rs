@@ -347,6 +347,17 @@ impl Profile {
         }
     }
 
+    /// The temperature range the profile was calibrated over, °C: the union of its runs'
+    /// ranges (None when no run had a temperature).
+    pub fn temperature_range_c(&self) -> Option<[f64; 2]> {
+        crate::session::temp_range(self.runs.iter().filter_map(|r| r.temp_range_c).flatten())
+    }
+
+    /// Whether the profile's model has temperature terms (its correction reads temperatures).
+    pub fn uses_temperature(&self) -> bool {
+        self.effects.iter().any(|e| e.contains("temp"))
+    }
+
     /// The fit of one sensor.
     pub fn sensor(&self, s: SensorKind) -> &SensorFit {
         match s {

@@ -206,6 +206,18 @@ pub struct RunUsed {
     pub sha256: String,
     /// Number of samples.
     pub samples: usize,
+    /// Lowest and highest temperature of the samples, °C (a `temp` column or the run's
+    /// `temperature_c`), when the run has one: the range a profile is calibrated over.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temp_range_c: Option<[f64; 2]>,
+}
+
+/// The lowest and highest finite value of `temps` (None when there is none).
+pub fn temp_range(temps: impl IntoIterator<Item = f64>) -> Option<[f64; 2]> {
+    temps.into_iter().filter(|t| t.is_finite()).fold(None, |r, t| match r {
+        None => Some([t, t]),
+        Some([lo, hi]) => Some([lo.min(t), hi.max(t)]),
+    })
 }
 
 /// One run as declared in the manifest.
@@ -355,6 +367,10 @@ impl Session {
                 file: r.spec.file.clone(),
                 sha256: r.rec.sha256.clone(),
                 samples: r.rec.len(),
+                temp_range_c: match &r.rec.temp_c {
+                    Some(t) => temp_range(t.iter().copied()),
+                    None => r.spec.temperature_c.map(|t| [t, t]),
+                },
             })
             .collect()
     }

@@ -1,0 +1,136 @@
+//! Temperature calibration (issue #24): the profile records the temperature range it was
+//! calibrated over, and the correction outside it clamps (default), extrapolates or refuses,
+//! offline and streaming alike, and says how many samples were outside.
+
+use crate::common::{run_in, run_ok};
+use crosscal::correct::{correct_offline, correct_streaming, Calibration, CorrectError, TempPolicy};
+use crosscal::profile::Profile;
+use crosscal::session::Session;
+
+const SET: [&str; 6] = ["--set", "gyro.tb_x=1e-4", "--set", "gyro.tb_y=-2e-4", "--set", "gyro.tb_z=5e-5"];
+
+fn simulate(d: &std::path::Path, out: &str, temps: &str) {
+    let mut args = vec!["simulate", "-o", out, "--temperature", temps, "--hidden", "gyro-temp-bias"];
+    args.extend_from_slice(&SET);
+    run_ok(d, &args);
+}
+
+#[test]
+fn a_profile_knows_its_temperature_range_and_correction_clamps_outside_it() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    simulate(d, "cal", "10,40");
+    simulate(d, "cold", "-35,0");
+    run_ok(d, &["fit", "cal/session.json", "--effect", "gyro-temp-bias", "--out", "store"]);
+    let unit = std::fs::read_dir(d.join("store"))
+        .unwrap_or_else(|e| panic!("{e}"))
+        .flatten()
+        .next()
+        .map(|e| e.path())
+        .unwrap_or_default();
+    let (path, p) = Profile::read_or_latest(&unit).unwrap_or_else(|e| panic!("{e}"));
+    let range = p.temperature_range_c().unwrap_or_else(|| panic!("no range in {}", path.display()));
+    assert!((range[0] - 10.0).abs() < 1e-9 && (range[1] - 40.0).abs() < 1e-9, "{range:?}");
+    assert!(p.uses_temperature());
+
+    let cold = Session::load(&d.join("cold/session.json")).unwrap_or_else(|e| panic!("{e}"));
+    let run = &cold.runs[0];
+    let (t, g, a) = (&run.rec.t_s, &run.rec.gyro, &run.rec.accel);
+    let temps = run.rec.temp_c.clone().unwrap_or_default();
+    let n = temps.len();
+    let mut cal = Calibration::from_profile(&p).unwrap_or_else(|e| panic!("{e}"));
+    // Clamp (default): every sample is outside, and each is corrected as at 10 °C exactly.
+    let clamped = correct_offline(&cal, t, g, a, Some(&temps)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(clamped.temp_outside.samples, n as u64);
+    assert_eq!(clamped.temp_outside.first.map(|f| f.1.to_bits()), Some(temps[0].to_bits()));
+    let w = clamped.temp_outside.warning().unwrap_or_default();
+    assert!(w.contains(&format!("{n} samples")) && w.contains("10.0..40.0"), "{w}");
+    let at_edge = vec![10.0; n];
+    cal.temp_policy = TempPolicy::Extrapolate;
+    let edge = correct_offline(&cal, t, g, a, Some(&at_edge)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(edge.temp_outside.samples, 0);
+    for k in 0..n {
+        assert_eq!(clamped.w_rad_s[k].map(f64::to_bits), edge.w_rad_s[k].map(f64::to_bits), "sample {k}");
+    }
+    // Extrapolate: the linear term evaluated as fitted, counted; the simulated unit's bias is
+    // linear in T, so here extrapolation recovers the truth and clamping leaves tb (T − 10).
+    let extra = correct_offline(&cal, t, g, a, Some(&temps)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(extra.temp_outside.samples, n as u64);
+    let k = 0;
+    let dt = temps[k] - 10.0;
+    let diff = extra.w_rad_s[k][1] - clamped.w_rad_s[k][1];
+    // u = C ω + tb (T − 20): the two corrections differ by C⁻¹ tb (T − 10), C within 3 % of I.
+    let want = -(-2e-4) * dt;
+    assert!((diff / want - 1.0).abs() < 0.03, "difference {diff} for ΔT {dt}, expected about {want}");
+    // Error: refused, naming the samples.
+    cal.temp_policy = TempPolicy::Error;
+    match correct_offline(&cal, t, g, a, Some(&temps)) {
+        Err(CorrectError::OutOfRange(m)) => assert!(m.contains("refused"), "{m}"),
+        other => panic!("expected OutOfRange, got {:?}", other.map(|c| c.temp_outside)),
+    }
+    assert!(matches!(correct_streaming(&cal, t, g, a, Some(&temps)), Err(CorrectError::OutOfRange(_))));
+    // Streaming clamps as offline does: the same count, the same values as at the edge.
+    cal.temp_policy = TempPolicy::Clamp;
+    let s = correct_streaming(&cal, t, g, a, Some(&temps)).unwrap_or_else(|e| panic!("{e}"));
+    cal.temp_policy = TempPolicy::Extrapolate;
+    let s_edge = correct_streaming(&cal, t, g, a, Some(&at_edge)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.temp_outside.samples, n as u64);
+    assert_eq!(
+        s.w_rad_s.iter().map(|v| v.map(f64::to_bits)).collect::<Vec<_>>(),
+        s_edge.w_rad_s.iter().map(|v| v.map(f64::to_bits)).collect::<Vec<_>>()
+    );
+    // Inside the range nothing is counted.
+    let cal_in = Calibration::from_profile(&p).unwrap_or_else(|e| panic!("{e}"));
+    let warm = Session::load(&d.join("cal/session.json")).unwrap_or_else(|e| panic!("{e}"));
+    let r = &warm.runs[3];
+    let c = correct_offline(&cal_in, &r.rec.t_s, &r.rec.gyro, &r.rec.accel, r.rec.temp_c.as_deref())
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(c.temp_outside.samples, 0);
+    assert!(c.temp_outside.warning().is_none());
+
+    // The command line: a warning by default, exit 23 with --temperature-range error.
+    let prof = path.to_string_lossy().to_string();
+    let (code, _, err) = run_in(d, &["correct", "--profile", &prof, "cold/cone+10.csv", "-o", "c.csv"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("outside the profile's calibrated range") && err.contains("clamp"), "{err}");
+    let (code, _, err) =
+        run_in(d, &["correct", "--profile", &prof, "cold/cone+10.csv", "-o", "e.csv", "--temperature-range", "error"]);
+    assert_eq!(code, 23, "{err}");
+    assert!(!d.join("e.csv").exists(), "a refused correction writes nothing");
+    let (code, _, err) = run_in(
+        d,
+        &[
+            "correct",
+            "--profile",
+            &prof,
+            "cold/cone+10.csv",
+            "-o",
+            "s.csv",
+            "--mode",
+            "streaming",
+            "--temperature-range",
+            "error",
+        ],
+    );
+    assert_eq!(code, 23, "{err}");
+}
+
+/// A profile without temperature terms has no range to guard, whatever the data's temperatures.
+#[test]
+fn a_profile_without_temperature_terms_guards_nothing() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    run_ok(d, &["simulate", "-o", "cal", "--temperature", "10,40"]);
+    run_ok(d, &["fit", "cal/session.json", "--out", "store"]);
+    let unit = std::fs::read_dir(d.join("store"))
+        .unwrap_or_else(|e| panic!("{e}"))
+        .flatten()
+        .next()
+        .map(|e| e.path())
+        .unwrap_or_default();
+    let (_, p) = Profile::read_or_latest(&unit).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!p.uses_temperature());
+    assert!(p.temperature_range_c().is_some(), "the range is still recorded");
+    let cal = Calibration::from_profile(&p).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(cal.temp_range_c, None);
+}
