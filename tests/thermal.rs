@@ -113,6 +113,16 @@ fn a_profile_knows_its_temperature_range_and_correction_clamps_outside_it() {
         ],
     );
     assert_eq!(code, 23, "{err}");
+    // check flags every run outside the range; diagnose --profile names them; a run inside
+    // is neither.
+    let out = run_in(d, &["check", "cold/session.json", "--profile", &prof]).1;
+    assert_eq!(out.matches("OUTSIDE THE CALIBRATED TEMPERATURE RANGE").count(), 18, "{out}");
+    let out = run_in(d, &["check", "cal/session.json", "--profile", &prof]).1;
+    assert!(!out.contains("OUTSIDE THE CALIBRATED"), "{out}");
+    let out = run_ok(d, &["diagnose", "cold/session.json", "--profile", &prof]);
+    assert!(out.contains("OUT OF THE CALIBRATED TEMPERATURE RANGE (10.0..40.0 degC): 18 of 18 runs"), "{out}");
+    let out = run_ok(d, &["diagnose", "cal/session.json", "--profile", &prof]);
+    assert!(!out.contains("OUT OF THE CALIBRATED"), "{out}");
 }
 
 /// A profile without temperature terms has no range to guard, whatever the data's temperatures.

@@ -99,6 +99,11 @@ pub struct RunCheck {
     pub skipped: usize,
     /// Six axes: gyro x, y, z then accel x, y, z.
     pub axes: Vec<AxisCheck>,
+    /// Samples outside the profile's calibrated temperature range, in words (the correction
+    /// held the temperature terms at the edge): this run checks the profile where it was
+    /// not calibrated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temperature_outside: Option<String>,
 }
 
 /// A full check.
@@ -181,7 +186,7 @@ pub fn check_run(run: &Run, track: &Track, corrected: &Corrected, raw_units: [bo
             });
         }
     }
-    RunCheck { run: run.spec.name.clone(), skipped: skip, axes }
+    RunCheck { run: run.spec.name.clone(), skipped: skip, axes, temperature_outside: corrected.temp_outside.warning() }
 }
 
 fn ratio(a: Option<f64>, b: Option<f64>) -> Option<f64> {

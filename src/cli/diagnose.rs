@@ -106,6 +106,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         session.runs.len(),
         session.n_samples()
     );
+    if let Some(note) = temperature_outside(&a, &session)? {
+        outln!("{note}");
+    }
     outln!("\nresidual per channel (units: gyro deg/s, accel m/s^2):");
     out!("{}", channel_table(&d.channels));
     print_noise_lines_candidates(&d)?;
@@ -248,6 +251,31 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
         ),
     }
     Ok(Outcome::Ok)
+}
+
+/// With `--profile`: the runs whose temperatures lie outside the range the profile's
+/// temperature terms were calibrated over, named (the model is evaluated there as fitted,
+/// an extrapolation).
+fn temperature_outside(a: &Args, session: &Session) -> anyhow::Result<Option<String>> {
+    let Some(p) = &a.profile else { return Ok(None) };
+    let prof = super::read_profile(p)?;
+    let Some([lo, hi]) = prof.temperature_range_c().filter(|_| prof.uses_temperature()) else { return Ok(None) };
+    let outside: Vec<String> = session
+        .runs_used()
+        .iter()
+        .filter_map(|r| {
+            let [a, b] = r.temp_range_c?;
+            (a < lo || b > hi).then(|| format!("{} ({a:.1}..{b:.1} degC)", r.name))
+        })
+        .collect();
+    Ok((!outside.is_empty()).then(|| {
+        format!(
+            "OUT OF THE CALIBRATED TEMPERATURE RANGE ({lo:.1}..{hi:.1} degC): {} of {} runs: {}; the profile's temperature terms are extrapolated there, so a misfit may be the range, not a missing effect: recalibrate over these temperatures",
+            outside.len(),
+            session.runs.len(),
+            outside.join(", ")
+        )
+    }))
 }
 
 /// The model to start from: the profile's (with `--effect`s added) or the preset; protocol

@@ -155,6 +155,11 @@ pub fn check_summary(r: &CheckReport) -> String {
         );
     }
     let _ = writeln!(s, "(errors: max |error| over all runs as % of each run's reference amplitude of the axis; sys = systematic part, cone-phase harmonics; pass uses the systematic reduction; noise-limited = no remaining systematic error is distinguishable from noise)");
+    for run in &r.runs {
+        if let Some(t) = &run.temperature_outside {
+            let _ = writeln!(s, "OUTSIDE THE CALIBRATED TEMPERATURE RANGE: run {}: {t}", run.run);
+        }
+    }
     s
 }
 
