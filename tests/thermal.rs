@@ -144,3 +144,62 @@ fn a_profile_without_temperature_terms_guards_nothing() {
     let cal = Calibration::from_profile(&p).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(cal.temp_range_c, None);
 }
+
+/// A cubic gyro bias over −20 … +70 °C (the range and degree ArduPilot and PX4 fit) is
+/// recovered term by term, each within 3 standard errors of its true value.
+#[test]
+fn a_cubic_temperature_bias_is_recovered_term_by_term() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    let truth = [
+        ("gyro.tb_x", 2e-5),
+        ("gyro.tb2_x", -3e-7),
+        ("gyro.tb3_x", 4e-9),
+        ("gyro.tb_y", 1e-5),
+        ("gyro.tb2_y", 2e-7),
+        ("gyro.tb3_y", -3e-9),
+        ("gyro.tb_z", -1e-5),
+        ("gyro.tb2_z", 1e-7),
+        ("gyro.tb3_z", 2e-9),
+    ];
+    let sets: Vec<String> = truth.iter().map(|(n, v)| format!("{n}={v}")).collect();
+    let mut args =
+        vec!["simulate", "-o", "sweep", "--temperature", "-20,70", "--gyro-noise", "0.002", "--accel-noise", "0.0002"];
+    for e in ["gyro-temp-bias", "gyro-temp-bias2", "gyro-temp-bias3"] {
+        args.extend_from_slice(&["--hidden", e]);
+    }
+    for s in &sets {
+        args.extend_from_slice(&["--set", s]);
+    }
+    run_ok(d, &args);
+    run_ok(
+        d,
+        &[
+            "fit",
+            "sweep/session.json",
+            "--effect",
+            "gyro-temp-bias",
+            "--effect",
+            "gyro-temp-bias2",
+            "--effect",
+            "gyro-temp-bias3",
+            "--out",
+            "store",
+        ],
+    );
+    let unit = std::fs::read_dir(d.join("store"))
+        .unwrap_or_else(|e| panic!("{e}"))
+        .flatten()
+        .next()
+        .map(|e| e.path())
+        .unwrap_or_default();
+    let (_, p) = Profile::read_or_latest(&unit).unwrap_or_else(|e| panic!("{e}"));
+    for (name, want) in truth {
+        let c = p.gyro.get(name).unwrap_or_else(|| panic!("{name} missing"));
+        let se = c.std_error.unwrap_or(f64::INFINITY);
+        assert!((c.value - want).abs() < 3.0 * se, "{name}: {} ± {se} vs truth {want}", c.value);
+        assert!(se < 0.02 * want.abs(), "{name}: standard error {se} too large for {want}");
+    }
+    let range = p.temperature_range_c().unwrap_or([0.0, 0.0]);
+    assert!((range[0] + 20.0).abs() < 0.01 && (range[1] - 70.0).abs() < 0.01, "{range:?}");
+}
