@@ -16,7 +16,7 @@
 //! high-water mark of the child's own memory since its exec; a peak reached in the last
 //! 5 ms of a run would be missed). `getrusage(RUSAGE_CHILDREN).ru_maxrss` was not used: it
 //! also counts the memory the child had before its exec, a copy of its parent's (a Python
-//! wrapper's 13.8 MB for `/bin/true`).
+//! wrapper's 13.5 MiB for `/bin/true`).
 
 #[path = "formats/writers.rs"]
 mod writers;
