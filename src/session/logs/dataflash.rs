@@ -144,6 +144,10 @@ struct State<'s, 'k> {
     mults: HashMap<u8, f64>,
     streams: HashMap<String, usize>,
     raw_pairs: HashMap<u32, (usize, Pairer)>,
+    /// The stream of each `IMU`-like type and instance, once met (no name built per record).
+    imu_streams: HashMap<(u8, u32), usize>,
+    /// Paired samples waiting to be emitted (reused, so a record allocates nothing).
+    paired: Vec<LogSample>,
     batch: Option<Batch>,
     params: Vec<(String, f64)>,
     err: Option<SessionError>,
@@ -165,6 +169,8 @@ pub fn read(path: &Path, only: Option<usize>, sink: &mut Sink<'_>) -> Result<Con
         mults: HashMap::new(),
         streams: HashMap::new(),
         raw_pairs: HashMap::new(),
+        imu_streams: HashMap::new(),
+        paired: Vec::new(),
         batch: None,
         params: Vec::new(),
         err: None,
@@ -249,12 +255,13 @@ impl State<'_, '_> {
                 k
             }
         };
-        let name = self.fmts.get(&ty).map(|f| f.name.clone()).unwrap_or_default();
-        match (kind, name.as_str()) {
-            (Some(k), _) => self.imu(&k, ty, b),
-            (None, "FMTU") => self.fmtu(ty, b),
-            (None, "MULT") => self.mult(ty, b),
-            _ => {}
+        match kind {
+            Some(k) => self.imu(&k, ty, b),
+            None => match self.fmts.get(&ty).map(|f| f.name.as_str()) {
+                Some("FMTU") => self.fmtu(ty, b),
+                Some("MULT") => self.mult(ty, b),
+                _ => {}
+            },
         }
         Ok(())
     }
@@ -285,6 +292,7 @@ impl State<'_, '_> {
             let mult = vec![1.0; cols.len()];
             self.fmts.insert(ty, Fmt { name, len: usize::from(len), cols, mult });
             self.kinds.remove(&ty);
+            self.imu_streams.retain(|k, _| k.0 != ty);
         }
         Ok(())
     }
@@ -393,14 +401,30 @@ impl State<'_, '_> {
     }
 
     fn imu(&mut self, k: &Kind, ty: u8, b: &[u8]) {
-        let Some(f) = self.fmts.get(&ty).cloned() else { return };
+        // The layout is moved out for the record and put back (a clone per record had cost
+        // a quarter of the import's time in allocations); nothing below looks it up.
+        let Some(f) = self.fmts.get_mut(&ty).map(std::mem::take) else { return };
+        self.imu_with(k, &f, ty, b);
+        if let Some(slot) = self.fmts.get_mut(&ty) {
+            *slot = f;
+        }
+    }
+
+    fn imu_with(&mut self, k: &Kind, f: &Fmt, ty: u8, b: &[u8]) {
         let v = |i: usize| f.value(b, i);
         let v3 = |c: &[usize; 3]| Some([v(c[0])?, v(c[1])?, v(c[2])?]);
         match k {
             Kind::Imu { time, time_scale, inst, base, gyro, accel, temp } => {
                 let instance = inst.and_then(v).map_or(*base, |i| i as u32);
-                let name = if inst.is_some() { format!("IMU[{instance}]") } else { f.name.clone() };
-                let stream = self.stream(name, "IMU", instance, temp.is_some(), true);
+                let stream = match self.imu_streams.get(&(ty, instance)) {
+                    Some(&s) => s,
+                    None => {
+                        let name = if inst.is_some() { format!("IMU[{instance}]") } else { f.name.clone() };
+                        let s = self.stream(name, "IMU", instance, temp.is_some(), true);
+                        self.imu_streams.insert((ty, instance), s);
+                        s
+                    }
+                };
                 let (Some(t), Some(g), Some(a)) = (f.int(b, *time), v3(gyro), v3(accel)) else { return };
                 let t_ns = t.saturating_mul(*time_scale);
                 let temp_c = temp.and_then(v);
@@ -421,7 +445,7 @@ impl State<'_, '_> {
                 }
                 let (Some(t), Some(x)) = (f.int(b, *time), v3(xyz)) else { return };
                 let t_ns = t.saturating_mul(1000);
-                let mut out = Vec::new();
+                let mut out = std::mem::take(&mut self.paired);
                 if let Some((_, p)) = self.raw_pairs.get_mut(&instance) {
                     if *accel {
                         p.accel(t_ns, x, None, &mut |s| out.push(s));
@@ -429,9 +453,10 @@ impl State<'_, '_> {
                         p.gyro(t_ns, x, None, &mut |s| out.push(s));
                     }
                 }
-                for s in out {
+                for s in out.drain(..) {
                     self.emit(stream, &s);
                 }
+                self.paired = out;
             }
             Kind::BatchHead => {
                 let g = |n: &str| f.col(n).and_then(v);
@@ -444,7 +469,7 @@ impl State<'_, '_> {
                     sample_us: g("SampleUS").unwrap_or(0.0),
                 });
             }
-            Kind::BatchData => self.batch_data(&f, b),
+            Kind::BatchData => self.batch_data(f, b),
             Kind::Param => {
                 let (Some(ni), Some(vi)) = (f.col("Name"), f.col("Value")) else { return };
                 let name = f.text(b, ni);
