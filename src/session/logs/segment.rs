@@ -30,6 +30,8 @@ struct Block {
 #[derive(Debug, Default)]
 pub struct Blocks {
     blocks: Vec<Block>,
+    /// Block length, s (0 = not started: [`BLOCK_S`]); doubled each time the list is halved.
+    block_s: f64,
     n: usize,
     t0: f64,
     t1: f64,
@@ -40,6 +42,32 @@ pub struct Blocks {
 }
 
 const BLOCK_S: f64 = 0.5;
+/// Blocks kept at most (88 bytes each): past it neighbours are merged.
+const MAX_BLOCKS: usize = 1 << 14;
+
+/// Two neighbouring blocks as one: pooled means and scatters (the scatter is the norm of
+/// the per-axis standard deviations, so the pooled one is
+/// √((n₁(s₁² + |m₁|²) + n₂(s₂² + |m₂|²))/n − |m|²)).
+fn merge(a: &Block, b: &Block) -> Block {
+    let n = (a.n + b.n) as f64;
+    let (wa, wb) = (a.n as f64 / n, b.n as f64 / n);
+    let mean = |x: [f64; 3], y: [f64; 3]| std::array::from_fn(|k| wa * x[k] + wb * y[k]);
+    let sq = |m: [f64; 3]| m.iter().map(|v| v * v).sum::<f64>();
+    let pooled = |sa: f64, ma: [f64; 3], sb: f64, mb: [f64; 3], m: [f64; 3]| {
+        (wa * (sa * sa + sq(ma)) + wb * (sb * sb + sq(mb)) - sq(m)).max(0.0).sqrt()
+    };
+    let g_mean = mean(a.g_mean, b.g_mean);
+    let a_mean = mean(a.a_mean, b.a_mean);
+    Block {
+        t0_s: a.t0_s,
+        t1_s: b.t1_s,
+        n: a.n + b.n,
+        g_mean,
+        g_std: pooled(a.g_std, a.g_mean, b.g_std, b.g_mean, g_mean),
+        a_mean,
+        a_std: pooled(a.a_std, a.a_mean, b.a_std, b.a_mean, a_mean),
+    }
+}
 const BLOCK_MIN: usize = 10;
 
 impl Blocks {
@@ -56,9 +84,18 @@ impl Blocks {
             self.sa[k] += a[k];
             self.saa[k] += a[k] * a[k];
         }
-        if self.n >= BLOCK_MIN && t_s - self.t0 >= BLOCK_S {
+        if self.n >= BLOCK_MIN && t_s - self.t0 >= self.block_s.max(BLOCK_S) {
             self.close();
         }
+    }
+
+    /// Halves the list by merging neighbours (memory stays under [`MAX_BLOCKS`] blocks
+    /// whatever the recording's length; a long recording is judged in longer blocks).
+    fn compact(&mut self) {
+        let merged: Vec<Block> =
+            self.blocks.chunks(2).map(|p| if p.len() == 2 { merge(&p[0], &p[1]) } else { p[0] }).collect();
+        self.blocks = merged;
+        self.block_s = 2.0 * self.block_s.max(BLOCK_S);
     }
 
     fn close(&mut self) {
@@ -78,7 +115,10 @@ impl Blocks {
             a_mean: mean(self.sa),
             a_std: std(self.sa, self.saa),
         });
-        *self = Blocks { blocks: std::mem::take(&mut self.blocks), ..Blocks::default() };
+        *self = Blocks { blocks: std::mem::take(&mut self.blocks), block_s: self.block_s, ..Blocks::default() };
+        if self.blocks.len() >= MAX_BLOCKS {
+            self.compact();
+        }
     }
 
     /// Classifies the recording (the last partial block included when long enough).
@@ -215,5 +255,22 @@ mod tests {
         assert_eq!(sum.orientations, 3, "{sum:?}");
         let init = sum.initial_rest_s().unwrap_or(0.0);
         assert!((init - 30.0).abs() < 1.0, "initial rest {init}");
+    }
+
+    #[test]
+    fn a_long_recording_keeps_few_blocks_and_the_same_verdict() {
+        let mut seed = 3;
+        let mut b = Blocks::default();
+        // 3 h at 100 Hz: 21 600 half-second blocks, so the list is halved once.
+        feed(&mut b, 0.0, 1_080_000, 100.0, [0.01, 0.0, 0.0], [0.0, 0.0, 9.8], &mut seed);
+        assert!(b.blocks.len() < MAX_BLOCKS && b.block_s > BLOCK_S, "{} blocks of {} s", b.blocks.len(), b.block_s);
+        let sum = b.finish();
+        assert!(sum.is_static(), "{sum:?}");
+        // Pooling two blocks gives the moments of their samples taken together.
+        let x = Block { t0_s: 0.0, t1_s: 1.0, n: 2, g_mean: [1.0, 0.0, 0.0], g_std: 1.0, a_mean: [0.0; 3], a_std: 0.0 };
+        let y = Block { t0_s: 1.0, t1_s: 2.0, n: 2, g_mean: [3.0, 0.0, 0.0], g_std: 1.0, a_mean: [0.0; 3], a_std: 0.0 };
+        // Samples 0, 2, 2, 4 on x: mean 2, variance 2.
+        let m = merge(&x, &y);
+        assert!((m.g_mean[0] - 2.0).abs() < 1e-12 && (m.g_std - 2f64.sqrt()).abs() < 1e-12, "{m:?}");
     }
 }
