@@ -150,6 +150,17 @@ pub fn small_session(dir: &std::path::Path, fit: bool) {
     }
 }
 
+/// The latest profile of the one unit in the store `store` (its path and contents).
+pub fn only_profile(store: &std::path::Path) -> (std::path::PathBuf, Profile) {
+    let unit = std::fs::read_dir(store)
+        .unwrap_or_else(|e| panic!("{}: {e}", store.display()))
+        .flatten()
+        .next()
+        .map(|e| e.path())
+        .unwrap_or_else(|| panic!("{} holds no unit", store.display()));
+    Profile::read_or_latest(&unit).unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// Rewrites a text file through `f`.
 pub fn edit(path: &std::path::Path, f: impl Fn(String) -> String) {
     let text = std::fs::read_to_string(path).unwrap();

@@ -475,12 +475,6 @@ fn a_fit_on_autopilot_calibrated_data_says_so() {
     assert_eq!(code, 0, "{out}{err}");
     let all = format!("{out}{err}");
     assert!(all.contains("calibrated by the autopilot") && all.contains("CAL_ACC0_XOFF=0.125"), "{all}");
-    let unit = std::fs::read_dir(d.join("store"))
-        .unwrap_or_else(|e| panic!("{e}"))
-        .flatten()
-        .next()
-        .map(|e| e.path())
-        .unwrap_or_default();
-    let (_, p) = crosscal::profile::Profile::read_or_latest(&unit).unwrap_or_else(|e| panic!("{e}"));
+    let (_, p) = crate::common::only_profile(&d.join("store"));
     assert!(p.notes.iter().any(|n| n.contains("calibrated by the autopilot")), "{:?}", p.notes);
 }

@@ -4,7 +4,6 @@
 
 use crate::common::{run_in, run_ok};
 use crosscal::correct::{correct_offline, correct_streaming, Calibration, CorrectError, TempPolicy};
-use crosscal::profile::Profile;
 use crosscal::session::Session;
 
 const SET: [&str; 6] = ["--set", "gyro.tb_x=1e-4", "--set", "gyro.tb_y=-2e-4", "--set", "gyro.tb_z=5e-5"];
@@ -22,13 +21,7 @@ fn a_profile_knows_its_temperature_range_and_correction_clamps_outside_it() {
     simulate(d, "cal", "10,40");
     simulate(d, "cold", "-35,0");
     run_ok(d, &["fit", "cal/session.json", "--effect", "gyro-temp-bias", "--out", "store"]);
-    let unit = std::fs::read_dir(d.join("store"))
-        .unwrap_or_else(|e| panic!("{e}"))
-        .flatten()
-        .next()
-        .map(|e| e.path())
-        .unwrap_or_default();
-    let (path, p) = Profile::read_or_latest(&unit).unwrap_or_else(|e| panic!("{e}"));
+    let (path, p) = crate::common::only_profile(&d.join("store"));
     let range = p.temperature_range_c().unwrap_or_else(|| panic!("no range in {}", path.display()));
     assert!((range[0] - 10.0).abs() < 1e-9 && (range[1] - 40.0).abs() < 1e-9, "{range:?}");
     assert!(p.uses_temperature());
@@ -132,13 +125,7 @@ fn a_profile_without_temperature_terms_guards_nothing() {
     let d = dir.path();
     run_ok(d, &["simulate", "-o", "cal", "--temperature", "10,40"]);
     run_ok(d, &["fit", "cal/session.json", "--out", "store"]);
-    let unit = std::fs::read_dir(d.join("store"))
-        .unwrap_or_else(|e| panic!("{e}"))
-        .flatten()
-        .next()
-        .map(|e| e.path())
-        .unwrap_or_default();
-    let (_, p) = Profile::read_or_latest(&unit).unwrap_or_else(|e| panic!("{e}"));
+    let (_, p) = crate::common::only_profile(&d.join("store"));
     assert!(!p.uses_temperature());
     assert!(p.temperature_range_c().is_some(), "the range is still recorded");
     let cal = Calibration::from_profile(&p).unwrap_or_else(|e| panic!("{e}"));
@@ -187,13 +174,7 @@ fn a_cubic_temperature_bias_is_recovered_term_by_term() {
             "store",
         ],
     );
-    let unit = std::fs::read_dir(d.join("store"))
-        .unwrap_or_else(|e| panic!("{e}"))
-        .flatten()
-        .next()
-        .map(|e| e.path())
-        .unwrap_or_default();
-    let (_, p) = Profile::read_or_latest(&unit).unwrap_or_else(|e| panic!("{e}"));
+    let (_, p) = crate::common::only_profile(&d.join("store"));
     for (name, want) in truth {
         let c = p.gyro.get(name).unwrap_or_else(|| panic!("{name} missing"));
         let se = c.std_error.unwrap_or(f64::INFINITY);
