@@ -33,6 +33,20 @@ fn check_all(path: &Path, opts: &ReadOptions, n: usize) {
     }
 }
 
+/// The part of a `sensor_msgs/Imu` after its header, little-endian f64s (packed in ROS 1; in
+/// CDR the caller has aligned to 8 already): orientation (identity), covariances 0.
+fn imu_body(out: &mut Vec<u8>, gyro: [f64; 3], accel: [f64; 3]) {
+    let mut f = vec![0.0, 0.0, 0.0, 1.0];
+    f.extend([0.0; 9]);
+    f.extend(gyro);
+    f.extend([0.0; 9]);
+    f.extend(accel);
+    f.extend([0.0; 9]);
+    for v in f {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
 fn le32(b: &mut Vec<u8>, v: u32) {
     b.extend_from_slice(&v.to_le_bytes());
 }
@@ -72,15 +86,7 @@ fn ros1_imu(i: usize) -> Vec<u8> {
     le32(&mut m, (t % 1_000_000_000) as u32);
     le32(&mut m, 3);
     m.extend_from_slice(b"imu");
-    let mut f = vec![0.0, 0.0, 0.0, 1.0];
-    f.extend([0.0; 9]);
-    f.extend(g);
-    f.extend([0.0; 9]);
-    f.extend(a);
-    f.extend([0.0; 9]);
-    for v in f {
-        m.extend_from_slice(&v.to_le_bytes());
-    }
+    imu_body(&mut m, g, a);
     m
 }
 
@@ -157,15 +163,7 @@ fn cdr_imu(i: usize) -> Vec<u8> {
     while (b.len() - 4) % 8 != 0 {
         b.push(0);
     }
-    let mut f = vec![0.0, 0.0, 0.0, 1.0];
-    f.extend([0.0; 9]);
-    f.extend(g);
-    f.extend([0.0; 9]);
-    f.extend(a);
-    f.extend([0.0; 9]);
-    for v in f {
-        b.extend_from_slice(&v.to_le_bytes());
-    }
+    imu_body(&mut b, g, a);
     b
 }
 
