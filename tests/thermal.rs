@@ -184,3 +184,44 @@ fn a_cubic_temperature_bias_is_recovered_term_by_term() {
     let range = p.temperature_range_c().unwrap_or([0.0, 0.0]);
     assert!((range[0] + 20.0).abs() < 0.01 && (range[1] - 70.0).abs() < 0.01, "{range:?}");
 }
+
+/// A scale factor curved in temperature (linear + quadratic tempco on every axis of both
+/// sensors) is recovered term by term within 3 standard errors.
+#[test]
+fn a_curved_scale_factor_tempco_is_recovered_term_by_term() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    let truth: Vec<(String, f64)> = ["gyro", "accel"]
+        .iter()
+        .flat_map(|s| {
+            ["x", "y", "z"].iter().enumerate().flat_map(move |(i, a)| {
+                let k = i as f64 + 1.0;
+                [(format!("{s}.ts_{a}"), 1e-4 * k), (format!("{s}.ts2_{a}"), -2e-6 * k)]
+            })
+        })
+        .collect();
+    let sets: Vec<String> = truth.iter().map(|(n, v)| format!("{n}={v}")).collect();
+    let mut args =
+        vec!["simulate", "-o", "sweep", "--temperature", "-20,70", "--gyro-noise", "0.002", "--accel-noise", "0.0002"];
+    let effects = ["gyro-temp-scale", "gyro-temp-scale2", "accel-temp-scale", "accel-temp-scale2"];
+    for e in effects {
+        args.extend_from_slice(&["--hidden", e]);
+    }
+    for s in &sets {
+        args.extend_from_slice(&["--set", s]);
+    }
+    run_ok(d, &args);
+    let mut fit = vec!["fit", "sweep/session.json", "--out", "store"];
+    for e in effects {
+        fit.extend_from_slice(&["--effect", e]);
+    }
+    run_ok(d, &fit);
+    let (_, p) = crate::common::only_profile(&d.join("store"));
+    for (name, want) in &truth {
+        let sensor = if name.starts_with("gyro") { &p.gyro } else { &p.accel };
+        let c = sensor.get(name).unwrap_or_else(|| panic!("{name} missing"));
+        let se = c.std_error.unwrap_or(f64::INFINITY);
+        assert!((c.value - want).abs() < 3.0 * se, "{name}: {} ± {se} vs truth {want}", c.value);
+        assert!(se < 0.05 * want.abs(), "{name}: standard error {se} too large for {want}");
+    }
+}
