@@ -134,6 +134,15 @@ proptest! {
                     crosscal::model::Role::Epsilon(_) => 0.001 * r,
                     crosscal::model::Role::Other => 1e-4 * r,
                 };
+                // Higher powers of (T − 20) (up to 20 °C here): sized so that each is as large
+                // as the linear term at the extremes, a perturbation like the rest.
+                let v = if t.term.unit.ends_with("degC^3") {
+                    v / 400.0
+                } else if t.term.unit.ends_with("degC^2") {
+                    v / 20.0
+                } else {
+                    v
+                };
                 m.fix(&t.term.name, v).unwrap();
             }
         }

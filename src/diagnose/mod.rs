@@ -23,6 +23,7 @@ pub mod report;
 pub mod select;
 pub mod separate;
 pub mod space;
+mod temperature;
 
 pub use lines::Line;
 pub use picture::{channel_reports, residuals, RunMotions, RunResiduals};
@@ -579,6 +580,7 @@ fn climb(
                 (candidate(id, space.evidence(&set, &base, &base_heldout, &cand), &base_q), cand)
             })
             .collect();
+        scored.extend(temperature::polynomial_candidates(space, &set, &base, &base_heldout, &base_q));
         scored.sort_by(|x, y| x.0.delta_bic.total_cmp(&y.0.delta_bic));
         // A sensor whose noise is rounding (a noiseless recording) has nothing to explain.
         let res = resolution(space);
@@ -596,6 +598,7 @@ fn climb(
         let Some(best) = passing.iter().max_by(|x, y| x.0.evidence.delta_q.total_cmp(&y.0.evidence.delta_q)) else {
             break;
         };
+        let best = temperature::lowest_sufficient_degree(best, &passing);
         let indistinguishable = aliases(space, &set, best, &passing);
         let separated_by = indistinguishable.first().and_then(|other| {
             let b = space.effect_params(other);
@@ -651,6 +654,8 @@ fn aliases(
     passing
         .iter()
         .filter(|o| o.0.effect != best.0.effect && o.0.evidence.delta_q >= 0.5 * best.0.evidence.delta_q)
+        // A polynomial and its own lower degree are one family, not two explanations.
+        .filter(|o| !o.1.iter().all(|p| best.1.contains(p)) && !best.1.iter().all(|p| o.1.contains(p)))
         .filter(|o| gain_after(&best.1, &o.1) < SHARED_FEATURE * o.0.evidence.delta_q)
         .filter(|o| gain_after(&o.1, &best.1) < SHARED_FEATURE * best.0.evidence.delta_q)
         .map(|o| o.0.effect.clone())

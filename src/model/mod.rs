@@ -675,6 +675,11 @@ impl Model {
 
     /// Adds a catalogue effect (no-op when already present).
     pub fn add_effect(&mut self, id: &str) -> Result<(), ModelError> {
+        // A composite (`gyro-temp-bias+gyro-temp-bias2`: a polynomial diagnose adds as one
+        // finding) is its parts.
+        if id.contains('+') {
+            return id.split('+').try_for_each(|part| self.add_effect(part));
+        }
         if self.has(id) {
             return Ok(());
         }
