@@ -2,7 +2,7 @@
 //! profile, against the simulated truth and against the target's documented equations.
 
 use crate::common::{fit_session, run_in, run_ok};
-use crosscal::correct::{Calibration, Streaming};
+use crosscal::correct::{correct_offline, Calibration, Streaming};
 use crosscal::estimate::FitOptions;
 use crosscal::model::Model;
 use crosscal::profile::autopilot::{to_ardupilot, to_px4, AutopilotImu};
@@ -415,4 +415,224 @@ fn export_command_writes_openvins_autopilot_and_c_files() {
     assert!(err.contains("expected kalibr, rpng or calibrated"), "{err}");
     let (code, _, _) = run_in(d, &["profile", "export", path, "--to", "ardupilot", "--imu", "4", "-o", "z"]);
     assert_ne!(code, 0, "there is no fourth ArduPilot IMU in the INS_ names");
+}
+
+/// `NAME,VALUE` lines of an ArduPilot parameter file.
+fn ardupilot_params(text: &str) -> BTreeMap<String, f64> {
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| {
+            let (k, v) = l.split_once(',').unwrap_or_else(|| panic!("not NAME,VALUE: {l}"));
+            (k.to_string(), v.parse().unwrap_or_else(|e| panic!("{l}: {e}")))
+        })
+        .collect()
+}
+
+/// `1 1 NAME VALUE TYPE` lines of a QGroundControl parameter file (type 6 INT32, 9 REAL32).
+fn px4_params(text: &str) -> BTreeMap<String, f64> {
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| {
+            let f: Vec<&str> = l.split('\t').collect();
+            assert_eq!((f.len(), f[0], f[1]), (5, "1", "1"), "{l}");
+            let ty = if f[2].ends_with("_ENABLE") { "6" } else { "9" };
+            assert_eq!(f[4], ty, "{l}");
+            (f[2].to_string(), f[3].parse().unwrap_or_else(|e| panic!("{l}: {e}")))
+        })
+        .collect()
+}
+
+/// ArduPilot's thermal correction as `AP_InertialSensor::TCal::correct_sensor` evaluates it,
+/// plus the offset: the total subtracted from raw axis `i` of `sensor` ("ACC"/"GYR") at `t`,
+/// P(x) = 1e-6 (C1 d + C2 d² + C3 d³), d = x − 35, x clamped to [TMIN, TMAX], and the
+/// calibration temperature (`INS_ACC1_CALTEMP`) clamped the same way.
+fn ardupilot_offset(p: &BTreeMap<String, f64>, sensor: &str, i: usize, t: f64) -> f64 {
+    let ax = ["X", "Y", "Z"][i];
+    let (lo, hi) = (p["INS_TCAL1_TMIN"], p["INS_TCAL1_TMAX"]);
+    assert_eq!(p["INS_TCAL1_ENABLE"].to_bits(), 1f64.to_bits());
+    let poly = |x: f64| {
+        let d = x.clamp(lo, hi) - 35.0;
+        let c = |k: u8| p[&format!("INS_TCAL1_{sensor}{k}_{ax}")];
+        (c(1) + (c(2) + c(3) * d) * d) * d * 1e-6
+    };
+    let (offs, cal) = if sensor == "ACC" {
+        (p[&format!("INS_ACCOFFS_{ax}")], p["INS_ACC1_CALTEMP"])
+    } else {
+        (p[&format!("INS_GYROFFS_{ax}")], p["INS_GYR1_CALTEMP"])
+    };
+    poly(t) - poly(cal) + offs
+}
+
+/// PX4's `TemperatureCompensation::calc_thermal_offsets_3D` plus the calibration offset: the
+/// total subtracted from raw axis `i` of `sensor` ('A'/'G') at `t`.
+fn px4_offset(p: &BTreeMap<String, f64>, sensor: char, i: usize, t: f64) -> f64 {
+    let g = |k: &str| p[&format!("TC_{sensor}0_{k}")];
+    assert_eq!(p[&format!("TC_{sensor}_ENABLE")].to_bits(), 1f64.to_bits());
+    let d = if t > g("TMAX") {
+        g("TMAX") - g("TREF")
+    } else if t < g("TMIN") {
+        g("TMIN") - g("TREF")
+    } else {
+        t - g("TREF")
+    };
+    let x = |k: u8| g(&format!("X{k}_{i}"));
+    let cal = if sensor == 'A' {
+        format!("CAL_ACC0_{}OFF", AXES[i].to_ascii_uppercase())
+    } else {
+        format!("CAL_GYRO0_{}OFF", AXES[i].to_ascii_uppercase())
+    };
+    x(0) + x(1) * d + x(2) * d * d + x(3) * d * d * d + p[&cal]
+}
+
+/// A unit with a hidden cubic gyro and quadratic accelerometer temperature bias, swept over
+/// −20 … +70 °C and fitted with those terms, exported to ArduPilot and PX4: each file's thermal
+/// block, evaluated as the firmware does (`ardupilot_offset`, `px4_offset`) at 487 temperatures
+/// from 25 °C below the calibrated range to 25 °C above it, subtracts from raw samples exactly
+/// what crosscal's correction (`correct_offline`, default clamp) does — the firmware's output
+/// equals crosscal's with the scale the firmware lacks re-applied (C ω̂, diag(1/k_ii) K â) to
+/// 1e-9 of the output — inside the range and, both clamping at TMIN/TMAX, outside it. The same
+/// holds for the profile narrowed to 25 … 70 °C, where 20 °C (crosscal's reference) is outside
+/// and ArduPilot's CALTEMP and offsets move.
+#[test]
+fn thermal_blocks_reproduce_crosscal_temperature_correction() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    let truth = [
+        ("gyro.tb_x", 2e-5),
+        ("gyro.tb2_x", -3e-7),
+        ("gyro.tb3_x", 4e-9),
+        ("gyro.tb_y", 1e-5),
+        ("gyro.tb2_y", 2e-7),
+        ("gyro.tb3_y", -3e-9),
+        ("gyro.tb_z", -1e-5),
+        ("gyro.tb2_z", 1e-7),
+        ("gyro.tb3_z", 2e-9),
+        ("accel.tb_x", 1e-3),
+        ("accel.tb2_x", -2e-5),
+        ("accel.tb_y", -5e-4),
+        ("accel.tb2_y", 1e-5),
+        ("accel.tb_z", 8e-4),
+        ("accel.tb2_z", 5e-6),
+    ];
+    let effects = ["gyro-temp-bias", "gyro-temp-bias2", "gyro-temp-bias3", "accel-temp-bias", "accel-temp-bias2"];
+    let sets: Vec<String> = truth.iter().map(|(n, v)| format!("{n}={v}")).collect();
+    let mut args = vec!["simulate", "-o", "sweep", "--temperature", "-20,70"];
+    for e in effects {
+        args.extend_from_slice(&["--hidden", e]);
+    }
+    for s in &sets {
+        args.extend_from_slice(&["--set", s]);
+    }
+    run_ok(d, &args);
+    let mut args = vec!["fit", "sweep/session.json", "--out", "store"];
+    for e in effects {
+        args.extend_from_slice(&["--effect", e]);
+    }
+    run_ok(d, &args);
+    let (_, p) = crate::common::only_profile(&d.join("store"));
+    let coef = |name: &str| if name.starts_with("gyro") { p.gyro.value(name) } else { p.accel.value(name) };
+    for (name, want) in truth {
+        let got = coef(name).unwrap_or(f64::NAN);
+        assert!((got - want).abs() < 0.05 * want.abs(), "{name}: {got} vs truth {want}");
+    }
+    let [lo, hi] = p.temperature_range_c().unwrap_or([f64::NAN; 2]);
+    assert!((lo + 20.0).abs() < 0.01 && (hi - 70.0).abs() < 0.01, "{lo}..{hi}");
+
+    let worst = firmware_matches_crosscal(&p);
+    eprintln!("firmware vs crosscal, -20..70 degC: {:?}", worst.map(|w| format!("{w:.1e}")));
+    // Calibrated over 25 … 70 °C only: 20 °C is outside, so ArduPilot's CALTEMP is 25 °C and
+    // its offsets carry q(25 °C); PX4's TREF moves to 47.5 °C.
+    let mut warm = p.clone();
+    for r in &mut warm.runs {
+        r.temp_range_c = r.temp_range_c.map(|_| [25.0, 70.0]);
+    }
+    let ap = ardupilot_params(&to_ardupilot(&warm, AutopilotImu::FIRST).0);
+    assert_eq!(ap["INS_GYR1_CALTEMP"].to_bits(), 25f64.to_bits());
+    assert!((ap["INS_GYROFFS_X"] - profile_bias(&p, "gyro")[0]).abs() > 1e-5, "q(25 degC) is in the offset");
+    let worst = firmware_matches_crosscal(&warm);
+    eprintln!("firmware vs crosscal, 25..70 degC: {:?}", worst.map(|w| format!("{w:.1e}")));
+}
+
+/// Both exports of `p` evaluated as the firmware does, against crosscal's correction of the
+/// same raw samples at 487 temperatures 25 °C beyond the calibrated range on either side;
+/// returns the worst gyro and accelerometer output differences and the worst relative
+/// differences of the offsets from b + q(clamp(T)).
+fn firmware_matches_crosscal(p: &Profile) -> [f64; 4] {
+    let coef = |name: &str| if name.starts_with("gyro") { p.gyro.value(name) } else { p.accel.value(name) };
+    let [lo, hi] = p.temperature_range_c().unwrap_or([f64::NAN; 2]);
+    let (ap_text, ap_lost) = to_ardupilot(p, AutopilotImu::FIRST);
+    let (px_text, px_lost) = to_px4(p, AutopilotImu::FIRST);
+    for lost in [&ap_lost, &px_lost] {
+        assert!(!lost.iter().any(|l| l.contains("temp-bias")), "the thermal polynomial is held: {lost:?}");
+    }
+    assert!(px_lost.iter().any(|l| l.contains("TC_A0_ID")), "{px_lost:?}");
+    let ap = ardupilot_params(&ap_text);
+    let px = px4_params(&px_text);
+    assert_eq!(ap.len(), 9 + 3 + 18 + 2, "{ap_text}");
+    assert_eq!(px.len(), 9 + 2 + 2 * (3 + 12), "{px_text}");
+    assert_eq!((ap["INS_TCAL1_TMIN"].to_bits(), ap["INS_TCAL1_TMAX"].to_bits()), (lo.to_bits(), hi.to_bits()));
+    assert_eq!((px["TC_G0_TMIN"].to_bits(), px["TC_A0_TMAX"].to_bits()), (lo.to_bits(), hi.to_bits()));
+    // A quadratic accelerometer bias has no cubic term about any reference.
+    assert!(ap["INS_TCAL1_ACC3_X"].abs() < 1e-9 && px["TC_A0_X3_0"].abs() < 1e-18);
+
+    // Raw samples the firmware's offsets map to fixed outputs: crosscal must find the same.
+    let pc = profile_matrix(p, "gyro", "c");
+    let pk = profile_matrix(p, "accel", "k");
+    let (s_w, s_a) = (Vector3::new(0.3, -0.2, 0.5), Vector3::new(0.4, -0.3, 9.8));
+    let temps: Vec<f64> = (0..487).map(|k| lo - 25.0 + (hi - lo + 50.0) * k as f64 / 486.0).collect();
+    let cal = Calibration::from_profile(p).unwrap_or_else(|e| panic!("{e}"));
+    let t_s: Vec<f64> = (0..temps.len()).map(|k| k as f64 * 0.01).collect();
+    let mut worst = [0.0f64; 4];
+    for stack in ["ArduPilot", "PX4"] {
+        let off = |acc: bool, i: usize, t: f64| match (stack, acc) {
+            ("ArduPilot", true) => ardupilot_offset(&ap, "ACC", i, t),
+            ("ArduPilot", false) => ardupilot_offset(&ap, "GYR", i, t),
+            (_, true) => px4_offset(&px, 'A', i, t),
+            (_, false) => px4_offset(&px, 'G', i, t),
+        };
+        let (cw, ka) = (pc * s_w, pk * s_a);
+        let scale: [f64; 3] = std::array::from_fn(|i| match stack {
+            "ArduPilot" => ap[&format!("INS_ACCSCAL_{}", AXES[i].to_ascii_uppercase())],
+            _ => px[&format!("CAL_ACC0_{}SCALE", AXES[i].to_ascii_uppercase())],
+        });
+        let gyro: Vec<[f64; 3]> = temps.iter().map(|&t| std::array::from_fn(|i| off(false, i, t) + cw[i])).collect();
+        let accel: Vec<[f64; 3]> = temps.iter().map(|&t| std::array::from_fn(|i| off(true, i, t) + ka[i])).collect();
+        let c = correct_offline(&cal, &t_s, &gyro, &accel, Some(&temps)).unwrap_or_else(|e| panic!("{e}"));
+        let outside = temps.iter().filter(|&&t| t < lo || t > hi).count() as u64;
+        assert_eq!(c.temp_outside.samples, outside);
+        for (k, &t) in temps.iter().enumerate() {
+            let (w, a) = (Vector3::from(c.w_rad_s[k]), Vector3::from(c.a_m_s2[k]));
+            let (cw_cc, ka_cc) = (pc * w, pk * a);
+            for i in 0..3 {
+                // The firmware's own output, ω = raw − offset, a = (raw − offset)·(1/k_ii).
+                let w_fw = gyro[k][i] - off(false, i, t);
+                let a_fw = (accel[k][i] - off(true, i, t)) * scale[i];
+                let (ew, ea) = ((w_fw - cw_cc[i]).abs(), (a_fw - ka_cc[i] * scale[i]).abs());
+                assert!(ew <= 1e-9 * s_w.norm(), "{stack} gyro {i} at {t:.2} degC: {w_fw} vs crosscal {}", cw_cc[i]);
+                assert!(ea <= 1e-9 * s_a.norm(), "{stack} accel {i} at {t:.2} degC: {a_fw} vs crosscal {}", ka_cc[i]);
+                worst[0] = worst[0].max(ew);
+                worst[1] = worst[1].max(ea);
+            }
+        }
+        // The thermal part alone against the profile's polynomial about 20 °C, clamped.
+        for &t in &temps {
+            let tc = t.clamp(lo, hi) - 20.0;
+            for (i, ax) in AXES.iter().enumerate() {
+                let q = |s: &str, b: f64| {
+                    let v = |l: &str| coef(&format!("{s}.{l}_{ax}")).unwrap_or(0.0);
+                    b + v("tb") * tc + v("tb2") * tc * tc + v("tb3") * tc * tc * tc
+                };
+                let (qg, qa) = (q("gyro", profile_bias(p, "gyro")[i]), q("accel", profile_bias(p, "accel")[i]));
+                worst[2] = worst[2].max((off(false, i, t) - qg).abs() / qg.abs().max(1e-3));
+                worst[3] = worst[3].max((off(true, i, t) - qa).abs() / qa.abs().max(1e-3));
+            }
+        }
+        // Outside the range the firmware holds the edge: its offset there is the edge's.
+        for i in 0..3 {
+            assert_eq!(off(false, i, hi + 20.0).to_bits(), off(false, i, hi).to_bits(), "{stack}");
+            assert_eq!(off(true, i, lo - 20.0).to_bits(), off(true, i, lo).to_bits(), "{stack}");
+        }
+    }
+    assert!(worst[2] < 1e-9 && worst[3] < 1e-9, "thermal offsets vs the profile's polynomial: {worst:?}");
+    worst
 }

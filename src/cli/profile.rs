@@ -64,9 +64,10 @@ What the target cannot hold is listed on stderr and in the file's header.")]
         /// Target format: `imucal`, `kalibr` (imu.yaml), `vins-fusion` or `orb-slam3` (their IMU
         /// noise blocks: continuous-time densities from the profile's noise section), `openvins`
         /// (kalibr_imu_chain.yaml: noise, Tw/Ta/Tg and the rotations), `ardupilot` (.param:
-        /// INS_ACCOFFS/INS_ACCSCAL/INS_GYROFFS), `px4` (QGroundControl .params: CAL_ACCn_*OFF,
-        /// CAL_ACCn_*SCALE, CAL_GYROn_*OFF) or `c-header` (a C99 function correcting like
-        /// crosscal's streaming corrector).
+        /// INS_ACCOFFS/INS_ACCSCAL/INS_GYROFFS, and INS_TCALn_* for temperature-bias terms),
+        /// `px4` (QGroundControl .params: CAL_ACCn_*OFF, CAL_ACCn_*SCALE, CAL_GYROn_*OFF, and
+        /// TC_An_*/TC_Gn_* for temperature-bias terms) or `c-header` (a C99 function correcting
+        /// like crosscal's streaming corrector).
         #[arg(long)]
         to: String,
         /// Output file (never overwritten).
