@@ -324,3 +324,35 @@ fn diagnose_finds_each_temperature_term_at_its_true_degree_and_nothing_on_a_clea
     let out = run_ok(d, &["check", "held/session.json", "--profile", &path.to_string_lossy()]);
     assert!(out.contains("PASS") && out.matches("yes (noise-limited)").count() == 6, "{out}");
 }
+
+/// `accept` judges temperature behaviour: the bias change the fitted polynomial makes over
+/// the calibrated range, and the range the calibration covers.
+#[test]
+fn accept_rules_on_temperature_behaviour() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    simulate(d, "cal", "10,40");
+    run_ok(d, &["fit", "cal/session.json", "--effect", "gyro-temp-bias", "--out", "store"]);
+    let (path, _) = crate::common::only_profile(&d.join("store"));
+    let prof = path.to_string_lossy().to_string();
+    // The y axis: |tb_y| = 2e-4 rad/s/°C over 30 °C is a change of 6e-3 rad/s, the largest.
+    let judge = |rule: &str| {
+        std::fs::write(d.join("rules.json"), format!(r#"{{"format":"crosscal-rules/1","rules":[{rule}]}}"#))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let (code, out, err) = run_in(d, &["accept", &prof, "--rules", "rules.json"]);
+        (code, format!("{out}{err}"))
+    };
+    let (code, out) = judge(r#"{"kind":"temperature","sensor":"gyro","max_bias_change":7e-3}"#);
+    assert_eq!(code, 0, "{out}");
+    assert!(out.contains("6.0000e-3 (axis y)"), "{out}");
+    let (code, out) = judge(r#"{"kind":"temperature","sensor":"gyro","max_bias_change":5e-3}"#);
+    assert_eq!(code, 1, "a 6e-3 change must fail a 5e-3 limit: {out}");
+    let (code, out) = judge(r#"{"kind":"temperature","sensor":"gyro","covers_c":[15,35]}"#);
+    assert_eq!(code, 0, "{out}");
+    let (code, out) = judge(r#"{"kind":"temperature","sensor":"gyro","covers_c":[-20,70]}"#);
+    assert_eq!(code, 1, "10..40 does not cover -20..70: {out}");
+    let (code, out) = judge(r#"{"kind":"temperature","sensor":"accel","max_bias_change":1}"#);
+    assert_eq!(code, 1, "no accelerometer temperature terms: unknown, not passed: {out}");
+    let (code, out) = judge(r#"{"kind":"temperature","sensor":"gyro","max_bias_chnge":1}"#);
+    assert_eq!(code, 20, "a misspelt field is refused: {out}");
+}

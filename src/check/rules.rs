@@ -1,6 +1,7 @@
 //! Acceptance rules (JSON) for a unit's calibration: bounds on coefficients, on their
 //! standard errors, on the measured noise, on the corrected residual and reduction factors,
-//! and on model adequacy.
+//! on temperature behaviour (bias change over the calibrated range, the range covered) and
+//! on model adequacy.
 //!
 //! ```json
 //! { "format": "crosscal-rules/1",
@@ -10,6 +11,7 @@
 //!     { "kind": "noise", "sensor": "gyro", "term": "white", "max": 0.2, "unit": "deg/sqrt(h)" },
 //!     { "kind": "residual", "sensor": "accel", "max_pct": 0.01 },
 //!     { "kind": "reduction", "sensor": "gyro", "min": 10 },
+//!     { "kind": "temperature", "sensor": "gyro", "max_bias_change": 1e-3, "covers_c": [-20, 70] },
 //!     { "kind": "adequate" } ] }
 //! ```
 //!
@@ -101,6 +103,21 @@ pub enum Rule {
         sensor: SensorKind,
         /// Smallest reduction over axes; noise-limited axes pass.
         min: f64,
+        /// Rule name.
+        #[serde(default)]
+        name: Option<String>,
+    },
+    /// Temperature behaviour from the profile's temperature-bias polynomial: the bias change
+    /// over the calibrated range, and the range the calibration covers.
+    Temperature {
+        /// `gyro` or `accel`.
+        sensor: SensorKind,
+        /// Largest change of any axis's bias across the calibrated range, SI (rad/s, m/s²).
+        #[serde(default)]
+        max_bias_change: Option<f64>,
+        /// The range, °C, the calibration must cover ([lowest, highest]).
+        #[serde(default)]
+        covers_c: Option<[f64; 2]>,
         /// Rule name.
         #[serde(default)]
         name: Option<String>,
@@ -463,6 +480,64 @@ fn adequate_rule(ev: &Evidence<'_>, label: String) -> Outcome {
     }
 }
 
+/// The temperature rule: the calibrated range must cover `covers_c`, and each axis's bias
+/// b(T) = Σₖ tbₖ (T − 20)ᵏ (the profile's temperature-bias terms of degree 1–3) may change by
+/// at most `max_change` across the calibrated range (evaluated on 401 points).
+fn temperature_rule(
+    profile: &Profile,
+    sensor: SensorKind,
+    max_change: Option<f64>,
+    covers: Option<[f64; 2]>,
+    label: String,
+) -> Outcome {
+    let Some([lo, hi]) = profile.temperature_range_c() else {
+        return (label, false, "the profile records no temperature (its runs had no temp column)".into());
+    };
+    let mut detail = vec![format!("calibrated over {lo:.1}..{hi:.1} degC")];
+    let mut pass = true;
+    if let Some([a, b]) = covers {
+        let ok = lo <= a && hi >= b;
+        pass &= ok;
+        detail.push(format!("must cover {a:.1}..{b:.1} degC: {}", if ok { "yes" } else { "NO" }));
+    }
+    if let Some(max) = max_change {
+        let fit = profile.sensor(sensor);
+        let coef = |k: &str, ax: char| fit.value(&format!("{}.{k}_{ax}", sensor.as_str()));
+        let any = crate::units::AXES.iter().any(|&ax| ["tb", "tb2", "tb3"].iter().any(|k| coef(k, ax).is_some()));
+        if !any {
+            return (
+                label,
+                false,
+                format!(
+                    "the profile has no {sensor} temperature-bias terms: the bias change over the range is unknown"
+                ),
+            );
+        }
+        let (mut worst, mut at) = (0.0_f64, 'x');
+        for ax in crate::units::AXES {
+            let c = ["tb", "tb2", "tb3"].map(|k| coef(k, ax).unwrap_or(0.0));
+            let bias = |t: f64| {
+                let d = t - crate::model::T_REF_C;
+                ((c[2] * d + c[1]) * d + c[0]) * d
+            };
+            let (mut min, mut maxv) = (f64::INFINITY, f64::NEG_INFINITY);
+            for i in 0..=400 {
+                let v = bias(lo + (hi - lo) * f64::from(i) / 400.0);
+                min = min.min(v);
+                maxv = maxv.max(v);
+            }
+            if maxv - min > worst {
+                worst = maxv - min;
+                at = ax;
+            }
+        }
+        let ok = worst <= max;
+        pass &= ok;
+        detail.push(format!("largest bias change {worst:.4e} (axis {at}) against {max:.4e}"));
+    }
+    (label, pass, detail.join("; "))
+}
+
 /// Evaluates every rule on a profile and what was checked on its session.
 pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<RuleResult> {
     let coefs: Vec<&crate::estimate::Coefficient> =
@@ -501,6 +576,13 @@ pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<Rule
                     reduction_rule(ev, *sensor, *min, name.clone().unwrap_or_else(|| format!("{sensor} reduction")))
                 }
                 Rule::Adequate { name } => adequate_rule(ev, name.clone().unwrap_or_else(|| "model adequate".into())),
+                Rule::Temperature { sensor, max_bias_change, covers_c, name } => temperature_rule(
+                    profile,
+                    *sensor,
+                    *max_bias_change,
+                    *covers_c,
+                    name.clone().unwrap_or_else(|| format!("{sensor} temperature")),
+                ),
             };
             RuleResult { rule, pass, detail }
         })
