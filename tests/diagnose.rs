@@ -21,7 +21,7 @@ pub fn hidden(effect: &str, values: &[(&str, f64)], seed: u64) -> (SimConfig, Se
     if !effect.is_empty() {
         cfg.truth.model.add_effect(effect).unwrap();
         if effect.contains("temp") {
-            cfg.temperature_c = Some((15.0, 35.0));
+            cfg.temperature_c = Some(vec![15.0, 35.0]);
         }
     }
     for (n, v) in values {

@@ -132,7 +132,7 @@ fn csv_correction_streams_the_same_bits_as_the_in_memory_corrector() {
     let mut c = noisy_cones(&[10.0, -20.0], 2, 25.0);
     let tmp = tempfile::tempdir().unwrap();
     let plain = write_session(&c.generate(), &tmp.path().join("plain")).unwrap();
-    c.temperature_c = Some((20.0, 30.0));
+    c.temperature_c = Some(vec![20.0, 30.0]);
     let warm = write_session(&c.generate(), &tmp.path().join("warm")).unwrap();
     // A fitted linear calibration; and one with a dead zone wide enough to catch the rates'
     // zero crossings (flags), on the recording with a temp column.

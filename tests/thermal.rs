@@ -356,3 +356,35 @@ fn accept_rules_on_temperature_behaviour() {
     let (code, out) = judge(r#"{"kind":"temperature","sensor":"gyro","max_bias_chnge":1}"#);
     assert_eq!(code, 20, "a misspelt field is refused: {out}");
 }
+
+/// `simulate --temperature` takes breakpoints: a sweep that warms then cools, and plateaus.
+#[test]
+fn simulated_temperature_follows_its_breakpoints() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    run_ok(d, &["simulate", "-o", "wc", "--temperature", "10,40,10"]);
+    let s = Session::load(&d.join("wc/session.json")).unwrap_or_else(|e| panic!("{e}"));
+    let temps: Vec<f64> = s.runs.iter().flat_map(|r| r.rec.temp_c.clone().unwrap_or_default()).collect();
+    let (first, last) = (temps[0], temps[temps.len() - 1]);
+    let peak = temps.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let at_peak = temps.iter().position(|&t| t >= peak).unwrap_or(0);
+    assert!(
+        (first - 10.0).abs() < 1e-9 && (last - 10.0).abs() < 0.01 && (peak - 40.0).abs() < 0.01,
+        "{first} {peak} {last}"
+    );
+    assert!(
+        (at_peak as f64 / temps.len() as f64 - 0.5).abs() < 0.01,
+        "the peak is half-way: sample {at_peak} of {}",
+        temps.len()
+    );
+    assert!(temps[..at_peak].windows(2).all(|w| w[1] >= w[0]) && temps[at_peak..].windows(2).all(|w| w[1] <= w[0]));
+    run_ok(d, &["simulate", "-o", "plateau", "--temperature", "20,20,60,60"]);
+    let s = Session::load(&d.join("plateau/session.json")).unwrap_or_else(|e| panic!("{e}"));
+    let temps: Vec<f64> = s.runs.iter().flat_map(|r| r.rec.temp_c.clone().unwrap_or_default()).collect();
+    let n = temps.len();
+    assert!(temps[..n / 3 - 1].iter().all(|&t| (t - 20.0).abs() < 1e-9), "first third at 20 °C");
+    assert!(temps[2 * n / 3 + 1..].iter().all(|&t| (t - 60.0).abs() < 1e-9), "last third at 60 °C");
+    let (code, _, err) = run_in(d, &["simulate", "-o", "bad", "--temperature", "25"]);
+    assert_ne!(code, 0, "{err}");
+    assert!(err.contains("--temperature expects"), "{err}");
+}

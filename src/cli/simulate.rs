@@ -44,7 +44,9 @@ pub struct Args {
     /// Set a true coefficient, NAME=VALUE in SI units (repeatable), e.g. gyro.g_xx=1.8e-5.
     #[arg(long = "set", value_parser = parse_set)]
     set: Vec<(String, f64)>,
-    /// Temperature ramp over the session, START,END in °C (adds a temp column).
+    /// Temperature over the session, °C: START,END (a ramp) or more breakpoints evenly spaced
+    /// in time, linear between them (10,40,10 warms then cools; 20,20,60,60 plateau, ramp,
+    /// plateau); adds a temp column.
     #[arg(long, value_parser = parse_list, allow_hyphen_values = true)]
     temperature: Option<List>,
     /// Gyro angle random walk (white noise), °/√h.
@@ -177,10 +179,10 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         cfg.truth.values.insert(name.clone(), *v);
     }
     if let Some(List(t)) = &a.temperature {
-        match t.as_slice() {
-            [a, b] => cfg.temperature_c = Some((*a, *b)),
-            _ => anyhow::bail!("--temperature expects START,END in °C"),
+        if t.len() < 2 || t.iter().any(|v| !(-100.0..=300.0).contains(v)) {
+            anyhow::bail!("--temperature expects START,END (or more breakpoints) in °C, each within -100..300");
         }
+        cfg.temperature_c = Some(t.clone());
     }
     crosscal::simulate::check_runs(&cfg.runs, cfg.sample_rate_hz).map_err(anyhow::Error::msg)?;
     let session = cfg.generate();

@@ -150,9 +150,10 @@ pub struct SimConfig {
     pub g_m_s2: f64,
     /// Random seed.
     pub seed: u64,
-    /// Temperature ramp over the whole session (start, end), °C: when set, every run gets a
-    /// `temp` column.
-    pub temperature_c: Option<(f64, f64)>,
+    /// Temperature over the whole session, °C: breakpoints evenly spaced in time from its
+    /// start to its end, linear between them (`[start, end]` is a ramp; `[10, 40, 10]` warms
+    /// then cools; `[t, t]` a plateau); when set, every run gets a `temp` column.
+    pub temperature_c: Option<Vec<f64>>,
     /// Coloured noise added to each gyro axis (rad/s), on top of the white per-sample noise.
     pub gyro_process: noise::NoiseProcess,
     /// Coloured noise added to each accelerometer axis (m/s²).
@@ -284,9 +285,9 @@ impl SimConfig {
             let coloured = !(self.gyro_process.is_zero() && self.accel_process.is_zero());
             rec.gyro.reserve(n);
             rec.accel.reserve(n);
-            if let Some((t0, t1)) = self.temperature_c {
+            if let Some(points) = self.temperature_c.as_deref().filter(|p| !p.is_empty()) {
                 // Rounded to 1 mK, as a stand's sensor would log it.
-                let temp = |t: f64| ((t0 + (t1 - t0) * (elapsed + t) / total) * 1000.0).round() / 1000.0;
+                let temp = |t: f64| (piecewise(points, (elapsed + t) / total) * 1000.0).round() / 1000.0;
                 rec.temp_c = Some(rec.t_s.iter().map(|&t| temp(t)).collect());
             }
             for k in 0..n {
@@ -392,4 +393,16 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
 fn state_at(tr: &crate::motion::Track, k: usize, temp_c: f64) -> State {
     let x = tr.at(k);
     State { t_session_s: tr.t_s[k], w: x.w_rad_s.xyz, e: x.e_rad_s2.xyz, a: x.a_m_s2.xyz, temp_c }
+}
+
+/// The piecewise-linear value at `pos` (0 … 1 over the whole) of breakpoints evenly spaced
+/// from 0 to 1 (one breakpoint: a constant).
+fn piecewise(points: &[f64], pos: f64) -> f64 {
+    let m = points.len().saturating_sub(1);
+    if m == 0 {
+        return points.first().copied().unwrap_or(f64::NAN);
+    }
+    let x = pos.clamp(0.0, 1.0) * m as f64;
+    let i = (x.floor() as usize).min(m - 1);
+    points[i] + (points[i + 1] - points[i]) * (x - i as f64)
 }
