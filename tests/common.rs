@@ -150,6 +150,31 @@ pub fn small_session(dir: &std::path::Path, fit: bool) {
     }
 }
 
+/// `crosscal simulate -o out` of the paper's unit with the `hidden` catalogue effects at the
+/// `truth` values (NAME, SI value) and `extra` arguments (`--temperature …`, noise, seed).
+pub fn simulate_hidden(dir: &std::path::Path, out: &str, hidden: &[&str], truth: &[(String, f64)], extra: &[&str]) {
+    let sets: Vec<String> = truth.iter().map(|(n, v)| format!("{n}={v}")).collect();
+    let mut args = vec!["simulate", "-o", out];
+    args.extend_from_slice(extra);
+    for e in hidden {
+        args.extend_from_slice(&["--hidden", e]);
+    }
+    for s in &sets {
+        args.extend_from_slice(&["--set", s]);
+    }
+    run_ok(dir, &args);
+}
+
+/// `crosscal fit SESSION --effect …` into `dir/store`; the unit's latest profile (path, profile).
+pub fn fit_into_store(dir: &std::path::Path, session: &str, effects: &[&str]) -> (std::path::PathBuf, Profile) {
+    let mut args = vec!["fit", session, "--out", "store"];
+    for e in effects {
+        args.extend_from_slice(&["--effect", e]);
+    }
+    run_ok(dir, &args);
+    only_profile(&dir.join("store"))
+}
+
 /// The latest profile of the one unit in the store `store` (its path and contents).
 pub fn only_profile(store: &std::path::Path) -> (std::path::PathBuf, Profile) {
     let unit = std::fs::read_dir(store)

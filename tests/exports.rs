@@ -515,21 +515,9 @@ fn thermal_blocks_reproduce_crosscal_temperature_correction() {
         ("accel.tb2_z", 5e-6),
     ];
     let effects = ["gyro-temp-bias", "gyro-temp-bias2", "gyro-temp-bias3", "accel-temp-bias", "accel-temp-bias2"];
-    let sets: Vec<String> = truth.iter().map(|(n, v)| format!("{n}={v}")).collect();
-    let mut args = vec!["simulate", "-o", "sweep", "--temperature", "-20,70"];
-    for e in effects {
-        args.extend_from_slice(&["--hidden", e]);
-    }
-    for s in &sets {
-        args.extend_from_slice(&["--set", s]);
-    }
-    run_ok(d, &args);
-    let mut args = vec!["fit", "sweep/session.json", "--out", "store"];
-    for e in effects {
-        args.extend_from_slice(&["--effect", e]);
-    }
-    run_ok(d, &args);
-    let (_, p) = crate::common::only_profile(&d.join("store"));
+    let owned: Vec<(String, f64)> = truth.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    crate::common::simulate_hidden(d, "sweep", &effects, &owned, &["--temperature", "-20,70"]);
+    let (_, p) = crate::common::fit_into_store(d, "sweep/session.json", &effects);
     let coef = |name: &str| if name.starts_with("gyro") { p.gyro.value(name) } else { p.accel.value(name) };
     for (name, want) in truth {
         let got = coef(name).unwrap_or(f64::NAN);

@@ -149,32 +149,11 @@ fn a_cubic_temperature_bias_is_recovered_term_by_term() {
         ("gyro.tb2_z", 1e-7),
         ("gyro.tb3_z", 2e-9),
     ];
-    let sets: Vec<String> = truth.iter().map(|(n, v)| format!("{n}={v}")).collect();
-    let mut args =
-        vec!["simulate", "-o", "sweep", "--temperature", "-20,70", "--gyro-noise", "0.002", "--accel-noise", "0.0002"];
-    for e in ["gyro-temp-bias", "gyro-temp-bias2", "gyro-temp-bias3"] {
-        args.extend_from_slice(&["--hidden", e]);
-    }
-    for s in &sets {
-        args.extend_from_slice(&["--set", s]);
-    }
-    run_ok(d, &args);
-    run_ok(
-        d,
-        &[
-            "fit",
-            "sweep/session.json",
-            "--effect",
-            "gyro-temp-bias",
-            "--effect",
-            "gyro-temp-bias2",
-            "--effect",
-            "gyro-temp-bias3",
-            "--out",
-            "store",
-        ],
-    );
-    let (_, p) = crate::common::only_profile(&d.join("store"));
+    let owned: Vec<(String, f64)> = truth.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let effects = ["gyro-temp-bias", "gyro-temp-bias2", "gyro-temp-bias3"];
+    let sweep = ["--temperature", "-20,70", "--gyro-noise", "0.002", "--accel-noise", "0.0002"];
+    crate::common::simulate_hidden(d, "sweep", &effects, &owned, &sweep);
+    let (_, p) = crate::common::fit_into_store(d, "sweep/session.json", &effects);
     for (name, want) in truth {
         let c = p.gyro.get(name).unwrap_or_else(|| panic!("{name} missing"));
         let se = c.std_error.unwrap_or(f64::INFINITY);
@@ -200,23 +179,10 @@ fn a_curved_scale_factor_tempco_is_recovered_term_by_term() {
             })
         })
         .collect();
-    let sets: Vec<String> = truth.iter().map(|(n, v)| format!("{n}={v}")).collect();
-    let mut args =
-        vec!["simulate", "-o", "sweep", "--temperature", "-20,70", "--gyro-noise", "0.002", "--accel-noise", "0.0002"];
     let effects = ["gyro-temp-scale", "gyro-temp-scale2", "accel-temp-scale", "accel-temp-scale2"];
-    for e in effects {
-        args.extend_from_slice(&["--hidden", e]);
-    }
-    for s in &sets {
-        args.extend_from_slice(&["--set", s]);
-    }
-    run_ok(d, &args);
-    let mut fit = vec!["fit", "sweep/session.json", "--out", "store"];
-    for e in effects {
-        fit.extend_from_slice(&["--effect", e]);
-    }
-    run_ok(d, &fit);
-    let (_, p) = crate::common::only_profile(&d.join("store"));
+    let sweep = ["--temperature", "-20,70", "--gyro-noise", "0.002", "--accel-noise", "0.0002"];
+    crate::common::simulate_hidden(d, "sweep", &effects, &truth, &sweep);
+    let (_, p) = crate::common::fit_into_store(d, "sweep/session.json", &effects);
     for (name, want) in &truth {
         let sensor = if name.starts_with("gyro") { &p.gyro } else { &p.accel };
         let c = sensor.get(name).unwrap_or_else(|| panic!("{name} missing"));
@@ -228,57 +194,37 @@ fn a_curved_scale_factor_tempco_is_recovered_term_by_term() {
 
 /// The unit of the issue: gyro bias cubic, accelerometer bias quadratic, gyro scale linear in
 /// temperature, over a −20 … +70 °C sweep.
-const SWEEP_UNIT: [&str; 18] = [
-    "gyro.tb_x=2e-5",
-    "gyro.tb2_x=-3e-7",
-    "gyro.tb3_x=4e-9",
-    "gyro.tb_y=1e-5",
-    "gyro.tb2_y=2e-7",
-    "gyro.tb3_y=-3e-9",
-    "gyro.tb_z=-1e-5",
-    "gyro.tb2_z=1e-7",
-    "gyro.tb3_z=2e-9",
-    "accel.tb_x=1e-4",
-    "accel.tb2_x=-2e-6",
-    "accel.tb_y=-1e-4",
-    "accel.tb2_y=1e-6",
-    "accel.tb_z=5e-5",
-    "accel.tb2_z=3e-6",
-    "gyro.ts_x=1e-4",
-    "gyro.ts_y=-1e-4",
-    "gyro.ts_z=2e-4",
+const SWEEP_UNIT: [(&str, f64); 18] = [
+    ("gyro.tb_x", 2e-5),
+    ("gyro.tb2_x", -3e-7),
+    ("gyro.tb3_x", 4e-9),
+    ("gyro.tb_y", 1e-5),
+    ("gyro.tb2_y", 2e-7),
+    ("gyro.tb3_y", -3e-9),
+    ("gyro.tb_z", -1e-5),
+    ("gyro.tb2_z", 1e-7),
+    ("gyro.tb3_z", 2e-9),
+    ("accel.tb_x", 1e-4),
+    ("accel.tb2_x", -2e-6),
+    ("accel.tb_y", -1e-4),
+    ("accel.tb2_y", 1e-6),
+    ("accel.tb_z", 5e-5),
+    ("accel.tb2_z", 3e-6),
+    ("gyro.ts_x", 1e-4),
+    ("gyro.ts_y", -1e-4),
+    ("gyro.ts_z", 2e-4),
 ];
 
+/// The effects [`SWEEP_UNIT`] sets.
+const SWEEP_EFFECTS: [&str; 6] =
+    ["gyro-temp-bias", "gyro-temp-bias2", "gyro-temp-bias3", "accel-temp-bias", "accel-temp-bias2", "gyro-temp-scale"];
+
+/// The sweep unit (or, with `hidden` false, a unit without temperature terms) over `temps`.
 fn simulate_sweep(d: &std::path::Path, out: &str, temps: &str, seed: &str, hidden: bool) {
-    let mut args = vec![
-        "simulate",
-        "-o",
-        out,
-        "--temperature",
-        temps,
-        "--seed",
-        seed,
-        "--gyro-noise",
-        "0.002",
-        "--accel-noise",
-        "0.0002",
-    ];
-    if hidden {
-        for e in [
-            "gyro-temp-bias",
-            "gyro-temp-bias2",
-            "gyro-temp-bias3",
-            "accel-temp-bias",
-            "accel-temp-bias2",
-            "gyro-temp-scale",
-        ] {
-            args.extend_from_slice(&["--hidden", e]);
-        }
-        for s in SWEEP_UNIT {
-            args.extend_from_slice(&["--set", s]);
-        }
-    }
-    run_ok(d, &args);
+    let extra = ["--temperature", temps, "--seed", seed, "--gyro-noise", "0.002", "--accel-noise", "0.0002"];
+    let truth: Vec<(String, f64)> = SWEEP_UNIT.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let (hidden, truth): (&[&str], &[(String, f64)]) = if hidden { (&SWEEP_EFFECTS, &truth) } else { (&[], &[]) };
+    crate::common::simulate_hidden(d, out, hidden, truth, &extra);
 }
 
 fn steps(d: &std::path::Path, session: &str) -> Vec<String> {
@@ -314,12 +260,7 @@ fn diagnose_finds_each_temperature_term_at_its_true_degree_and_nothing_on_a_clea
     }
     assert_eq!(false_discoveries, 0, "effects found on clean sweeps");
     // Fit what diagnose found; a run at 0 … 60 °C the fit never saw is corrected to the noise.
-    let mut fit = vec!["fit", "sweep1/session.json", "--out", "store"];
-    for e in want {
-        fit.extend_from_slice(&["--effect", e]);
-    }
-    run_ok(d, &fit);
-    let (path, _) = crate::common::only_profile(&d.join("store"));
+    let (path, _) = crate::common::fit_into_store(d, "sweep1/session.json", &want);
     simulate_sweep(d, "held", "0,60", "9", true);
     let out = run_ok(d, &["check", "held/session.json", "--profile", &path.to_string_lossy()]);
     assert!(out.contains("PASS") && out.matches("yes (noise-limited)").count() == 6, "{out}");
