@@ -26,7 +26,7 @@ struct Expect {
     samples: u64,
     rate_hz: f64,
     span_s: f64,
-    temp_c: Option<(f64, f64)>,
+    temp_c: Option<[f64; 2]>,
     sample: Option<(Option<i64>, [f64; 3], [f64; 3])>,
 }
 
@@ -59,7 +59,7 @@ fn check_file(rel: &str, format: LogFormat, expect: &[Expect], applied: &[&str])
             e.span_s
         );
         match (s.temp_c, e.temp_c) {
-            (Some((lo, hi)), Some((elo, ehi))) => {
+            (Some([lo, hi]), Some([elo, ehi])) => {
                 assert!(close(lo, elo, 0.06) && close(hi, ehi, 0.06), "{rel} {}: temperature {lo}..{hi}", e.name)
             }
             (None, None) => {}
@@ -127,7 +127,7 @@ fn px4_ulogs_read_as_their_readme_says() {
         }],
         &["CAL_ACC0_XOFF", "CAL_GYRO0_XOFF", "SENS_BOARD_ROT"],
     );
-    let imu = |name: &'static str, t: (f64, f64)| Expect {
+    let imu = |name: &'static str, t: [f64; 2]| Expect {
         name,
         samples: 6,
         rate_hz: 1.0,
@@ -147,9 +147,9 @@ fn px4_ulogs_read_as_their_readme_says() {
                 temp_c: None,
                 sample: Some((Some(20_971_931_000), [0.00184, -0.00114, -0.00328], [-0.04115, -0.17096, -9.59200])),
             },
-            imu("sensor_accel+gyro[0]", (40.0, 40.4)),
-            imu("sensor_accel+gyro[1]", (28.2, 28.4)),
-            imu("sensor_accel+gyro[2]", (29.4, 29.7)),
+            imu("sensor_accel+gyro[0]", [40.0, 40.4]),
+            imu("sensor_accel+gyro[1]", [28.2, 28.4]),
+            imu("sensor_accel+gyro[2]", [29.4, 29.7]),
         ],
         &["CAL_ACC0_XOFF", "TC_A_ENABLE", "SENS_BOARD_ROT"],
     );
@@ -176,7 +176,7 @@ fn ardupilot_dataflash_logs_read_as_their_readme_says() {
                 samples: 1258,
                 rate_hz: 24.8,
                 span_s: 50.86,
-                temp_c: Some((27.2, 27.7)),
+                temp_c: Some([27.2, 27.7]),
                 sample: Some((Some(402_644_506_000), [-0.07747, -0.09213, 0.01890], [-0.11938, 0.24224, -10.21316])),
             },
             Expect {
@@ -199,7 +199,7 @@ fn ardupilot_dataflash_logs_read_as_their_readme_says() {
                 samples: 10,
                 rate_hz: 24.6,
                 span_s: 0.37,
-                temp_c: Some((37.3, 37.3)),
+                temp_c: Some([37.3, 37.3]),
                 sample: Some((Some(140_209_868_000), [0.00534, -0.00323, -0.00053], [0.61293, 0.86727, -9.76368])),
             },
             Expect {
@@ -207,7 +207,7 @@ fn ardupilot_dataflash_logs_read_as_their_readme_says() {
                 samples: 10,
                 rate_hz: 24.6,
                 span_s: 0.37,
-                temp_c: Some((28.5, 28.5)),
+                temp_c: Some([28.5, 28.5]),
                 sample: Some((Some(140_209_868_000), [0.00356, 0.00084, -0.00088], [0.48838, 0.91392, -9.73778])),
             },
             Expect { name: "ISBG[0]", samples: 576, rate_hz: 2000.3, span_s: 0.2875, temp_c: None, sample: None },

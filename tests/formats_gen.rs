@@ -363,7 +363,7 @@ fn a_dataflash_log_with_garbage_and_a_cut_record_reads_every_whole_sample() {
     let names: Vec<&str> = c.streams.iter().map(|s| s.name.as_str()).collect();
     assert_eq!(names, ["IMU[0]", "IMU[1]"]);
     assert_eq!((stats[0].samples, stats[1].samples), (N as u64, N as u64));
-    assert_eq!(stats[1].temp_c, Some((31.0, 31.0)));
+    assert_eq!(stats[1].temp_c, Some([31.0, 31.0]));
     assert!(c.warnings.iter().any(|w| w.contains("4 bytes") && w.contains("skipped")), "{:?}", c.warnings);
     assert!(
         c.warnings.iter().any(|w| w.contains("cut") && w.contains(&format!("byte {}", b.len() - 20))),

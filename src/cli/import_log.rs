@@ -87,7 +87,7 @@ fn print_list(file: &Path, c: &Contents, stats: &[StreamStats]) -> anyhow::Resul
         "temp degC"
     );
     for (s, st) in c.streams.iter().zip(stats) {
-        let temp = st.temp_c.map_or("-".to_string(), |(lo, hi)| format!("{lo:.1}..{hi:.1}"));
+        let temp = st.temp_c.map_or("-".to_string(), |[lo, hi]| format!("{lo:.1}..{hi:.1}"));
         let f = &st.first;
         let v = |x: [f64; 3]| {
             if x.iter().all(|v| v.is_nan()) {

@@ -70,7 +70,7 @@ impl TempOutside {
         if self.first.is_none() {
             self.first = Some((t_s, temp_c));
         }
-        self.extent_c = Some(self.extent_c.map_or([temp_c, temp_c], |[a, b]| [a.min(temp_c), b.max(temp_c)]));
+        self.extent_c = crate::stats::widen(self.extent_c, temp_c);
         match self.policy {
             TempPolicy::Clamp => temp_c.clamp(lo, hi),
             TempPolicy::Extrapolate | TempPolicy::Error => temp_c,

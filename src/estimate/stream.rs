@@ -273,10 +273,7 @@ impl StreamRun<'_> {
                 if !has_temp {
                     row.temp_c = self.spec.temperature_c.unwrap_or(f64::NAN);
                 }
-                if row.temp_c.is_finite() {
-                    let t = row.temp_c;
-                    temps = Some(temps.map_or([t, t], |[lo, hi]| [lo.min(t), hi.max(t)]));
-                }
+                temps = crate::stats::widen(temps, row.temp_c);
                 if let Some(w) = &mut spill {
                     if std::io::Write::write_all(w, &spill_record(&row)).is_err() {
                         spill = None;

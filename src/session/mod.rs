@@ -214,10 +214,7 @@ pub struct RunUsed {
 
 /// The lowest and highest finite value of `temps` (None when there is none).
 pub fn temp_range(temps: impl IntoIterator<Item = f64>) -> Option<[f64; 2]> {
-    temps.into_iter().filter(|t| t.is_finite()).fold(None, |r, t| match r {
-        None => Some([t, t]),
-        Some([lo, hi]) => Some([lo.min(t), hi.max(t)]),
-    })
+    temps.into_iter().fold(None, crate::stats::widen)
 }
 
 /// One run as declared in the manifest.

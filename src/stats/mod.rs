@@ -20,6 +20,14 @@ pub use qr::QrAccumulator;
 /// median absolute deviation into the standard deviation of Gaussian data.
 pub const MAD_TO_SIGMA: f64 = 1.4826;
 
+/// `range` ([lowest, highest]) widened to hold `x`; a non-finite `x` leaves it as it is.
+pub fn widen(range: Option<[f64; 2]>, x: f64) -> Option<[f64; 2]> {
+    if !x.is_finite() {
+        return range;
+    }
+    Some(range.map_or([x, x], |[lo, hi]| [lo.min(x), hi.max(x)]))
+}
+
 /// The median of `v` by selection (O(n), reorders `v`): for an even count the upper of the
 /// two middle values (element n/2 of the sorted values), so that every median in crosscal
 /// is one of the data and the same whatever the caller. `None` when `v` is empty.

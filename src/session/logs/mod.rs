@@ -217,7 +217,7 @@ pub struct StreamStats {
     /// Median sample interval, s (over the first 20 000 intervals).
     pub median_dt_s: f64,
     /// Temperature range, °C, when the stream reports one (all-zero = not reported).
-    pub temp_c: Option<(f64, f64)>,
+    pub temp_c: Option<[f64; 2]>,
     /// The first sample.
     pub first: LogSample,
     /// Intervals longer than 5 × the median (dropouts), and their total, s.
@@ -261,7 +261,7 @@ struct StatsAcc {
     first: Option<LogSample>,
     last_ns: i64,
     dts: Vec<f64>,
-    temp: Option<(f64, f64)>,
+    temp: Option<[f64; 2]>,
     any_temp_nonzero: bool,
     big_gaps: Vec<f64>,
     median: Option<f64>,
@@ -286,7 +286,7 @@ impl StatsAcc {
         self.last_ns = s.t_ns;
         if let Some(t) = s.temp_c {
             self.any_temp_nonzero |= t != 0.0;
-            self.temp = Some(self.temp.map_or((t, t), |(lo, hi)| (lo.min(t), hi.max(t))));
+            self.temp = crate::stats::widen(self.temp, t);
         }
         // Keep only intervals that may be gaps once the median is known (bounded list).
         if self.dts.len() == MEDIAN_WINDOW && self.big_gaps.len() > 4096 {

@@ -223,7 +223,7 @@ fn write_recording(
         writeln!(w, "{}", crate::session::recording_header(has_temp, false))?;
         let mut line = CsvLine::new();
         let mut last_t = f64::NEG_INFINITY;
-        let mut last_temp = st.temp_c.map_or(0.0, |r| r.0);
+        let mut last_temp = st.temp_c.map_or(0.0, |r| r[0]);
         let mut sink = |i: usize, s: &LogSample| -> Result<(), SessionError> {
             if i != idx {
                 return Ok(());
