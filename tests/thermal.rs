@@ -327,5 +327,5 @@ fn simulated_temperature_follows_its_breakpoints() {
     assert!(temps[2 * n / 3 + 1..].iter().all(|&t| (t - 60.0).abs() < 1e-9), "last third at 60 °C");
     let (code, _, err) = run_in(d, &["simulate", "-o", "bad", "--temperature", "25"]);
     assert_ne!(code, 0, "{err}");
-    assert!(err.contains("--temperature expects"), "{err}");
+    assert!(err.contains("(--temperature) expects START,END"), "{err}");
 }

@@ -11,8 +11,12 @@
 #![allow(clippy::result_large_err)]
 
 pub mod accept;
+pub mod arrays;
 pub mod batch;
+pub mod diagnose;
+pub mod errors;
 pub mod fit;
+pub mod simulate;
 pub mod validate;
 
 use std::path::PathBuf;
@@ -56,6 +60,15 @@ pub enum AppError {
         /// Why.
         #[source]
         source: crate::session::SessionError,
+    },
+    /// The model cannot be built as asked (an unknown effect, a coefficient of another model).
+    #[error("the model for {what}")]
+    Model {
+        /// The session or unit.
+        what: String,
+        /// Why.
+        #[source]
+        source: crate::model::ModelError,
     },
     /// The request does not make sense for these data (nothing held out, one run only…).
     #[error("{0}")]

@@ -2,11 +2,12 @@
 
 use super::Outcome;
 use anyhow::Context;
+use crosscal::app::arrays::IoUnits;
 use crosscal::app::validate::{correct_run, Mode};
 use crosscal::correct::{correct_csv_streaming, Calibration, OutputScale, StreamCsvError, StreamCsvOptions};
 use crosscal::profile::Profile;
 use crosscal::session::{read_recording, recording_header, CsvLine, MotionSpec, ReadOptions, Run, RunSpec};
-use crosscal::units::{AccelUnit, GyroUnit, Units};
+use crosscal::units::Units;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -79,15 +80,8 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let mut cal =
         Calibration::from_profile(&profile).with_context(|| format!("using profile {}", a.profile.display()))?;
     cal.temp_policy = crosscal::correct::TempPolicy::parse(&a.temperature_range).unwrap_or_default();
-    let mut units: Units = profile.input_units;
-    if let Some(u) = &a.gyro_unit {
-        units.gyro = GyroUnit::parse(u)
-            .ok_or_else(|| anyhow::anyhow!("--gyro-unit '{u}': expected one of {}", GyroUnit::CHOICES))?;
-    }
-    if let Some(u) = &a.accel_unit {
-        units.accel = AccelUnit::parse(u)
-            .ok_or_else(|| anyhow::anyhow!("--accel-unit '{u}': expected one of {}", AccelUnit::CHOICES))?;
-    }
+    let io = IoUnits::for_profile(&profile, a.gyro_unit.as_deref(), a.accel_unit.as_deref())?;
+    let (units, out_units, scale) = (io.input, io.output, io.scale());
     if a.output.exists() && !a.force {
         return Err(anyhow::Error::new(std::io::Error::new(
             std::io::ErrorKind::AlreadyExists,
@@ -97,18 +91,6 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if a.output.canonicalize().ok().is_some_and(|o| a.input.canonicalize().ok().is_some_and(|i| i == o)) {
         anyhow::bail!("the output {} is the input: crosscal never modifies the data it is given", a.output.display());
     }
-    // Output in the input's units (raw inputs come out in deg/s and g: the calibration
-    // supplies the physical unit).
-    let out_units = Units {
-        gyro: if units.gyro == GyroUnit::Raw { GyroUnit::DegPerS } else { units.gyro },
-        accel: if units.accel == AccelUnit::Raw { AccelUnit::G } else { units.accel },
-        time: units.time,
-    };
-    let scale = OutputScale {
-        time: 1.0 / units.time.to_s(),
-        gyro: 1.0 / out_units.gyro.to_rad_s(),
-        accel: 1.0 / out_units.accel.to_m_s2(profile.g_m_s2),
-    };
     if matches!(a.mode, ModeArg::Streaming) {
         if a.resample {
             anyhow::bail!("--resample needs the whole record: use it with --mode offline");

@@ -3,11 +3,10 @@
 use super::{format, ModelArgs, Outcome};
 use crate::{out, outln};
 use anyhow::Context;
-use crosscal::diagnose::{diagnose, ChannelReport, Verdict};
-use crosscal::estimate::FitOptions;
-use crosscal::estimate::{fit_runs, tracks};
-use crosscal::motion::DerivativeConfig;
-use crosscal::session::{MotionSpec, Session};
+use crosscal::app::diagnose::{diagnose_session, start_model, Diagnosed};
+use crosscal::diagnose::protocol::ProtocolDiagnosis;
+use crosscal::diagnose::{ChannelReport, Verdict};
+use crosscal::session::Session;
 use std::path::PathBuf;
 
 /// Options of `diagnose`.
@@ -69,30 +68,24 @@ fn channel_table(c: &[ChannelReport]) -> String {
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let session = Session::load(&a.session).with_context(|| format!("reading session {}", a.session.display()))?;
-    if session.is_protocol() {
-        return run_protocol(&a, &session);
-    }
-    let model = start_model(&a, &session)?;
-    let tr = tracks(&session, &DerivativeConfig::default());
-    let runs = fit_runs(&session, &tr);
-    let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
-    let d = diagnose(&model, &runs, &motions, &FitOptions::default())?;
+    let profile = match &a.profile {
+        Some(p) => Some(super::read_profile(p)?),
+        None => None,
+    };
+    let model = start_model(&session, &a.model.spec(&[]), a.profile.as_deref().zip(profile.as_ref()))?;
+    let d = match diagnose_session(&session, &model, a.trim_rest)? {
+        Diagnosed::Protocol(d) => return run_protocol(&a, &session, &d),
+        Diagnosed::Stand(d) => d,
+    };
     if a.report.is_some() || a.figures.is_some() {
-        let base_fit = crosscal::estimate::fit(&crosscal::estimate::FitRequest::runs(&model, &runs))?.fit;
-        let before = crosscal::diagnose::residuals(&model, &base_fit, &runs, &motions);
-        let after = (!d.steps.is_empty()).then(|| {
-            let m = crosscal::diagnose::ladder_model(&model, &d);
-            crosscal::diagnose::residuals(&m, &d.final_fit, &runs, &motions)
-        });
+        let (html, figures) = crosscal::app::diagnose::report(&session, &model, &d)?;
         if let Some(path) = &a.report {
-            let title = format!("crosscal diagnose: unit {}", session.manifest.serial);
-            let html = crosscal::diagnose::report::html(&title, &d, &before, after.as_deref(), &motions);
             crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, html.as_bytes()))
                 .with_context(|| format!("writing {}", path.display()))?;
             eprintln!("report written to {}", path.display());
         }
         if let Some(dir) = &a.figures {
-            super::write_figures(dir, &crosscal::diagnose::report::figures(&before, after.as_deref(), &motions))?;
+            super::write_figures(dir, &figures)?;
         }
     }
     if a.json {
@@ -106,7 +99,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         session.runs.len(),
         session.n_samples()
     );
-    if let Some(note) = temperature_outside(&a, &session)? {
+    if let Some(note) = profile.as_ref().and_then(|p| crosscal::app::diagnose::temperature_outside(p, &session)) {
         outln!("{note}");
     }
     outln!("\nresidual per channel (units: gyro deg/s, accel m/s^2):");
@@ -164,16 +157,12 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
 }
 
 /// `diagnose` on a protocol session: pose and turn residuals, candidate effects on the poses.
-fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
+fn run_protocol(a: &Args, session: &Session, d: &ProtocolDiagnosis) -> anyhow::Result<Outcome> {
     if a.report.is_some() || a.figures.is_some() {
         anyhow::bail!(
             "--report and --figures draw stand-run residuals; for a protocol session use the text or --json output"
         );
     }
-    let model = start_model(a, session)?;
-    let protocol = crosscal::estimate::protocol::ProtocolOptions { trim_rest: a.trim_rest, ..Default::default() };
-    let d = crosscal::diagnose::protocol::diagnose_protocol_with(session, &model, &protocol)
-        .with_context(|| format!("diagnosing {}", a.session.display()))?;
     if a.json {
         outln!("{}", serde_json::to_string_pretty(&d)?);
         return Ok(Outcome::Ok);
@@ -251,55 +240,6 @@ fn run_protocol(a: &Args, session: &Session) -> anyhow::Result<Outcome> {
         ),
     }
     Ok(Outcome::Ok)
-}
-
-/// With `--profile`: the runs whose temperatures lie outside the range the profile's
-/// temperature terms were calibrated over, named (the model is evaluated there as fitted,
-/// an extrapolation).
-fn temperature_outside(a: &Args, session: &Session) -> anyhow::Result<Option<String>> {
-    let Some(p) = &a.profile else { return Ok(None) };
-    let prof = super::read_profile(p)?;
-    let Some([lo, hi]) = prof.temperature_range_c().filter(|_| prof.uses_temperature()) else { return Ok(None) };
-    let outside: Vec<String> = session
-        .runs_used()
-        .iter()
-        .filter_map(|r| {
-            let [a, b] = r.temp_range_c?;
-            (a < lo || b > hi).then(|| format!("{} ({a:.1}..{b:.1} degC)", r.name))
-        })
-        .collect();
-    Ok((!outside.is_empty()).then(|| {
-        format!(
-            "OUT OF THE CALIBRATED TEMPERATURE RANGE ({lo:.1}..{hi:.1} degC): {} of {} runs: {}; the profile's temperature terms are extrapolated there, so a misfit may be the range, not a missing effect: recalibrate over these temperatures",
-            outside.len(),
-            session.runs.len(),
-            outside.join(", ")
-        )
-    }))
-}
-
-/// The model to start from: the profile's (with `--effect`s added) or the preset; protocol
-/// sessions start from their protocol's preset unless `--model` names another.
-fn start_model(a: &Args, session: &Session) -> anyhow::Result<crosscal::model::Model> {
-    match &a.profile {
-        Some(p) => {
-            let prof = super::read_profile(p)?;
-            prof.ensure_unit(p, &session.manifest.serial)?;
-            let mut m = prof.model().with_context(|| format!("using profile {}", p.display()))?;
-            for e in &a.model.effects {
-                m.add_effect(e)?;
-            }
-            Ok(m)
-        }
-        None => {
-            let default = if session.is_protocol() {
-                crosscal::estimate::protocol::default_preset(session)
-            } else {
-                crosscal::model::Preset::Default
-            };
-            Ok(a.model.spec(&[]).build_with_default(default)?)
-        }
-    }
 }
 
 /// The noise model, the spectrum's lines, the candidates and what cannot be identified.

@@ -3,8 +3,8 @@
 use super::{parse_list, parse_triple, List, Outcome};
 use crate::outln;
 use anyhow::Context;
-use crosscal::simulate::{write_session, SimConfig};
-use crosscal::units::{SensorKind, AXES};
+use crosscal::app::simulate::SimulateOptions;
+use crosscal::simulate::write_session;
 use std::path::PathBuf;
 
 /// Options of `simulate`.
@@ -99,92 +99,46 @@ fn parse_set(s: &str) -> Result<(String, f64), String> {
     Ok((name.trim().to_string(), v))
 }
 
+impl Args {
+    /// The flags as the library's simulation settings.
+    fn options(&self) -> SimulateOptions {
+        SimulateOptions {
+            preset: self.preset.clone(),
+            gyro_noise_deg_s: self.gyro_noise,
+            accel_noise_g: self.accel_noise,
+            gyro_bias_deg_s: self.gyro_bias,
+            accel_bias_g: self.accel_bias,
+            seed: self.seed,
+            rates_deg_s: self.runs.rates.0.clone(),
+            cone_angles_deg: self.runs.cone_angles.0.clone(),
+            mounts: self.runs.mounts as usize,
+            duration_s: self.runs.duration,
+            rate_hz: self.runs.rate_hz,
+            serial: self.serial.clone(),
+            hidden: self.hidden.clone(),
+            set: self.set.clone(),
+            temperature_c: self.temperature.as_ref().map(|l| l.0.clone()),
+            arw_deg_rt_h: self.arw,
+            gyro_bias_instability_deg_h: self.gyro_bias_instability,
+            rrw_deg_h_rt_h: self.rrw,
+            vrw_m_s_rt_h: self.vrw,
+            accel_bias_instability_ug: self.accel_bias_instability,
+            accel_random_walk: self.accel_random_walk,
+            ar1: self.ar1,
+            quantize: self.quantize.as_ref().map(|l| match l.0.as_slice() {
+                [g, a] => [*g, *a],
+                _ => [f64::NAN; 2],
+            }),
+            jitter_ms: self.jitter_ms,
+            session_clock_s: self.session_clock,
+            si_units: self.si_units,
+            disturb: self.disturb.clone(),
+        }
+    }
+}
+
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
-    if a.preset != "paper" && a.preset != "static" {
-        anyhow::bail!("unknown preset '{}': expected 'paper' or 'static'", a.preset);
-    }
-    if !(a.runs.duration > 0.0 && a.runs.rate_hz > 0.0 && a.gyro_noise >= 0.0 && a.accel_noise >= 0.0) {
-        anyhow::bail!("--duration and --rate-hz must be positive and noise levels non-negative");
-    }
-    let mut cfg = SimConfig::paper();
-    cfg.gyro_noise_deg_s = a.gyro_noise;
-    cfg.accel_noise_g = a.accel_noise;
-    if let Some(rho) = a.ar1 {
-        if !(0.0..1.0).contains(&rho) {
-            anyhow::bail!("--ar1 must be in [0, 1)");
-        }
-        cfg.gyro_process.ar1 = Some((rho, a.gyro_noise.to_radians()));
-        cfg.accel_process.ar1 = Some((rho, a.accel_noise * cfg.g_m_s2));
-        cfg.gyro_noise_deg_s = 0.0;
-        cfg.accel_noise_g = 0.0;
-    }
-    if let Some(List(q)) = &a.quantize {
-        match q.as_slice() {
-            [g, acc] if *g >= 0.0 && *acc >= 0.0 => cfg.realism.quantum = [*g, *acc],
-            _ => anyhow::bail!("--quantize expects GYRO,ACCEL resolutions (non-negative)"),
-        }
-    }
-    if !(a.jitter_ms.is_finite() && a.jitter_ms >= 0.0) {
-        anyhow::bail!("--jitter-ms must be finite and non-negative");
-    }
-    cfg.realism.jitter_s = a.jitter_ms * 1e-3;
-    if let Some(gap) = a.session_clock {
-        if !(gap.is_finite() && gap >= 0.0) {
-            anyhow::bail!("--session-clock expects a pause between runs in s (finite, non-negative)");
-        }
-        cfg.realism.session_clock_gap_s = Some(gap);
-    }
-    cfg.realism.si_units = a.si_units;
-    cfg.realism.disturbances = a.disturb.clone();
-    cfg.seed = a.seed;
-    cfg.sample_rate_hz = a.runs.rate_hz;
-    cfg.runs = a.runs.plan();
-    if a.preset == "static" {
-        cfg.runs = SimConfig::static_recording(a.runs.duration, a.runs.rate_hz).runs;
-    }
-    let deg = std::f64::consts::PI / 180.0;
-    let coloured = [a.arw, a.gyro_bias_instability, a.rrw, a.vrw, a.accel_bias_instability, a.accel_random_walk];
-    if coloured.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-        anyhow::bail!("noise densities must be finite and non-negative");
-    }
-    // Display units to SI: °/√h → rad/s/√Hz; °/h → rad/s; °/h/√h → rad/s/√s; m/s/√h →
-    // m/s²/√Hz; µg → m/s²; m/s²/√s stays.
-    cfg.gyro_process.white_density = a.arw * deg / 60.0;
-    cfg.gyro_process.bias_instability = a.gyro_bias_instability * deg / 3600.0;
-    cfg.gyro_process.random_walk = a.rrw * deg / 3600.0 / 60.0;
-    cfg.accel_process.white_density = a.vrw / 60.0;
-    cfg.accel_process.bias_instability = a.accel_bias_instability * 1e-6 * cfg.g_m_s2;
-    cfg.accel_process.random_walk = a.accel_random_walk;
-    if let Some(s) = a.serial {
-        cfg.serial = s;
-    }
-    for (sensor, bias, k) in
-        [(SensorKind::Gyro, a.gyro_bias, std::f64::consts::PI / 180.0), (SensorKind::Accel, a.accel_bias, cfg.g_m_s2)]
-    {
-        if let Some(b) = bias {
-            for i in 0..3 {
-                cfg.truth.values.insert(format!("{}.b_{}", sensor.as_str(), AXES[i]), b[i] * k);
-            }
-        }
-    }
-    for h in &a.hidden {
-        cfg.truth.model.add_effect(h)?;
-    }
-    for (name, v) in &a.set {
-        if cfg.truth.value(name).is_none() {
-            anyhow::bail!(
-                "--set {name}: no such coefficient in the simulated unit's model (add its effect with --hidden)"
-            );
-        }
-        cfg.truth.values.insert(name.clone(), *v);
-    }
-    if let Some(List(t)) = &a.temperature {
-        if t.len() < 2 || t.iter().any(|v| !(-100.0..=300.0).contains(v)) {
-            anyhow::bail!("--temperature expects START,END (or more breakpoints) in °C, each within -100..300");
-        }
-        cfg.temperature_c = Some(t.clone());
-    }
-    crosscal::simulate::check_runs(&cfg.runs, cfg.sample_rate_hz).map_err(anyhow::Error::msg)?;
+    let cfg = crosscal::app::simulate::config(&a.options())?;
     let session = cfg.generate();
     let path =
         write_session(&session, &a.out).with_context(|| format!("writing the session to {}", a.out.display()))?;

@@ -40,8 +40,7 @@ pub use csvstream::{correct_csv_streaming, OutputScale, StreamCsvError, StreamCs
 pub use inverse::{Calibration, NonlinearPart, SensorInverse};
 pub use offline::{correct_offline, resample_to_stamps};
 pub use streaming::{correct_streaming, Streaming};
-use temperature::refuse_outside;
-pub use temperature::{TempOutside, TempPolicy};
+pub use temperature::{refuse_outside, TempOutside, TempPolicy};
 
 /// Correction errors.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

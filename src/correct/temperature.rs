@@ -93,7 +93,7 @@ impl TempOutside {
 }
 
 /// The error of `--temperature-range error` when samples were outside.
-pub(crate) fn refuse_outside(t: &TempOutside) -> Result<(), super::CorrectError> {
+pub fn refuse_outside(t: &TempOutside) -> Result<(), super::CorrectError> {
     match t.warning() {
         Some(w) if t.policy == TempPolicy::Error => Err(super::CorrectError::OutOfRange(w)),
         _ => Ok(()),

@@ -178,6 +178,14 @@ pub enum NoiseError {
     /// The sample interval is not usable.
     #[error("the sample interval {0} s is not a positive finite number")]
     Interval(f64),
+    /// A sample is NaN or infinite.
+    #[error("channel {channel}, sample {sample}: expected a finite number (NaN or infinite values are not accepted)")]
+    NotFinite {
+        /// The channel (gx … az).
+        channel: &'static str,
+        /// 1-based sample.
+        sample: usize,
+    },
 }
 
 pub(crate) const BASIS: [fn(f64) -> f64; 5] = [|t| 1.0 / (t * t), |t| 1.0 / t, |_| 1.0, |t| t, |t| t * t];

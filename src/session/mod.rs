@@ -11,6 +11,7 @@ mod error;
 pub mod import;
 pub mod import_text;
 pub mod logs;
+pub mod memory;
 mod open;
 pub mod sanity;
 mod source;
