@@ -60,11 +60,12 @@ fn images(md: &str) -> Vec<String> {
 
 /// The page's shell text as run: `cargo run --release -- ARGS` is `crosscal ARGS` (the same
 /// binary), `cargo run --release --example NAME -- ARGS` the example `cargo test` built
-/// beside it, and `cargo test`/`cargo bench` lines are skipped (they are what CI runs).
+/// beside it, and `cargo test`/`cargo bench`/`bash .ci/run` lines are skipped (they are what
+/// CI runs).
 fn script(b: &Block, bin_dir: &Path) -> String {
     b.text
         .lines()
-        .filter(|l| !l.trim_start().starts_with("cargo test") && !l.trim_start().starts_with("cargo bench"))
+        .filter(|l| !["cargo test", "cargo bench", "bash .ci/run"].iter().any(|c| l.trim_start().starts_with(c)))
         .map(|l| {
             let l = l.replace("cargo run --release -- ", "crosscal ");
             match l.split_once("cargo run --release --example ") {

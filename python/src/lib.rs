@@ -704,6 +704,38 @@ fn mode_of(py: Python<'_>, mode: &str) -> PyResult<Mode> {
     }
 }
 
+/// The benchmark's peer: the Rust library's own streaming corrector
+/// (`crosscal::correct::Streaming::push_block`) on SI arrays, in blocks of `block`
+/// samples into preallocated buffers, as a Rust program would call it. Returns the
+/// seconds it took (GIL released). For `benches/python_streaming.py`.
+#[pyfunction]
+fn bench_rust_streaming(
+    py: Python<'_>,
+    profile_json: &str,
+    t_s: PyReadonlyArray1<'_, f64>,
+    gyro_rad_s: PyReadonlyArray2<'_, f64>,
+    accel_m_s2: PyReadonlyArray2<'_, f64>,
+    block: usize,
+) -> PyResult<f64> {
+    let p = profile_of(py, profile_json, "<profile>")?;
+    let cal = crosscal::correct::Calibration::from_profile(&p).map_err(|e| err(py, e))?;
+    let (t, g, a) = (slice(py, &t_s, "t")?, triples(py, &gyro_rad_s, "gyro")?, triples(py, &accel_m_s2, "accel")?);
+    let n = t.len().min(g.len()).min(a.len());
+    let block = block.max(1);
+    Ok(py.detach(|| {
+        let mut s = crosscal::correct::Streaming::new(cal);
+        let (mut w, mut f) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        let start = std::time::Instant::now();
+        for k in (0..n).step_by(block) {
+            let e = (k + block).min(n);
+            s.push_block(&t[k..e], &g[k..e], &a[k..e], &mut w[k..e], &mut f[k..e]);
+        }
+        let took = start.elapsed().as_secs_f64();
+        std::hint::black_box((&w, &f));
+        took
+    }))
+}
+
 /// Every exit code and its meaning (the exception classes' codes).
 #[pyfunction]
 fn exit_codes() -> Vec<(u8, &'static str)> {
@@ -734,6 +766,7 @@ fn _crosscal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(check, m)?)?;
     m.add_function(wrap_pyfunction!(paper_table, m)?)?;
+    m.add_function(wrap_pyfunction!(bench_rust_streaming, m)?)?;
     m.add_function(wrap_pyfunction!(exit_codes, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     Ok(())
