@@ -4,7 +4,158 @@
 //! the `temperature` rule's `max_residual`, each against known truth.
 
 use crate::common::{run_in, run_ok};
+use crosscal::profile::Profile;
 use crosscal::session::Session;
+
+/// A cubic gyro bias and a quadratic accelerometer bias (SI), the unit.
+const TRUTH: [(&str, f64); 15] = [
+    ("gyro.tb_x", 2e-5),
+    ("gyro.tb2_x", -3e-7),
+    ("gyro.tb3_x", 4e-9),
+    ("gyro.tb_y", 1e-5),
+    ("gyro.tb2_y", 2e-7),
+    ("gyro.tb3_y", -3e-9),
+    ("gyro.tb_z", -1e-5),
+    ("gyro.tb2_z", 1e-7),
+    ("gyro.tb3_z", 2e-9),
+    ("accel.tb_x", 1e-4),
+    ("accel.tb2_x", -2e-6),
+    ("accel.tb_y", -1e-4),
+    ("accel.tb2_y", 1e-6),
+    ("accel.tb_z", 5e-5),
+    ("accel.tb2_z", 3e-6),
+];
+
+/// The effects fitted (and planned: degree 3 on both sensors; the accelerometer's true cubic
+/// term is 0).
+const EFFECTS: [&str; 2] =
+    ["gyro-temp-bias+gyro-temp-bias2+gyro-temp-bias3", "accel-temp-bias+accel-temp-bias2+accel-temp-bias3"];
+
+/// The sweep design, shared by simulate and plan: five plateaus, six faces and four conic runs
+/// at each, the unit lagging the chamber by 60 s and soaked 300 s, 50 Hz.
+fn design(duration_s: &str) -> Vec<String> {
+    [
+        "--thermal-sweep",
+        "-20,0,20,45,70",
+        "--plateau-conic",
+        "--rates",
+        "10,-10",
+        "--cone-angles",
+        "10",
+        "--mounts",
+        "2",
+        "--thermal-tau",
+        "60",
+        "--rate-hz",
+        "50",
+        "--duration",
+        duration_s,
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect()
+}
+
+/// Per-sample noise of the simulations: gyro 0.002 °/s, accelerometer 2e-4 g.
+const GYRO_NOISE_DEG_S: f64 = 0.002;
+const ACCEL_NOISE_G: f64 = 2e-4;
+
+/// Simulates the sweep unit into `dir/out` with reading noise 0.05 °C.
+fn simulate(d: &std::path::Path, out: &str, duration_s: &str, seed: u64) {
+    let seed = seed.to_string();
+    let (gn, an) = (GYRO_NOISE_DEG_S.to_string(), ACCEL_NOISE_G.to_string());
+    let mut extra: Vec<String> = design(duration_s);
+    extra.extend(
+        ["--seed", &seed, "--gyro-noise", &gn, "--accel-noise", &an, "--temp-noise", "0.05"].map(str::to_string),
+    );
+    let extra: Vec<&str> = extra.iter().map(String::as_str).collect();
+    let truth: Vec<(String, f64)> = TRUTH.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let hidden = ["gyro-temp-bias", "gyro-temp-bias2", "gyro-temp-bias3", "accel-temp-bias", "accel-temp-bias2"];
+    crate::common::simulate_hidden(d, out, &hidden, &truth, &extra);
+}
+
+/// `plan --thermal` of the same design and noise, as JSON.
+fn plan(d: &std::path::Path, duration_s: &str, extra: &[&str]) -> serde_json::Value {
+    // Per-sample σ at 50 Hz as densities: ARW (°/√h) = 60 σ/√f, VRW (m/s/√h) = 60 σ/√f.
+    let arw = (60.0 * GYRO_NOISE_DEG_S / 50f64.sqrt()).to_string();
+    let vrw = (60.0 * ACCEL_NOISE_G * 9.80665 / 50f64.sqrt()).to_string();
+    let mut args: Vec<String> = vec!["plan".into()];
+    args.extend(design(duration_s).into_iter().map(|a| if a == "--thermal-sweep" { "--thermal".into() } else { a }));
+    args.extend(["--degree", "3", "--arw", &arw, "--vrw", &vrw, "--json", "--no-suggest"].map(str::to_string));
+    args.extend(extra.iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = run_ok(d, &args);
+    serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"))
+}
+
+fn predicted_se(plan: &serde_json::Value, name: &str) -> f64 {
+    plan["coefficients"]
+        .as_array()
+        .and_then(|cs| cs.iter().find(|c| c["name"] == name))
+        .and_then(|c| c["std_error"].as_f64())
+        .unwrap_or_else(|| panic!("{name} not in the plan: {plan}"))
+}
+
+fn truth_of(name: &str) -> f64 {
+    TRUTH.iter().find(|t| t.0 == name).map_or(0.0, |t| t.1)
+}
+
+/// Every temperature coefficient of both sensors (the accelerometer's tb3 is truly 0).
+fn temperature_names() -> Vec<String> {
+    let mut names = Vec::new();
+    for s in ["gyro", "accel"] {
+        for ax in ["x", "y", "z"] {
+            for k in ["tb", "tb2", "tb3"] {
+                names.push(format!("{s}.{k}_{ax}"));
+            }
+        }
+    }
+    names
+}
+
+fn coefficient(p: &Profile, name: &str) -> (f64, f64) {
+    let s = if name.starts_with("gyro") { &p.gyro } else { &p.accel };
+    let c = s.get(name).unwrap_or_else(|| panic!("{name} missing from the profile"));
+    (c.value, c.std_error.unwrap_or(f64::INFINITY))
+}
+
+/// A sweep with a hidden cubic gyro and quadratic accelerometer bias and 0.05 °C reading
+/// noise, fitted with cubics: every temperature coefficient within 3 of its standard errors of
+/// the truth; each standard error within 15 % of the plan's prediction for the design; and
+/// over four seeds the errors scatter as the plan predicts (RMS of error / predicted σ within
+/// 0.7 … 1.3).
+#[test]
+fn a_sweep_recovers_the_temperature_polynomials_as_the_plan_predicts() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    let predicted = plan(d, "10", &[]);
+    let names = temperature_names();
+    let mut z2 = Vec::new();
+    let mut ratio_dev: f64 = 0.0;
+    for seed in 1..=4u64 {
+        let out = format!("sweep{seed}");
+        simulate(d, &out, "10", seed);
+        let (_, p) = crate::common::fit_into_store(d, &format!("{out}/session.json"), &EFFECTS);
+        std::fs::remove_dir_all(d.join("store")).unwrap_or_else(|e| panic!("{e}"));
+        for n in &names {
+            let (value, se) = coefficient(&p, n);
+            let (want, pse) = (truth_of(n), predicted_se(&predicted, n));
+            assert!((value - want).abs() < 3.0 * se, "seed {seed} {n}: {value} ± {se} vs truth {want}");
+            assert!((se / pse - 1.0).abs() < 0.15, "seed {seed} {n}: fit's standard error {se} vs predicted {pse}");
+            ratio_dev = ratio_dev.max((se / pse - 1.0).abs());
+            z2.push(((value - want) / pse).powi(2));
+        }
+        if seed == 1 {
+            let range = p.temperature_range_c().unwrap_or([f64::NAN; 2]);
+            assert!((range[0] + 20.0).abs() < 0.3 && (range[1] - 70.0).abs() < 0.3, "{range:?}");
+        }
+    }
+    let rms = (z2.iter().sum::<f64>() / z2.len() as f64).sqrt();
+    let zmax = z2.iter().copied().fold(0.0, f64::max).sqrt();
+    eprintln!("thermal sweep: RMS error/predicted σ {rms:.3} over {} estimates, largest {zmax:.2}", z2.len());
+    eprintln!("thermal sweep: fit's standard errors within {:.1} % of the plan's", 100.0 * ratio_dev);
+    assert!((0.7..1.3).contains(&rms), "errors / predicted σ have RMS {rms} over {} estimates", z2.len());
+}
 
 /// After a step of the set point the temp column follows u = T_set + (T₀ − T_set) e^(−t/τ)
 /// (to its 1 mK step), and the unsettled run's note says so; during a recorded ramp it
@@ -116,4 +267,74 @@ fn the_temperature_reading_has_the_given_noise_and_step() {
     let (code, _, err) = run_in(d, &["simulate", "-o", "x", "--thermal-sweep", "10", "--thermal-tau=-1"]);
     assert_ne!(code, 0, "{err}");
     assert!(err.contains("non-negative"), "{err}");
+}
+
+/// The worst compensated-bias uncertainty a profile's covariance gives over −20 … 70 °C.
+fn worst_bias_std(p: &Profile, sensor: &str) -> f64 {
+    let fit = if sensor == "gyro" { &p.gyro } else { &p.accel };
+    let mut worst: f64 = 0.0;
+    for (i, ax) in ["x", "y", "z"].iter().enumerate() {
+        let ch = &fit.channels[i];
+        let names = [
+            format!("{sensor}.b_{ax}"),
+            format!("{sensor}.tb_{ax}"),
+            format!("{sensor}.tb2_{ax}"),
+            format!("{sensor}.tb3_{ax}"),
+        ];
+        let idx: Vec<usize> = names
+            .iter()
+            .map(|n| ch.covariance_names.iter().position(|c| c == n).unwrap_or_else(|| panic!("{n}")))
+            .collect();
+        for j in 0..=90 {
+            let dt = -40.0 + f64::from(j);
+            let g = [1.0, dt, dt * dt, dt * dt * dt];
+            let mut var = 0.0;
+            for a in 0..4 {
+                for b in 0..4 {
+                    var += g[a] * g[b] * ch.covariance[idx[a]][idx[b]];
+                }
+            }
+            worst = worst.max(var.sqrt());
+        }
+    }
+    worst
+}
+
+/// `plan --thermal --target-bias-std`: the suggested run duration meets the target, and a
+/// sweep simulated with it and fitted does too (the fit's own covariance, within 10 %).
+#[test]
+fn the_suggested_dwell_meets_the_target_when_simulated() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    let short = plan(d, "4", &[]);
+    let worst = |p: &serde_json::Value, i: usize| p["bias"][i]["worst_std"].as_f64().unwrap_or(f64::NAN);
+    let (g4, a4) = (worst(&short, 0), worst(&short, 1));
+    // Targets a third of the 4 s design's worst: about nine times the dwell.
+    let target = format!("{},{}", g4 / 3.0, a4 / 3.0);
+    let p = plan(d, "4", &["--target-bias-std", &target]);
+    let dwell = &p["dwell"];
+    assert_eq!(dwell["meets"], true, "{p}");
+    let dur = dwell["run_duration_s"].as_f64().unwrap_or(f64::NAN);
+    assert!((30.0..45.0).contains(&dur), "suggested {dur} s for a third of the uncertainty of 4 s runs");
+    let dur_arg = format!("{dur}");
+    simulate(d, "long", &dur_arg, 7);
+    let (_, prof) = crate::common::fit_into_store(d, "long/session.json", &EFFECTS);
+    let (tg, ta) = (g4 / 3.0, a4 / 3.0);
+    let (fg, fa) = (worst_bias_std(&prof, "gyro"), worst_bias_std(&prof, "accel"));
+    eprintln!(
+        "dwell: 4 s runs give worst σ gyro {g4:.3e}, accel {a4:.3e}; suggested {dur} s; fitted worst σ / target gyro {:.3}, accel {:.3}",
+        fg / tg,
+        fa / ta
+    );
+    assert!(fg <= 1.1 * tg && fa <= 1.1 * ta, "fitted worst σ gyro {fg} (target {tg}), accel {fa} (target {ta})");
+    // Three plateaus cannot fix a cubic: the text says so, and suggests the fourth.
+    let text = run_ok(d, &["plan", "--thermal", "-20,20,70", "--degree", "3", "--duration", "2", "--rate-hz", "20"]);
+    assert!(text.contains("gyro compensated bias: UNKNOWN"), "{text}");
+    assert!(
+        text.contains("suggested extra plateau: 0 degC") || text.contains("suggested extra plateau: 45 degC"),
+        "{text}"
+    );
+    let (code, _, err) = run_in(d, &["plan", "--thermal", "0,40", "--target-bias-std", "1e-5"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("GYRO,ACCEL"), "{err}");
 }

@@ -204,7 +204,9 @@ enum Command {
     #[command(after_help = "Example: crosscal noise still/session.json --report noise.html")]
     Noise(noise::Args),
     /// Predicted uncertainty of every coefficient for proposed runs, before recording; suggests a run.
-    #[command(after_help = "Example: crosscal plan --rates 10 --cone-angles 10 --mounts 1 --arw 0.15 --vrw 0.02")]
+    #[command(
+        after_help = "Example: crosscal plan --rates 10 --cone-angles 10 --mounts 1 --arw 0.15 --vrw 0.02\nExample: crosscal plan --thermal -20,0,20,45,70 --degree 3 --target-bias-std 1e-5,1e-3"
+    )]
     Plan(plan::Args),
     /// Accept or reject a unit: its profile (and session) against acceptance rules; exit 1 on reject.
     #[command(
