@@ -338,3 +338,74 @@ fn the_suggested_dwell_meets_the_target_when_simulated() {
     assert_ne!(code, 0);
     assert!(err.contains("GYRO,ACCEL"), "{err}");
 }
+
+/// `max_residual`: a profile without temperature terms on a sweep whose gyro x bias is linear
+/// in T (1e-4 rad/s/°C, plateaus −20, 0, 20, 45, 70 °C, equal dwell) leaves tb (T − T̄) at each
+/// plateau, T̄ = 23 °C: 4.7e-3 rad/s at 70 °C, the worst; the profile with the term leaves noise.
+#[test]
+fn max_residual_measures_what_the_compensation_leaves_per_plateau() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let d = dir.path();
+    let args = [
+        "--thermal-sweep",
+        "-20,0,20,45,70",
+        "--plateau-conic",
+        "--rates",
+        "10,-10",
+        "--cone-angles",
+        "10",
+        "--mounts",
+        "2",
+        "--duration",
+        "6",
+        "--rate-hz",
+        "50",
+        "--gyro-noise",
+        "0.002",
+        "--accel-noise",
+        "0.0002",
+    ];
+    let truth = [("gyro.tb_x".to_string(), 1e-4)];
+    crate::common::simulate_hidden(d, "sweep", &["gyro-temp-bias"], &truth, &args);
+    run_ok(d, &["fit", "sweep/session.json", "--out", "plain"]);
+    run_ok(d, &["fit", "sweep/session.json", "--effect", "gyro-temp-bias", "--out", "comp"]);
+    let judge = |store: &str, rule: &str| {
+        std::fs::write(d.join("rules.json"), format!(r#"{{"format":"crosscal-rules/1","rules":[{rule}]}}"#))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let (path, _) = crate::common::only_profile(&d.join(store));
+        let prof = path.to_string_lossy().to_string();
+        let (code, out, err) =
+            run_in(d, &["accept", &prof, "--rules", "rules.json", "--session", "sweep/session.json"]);
+        (code, format!("{out}{err}"))
+    };
+    let residual = |out: &str| -> f64 {
+        out.split("largest bias residual after compensation ")
+            .nth(1)
+            .and_then(|s| s.split_whitespace().next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("no residual in {out}"))
+    };
+    let (code, out) = judge("plain", r#"{"kind":"temperature","sensor":"gyro","max_residual":5e-3}"#);
+    assert_eq!(code, 0, "{out}");
+    let r = residual(&out);
+    eprintln!("max_residual: uncompensated {r:.4e} rad/s (expected 4.7e-3)");
+    assert!((r / 4.7e-3 - 1.0).abs() < 0.02, "residual {r}, expected 4.7e-3: {out}");
+    assert!(out.contains("axis x, 70..71 degC"), "{out}");
+    let (code, out) = judge("plain", r#"{"kind":"temperature","sensor":"gyro","max_residual":4.5e-3}"#);
+    assert_eq!(code, 1, "4.7e-3 must fail a 4.5e-3 limit: {out}");
+    // Compensated: what is left is the noise of a plateau's mean (σ/√1500 ≈ 1e-6 rad/s).
+    let (code, out) = judge("comp", r#"{"kind":"temperature","sensor":"gyro","max_residual":1e-5}"#);
+    assert_eq!(code, 0, "{out}");
+    assert!(residual(&out) < 1e-5, "{out}");
+    eprintln!("max_residual: compensated {:.3e} rad/s", residual(&out));
+    // Wider bins pool the plateaus (0..10 holds the 0 °C plateau alone); no session: fails.
+    let (code, out) = judge("plain", r#"{"kind":"temperature","sensor":"gyro","max_residual":5e-3,"bin_c":10}"#);
+    assert_eq!(code, 0, "{out}");
+    assert!(out.contains("70..80 degC"), "{out}");
+    let (path, _) = crate::common::only_profile(&d.join("comp"));
+    let (code, out, _) = run_in(d, &["accept", &path.to_string_lossy(), "--rules", "rules.json"]);
+    assert_eq!(code, 1, "no session checked: {out}");
+    assert!(out.contains("no session was checked"), "{out}");
+    let (code, out) = judge("plain", r#"{"kind":"temperature","sensor":"gyro","max_residual":-1}"#);
+    assert_eq!(code, 20, "{out}");
+}
