@@ -104,18 +104,20 @@ pub struct RunCheck {
     /// not calibrated.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub temperature_outside: Option<String>,
-    /// The corrected error by temperature: one bin per whole degree the run's samples read
-    /// (empty without temperatures).
+    /// The corrected error by temperature: one bin per whole degree the run's samples read,
+    /// centred on it (empty without temperatures).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub temp_bins: Vec<TempBin>,
 }
 
-/// The corrected error of the samples whose temperature reads in [lo_c, lo_c + 1) °C: what
-/// the calibration leaves at that temperature (for `accept`'s `max_residual`).
+/// The corrected error of the samples whose temperature reads within half a degree of
+/// `centre_c` (in [centre − 0.5, centre + 0.5) °C): what the calibration leaves at that
+/// temperature (for `accept`'s `max_residual`). Centred on whole degrees, a plateau at a
+/// whole-degree set point falls in one bin whatever its reading noise.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TempBin {
-    /// Lower edge, °C (a whole degree).
-    pub lo_c: f64,
+    /// Centre, °C (a whole degree).
+    pub centre_c: f64,
     /// Samples per axis (gyro x, y, z, accel x, y, z).
     pub n: [u64; 6],
     /// Mean corrected error per axis, SI.
@@ -139,7 +141,7 @@ struct Bins(std::collections::BTreeMap<i64, Sums>);
 impl Bins {
     fn add(&mut self, temp_c: f64, axis: usize, err: f64) {
         if temp_c.is_finite() && err.is_finite() {
-            let b = self.0.entry(temp_c.floor() as i64).or_default();
+            let b = self.0.entry((temp_c + 0.5).floor() as i64).or_default();
             b.n[axis] += 1;
             b.sum[axis] += err;
             b.sq[axis] += err * err;
@@ -149,9 +151,9 @@ impl Bins {
     fn finish(self) -> Vec<TempBin> {
         self.0
             .into_iter()
-            .map(|(lo, b)| {
+            .map(|(centre, b)| {
                 let per = |v: [f64; 6]| std::array::from_fn(|i| if b.n[i] > 0 { v[i] / b.n[i] as f64 } else { 0.0 });
-                TempBin { lo_c: lo as f64, n: b.n, mean: per(b.sum), rms: per(b.sq).map(f64::sqrt) }
+                TempBin { centre_c: centre as f64, n: b.n, mean: per(b.sum), rms: per(b.sq).map(f64::sqrt) }
             })
             .collect()
     }

@@ -125,7 +125,8 @@ pub enum Rule {
         /// session with temperatures).
         #[serde(default)]
         max_residual: Option<f64>,
-        /// Width of the temperature bins of `max_residual`, °C (whole degrees; default 1).
+        /// Width of the temperature bins of `max_residual`, °C (whole degrees, bins centred on
+        /// multiples of it; default 1).
         #[serde(default)]
         bin_c: Option<f64>,
         /// Rule name.
@@ -521,7 +522,7 @@ pub struct TemperatureResidual {
     pub residual: f64,
     /// Its axis.
     pub axis: char,
-    /// Its bin, °C ([lo, hi)).
+    /// Its bin, °C ([lo, hi), centred on a multiple of the bin width).
     pub bin_c: [f64; 2],
     /// Samples in it.
     pub samples: u64,
@@ -531,14 +532,15 @@ pub struct TemperatureResidual {
 
 /// The largest bias residual after compensation of `sensor` in a checked session: the run
 /// checks' whole-degree bins of corrected error merged over runs into `bin_c`-wide bins
-/// (pooled mean and mean square), bins of fewer than [`MIN_BIN_SAMPLES`] left out; the worst
-/// |mean| over bins and axes. None when no bin has enough samples.
+/// centred on multiples of `bin_c` (pooled mean and mean square), bins of fewer than
+/// [`MIN_BIN_SAMPLES`] left out; the worst |mean| over bins and axes. None when no bin has
+/// enough samples.
 pub fn worst_temperature_residual(check: &CheckReport, sensor: SensorKind, bin_c: f64) -> Option<TemperatureResidual> {
     let width = bin_c.max(1.0).round();
     // Per merged bin and axis: samples, Σ error, Σ error².
     let mut merged: std::collections::BTreeMap<i64, [(u64, f64, f64); 3]> = Default::default();
     for b in check.runs.iter().flat_map(|r| &r.temp_bins) {
-        let m = merged.entry((b.lo_c / width).floor() as i64).or_default();
+        let m = merged.entry((b.centre_c / width).round() as i64).or_default();
         for (i, acc) in m.iter_mut().enumerate() {
             let j = 3 * sensor.index() + i;
             let n = b.n[j] as f64;
@@ -556,7 +558,7 @@ pub fn worst_temperature_residual(check: &CheckReport, sensor: SensorKind, bin_c
             let nf = n as f64;
             let mean = sum / nf;
             if worst.is_none_or(|w| mean.abs() > w.residual) {
-                let lo = key as f64 * width;
+                let lo = (key as f64 - 0.5) * width;
                 worst = Some(TemperatureResidual {
                     residual: mean.abs(),
                     axis: crate::units::AXES[i],
@@ -583,7 +585,7 @@ fn temperature_residual(ev: &Evidence<'_>, sensor: SensorKind, max: f64, bin_c: 
         Some(w) => (
             w.residual <= max,
             format!(
-                "largest bias residual after compensation {:.4e} (axis {}, {:.0}..{:.0} degC, {} samples, ±{:.1e}) against {max:.4e}",
+                "largest bias residual after compensation {:.4e} (axis {}, {}..{} degC, {} samples, ±{:.1e}) against {max:.4e}",
                 w.residual, w.axis, w.bin_c[0], w.bin_c[1], w.samples, w.std_error
             ),
         ),

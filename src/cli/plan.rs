@@ -177,7 +177,7 @@ fn run_thermal(a: &Args, plateaus: &[f64], model: &crosscal::model::Model, spec:
     }
     let plateaus: Vec<String> = r.plateaus_c.iter().map(|p| format!("{p}")).collect();
     outln!(
-        "thermal plan: plateaus {} degC, {} runs of {} s per plateau ({} s recorded each, sweep {:.0} s), degree {}",
+        "thermal plan: plateaus {} degC, {} runs of {:.2} s per plateau ({:.1} s recorded each, sweep {:.0} s), degree {}",
         plateaus.join(", "),
         r.runs_per_plateau,
         t.sweep.runs.first().map_or(0.0, |x| x.duration_s),
@@ -213,7 +213,7 @@ fn run_thermal(a: &Args, plateaus: &[f64], model: &crosscal::model::Model, spec:
     if let Some(d) = &r.dwell {
         let [g, acc] = d.worst_std.map(|v| v.map_or("unknown".to_string(), |v| format!("{v:.3e}")));
         outln!(
-            "suggested run duration: {} s ({} s recorded per plateau, sweep {:.0} s): worst 1σ gyro {g} rad/s, accel {acc} m/s^2{}",
+            "suggested run duration: {:.2} s ({:.1} s recorded per plateau, sweep {:.0} s): worst 1σ gyro {g} rad/s, accel {acc} m/s^2{}",
             d.run_duration_s,
             d.dwell_s,
             d.sweep_s,
