@@ -30,5 +30,6 @@ mod robust;
 mod stand;
 mod stream;
 mod thermal;
+mod thermal_sweep;
 mod uncertainty;
 mod validate;

@@ -392,7 +392,8 @@ def simulate(preset: str = "paper", **settings: Any) -> Session:
     pairs NAME → true value, SI), ``temperature_c`` (breakpoints), ``arw_deg_rt_h``,
     ``gyro_bias_instability_deg_h``, ``rrw_deg_h_rt_h``, ``vrw_m_s_rt_h``,
     ``accel_bias_instability_ug``, ``accel_random_walk``, ``ar1``, ``quantize``,
-    ``jitter_ms``, ``session_clock_s``, ``si_units``, ``disturb``. ``session.save(dir)``
+    ``jitter_ms``, ``session_clock_s``, ``si_units``, ``disturb``, ``temp_noise_c``,
+    ``temp_quantum_c``. ``session.save(dir)``
     writes it as ``crosscal simulate -o dir`` would.
     """
     settings["preset"] = preset

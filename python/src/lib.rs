@@ -640,6 +640,8 @@ fn simulate(py: Python<'_>, options: Bound<'_, pyo3::types::PyDict>) -> PyResult
             "jitter_ms" => o.jitter_ms = v.extract()?,
             "session_clock_s" => o.session_clock_s = v.extract()?,
             "si_units" => o.si_units = v.extract()?,
+            "temp_noise_c" => o.temp_noise_c = v.extract()?,
+            "temp_quantum_c" => o.temp_quantum_c = v.extract()?,
             "disturb" => {
                 let specs: Vec<String> = v.extract()?;
                 o.disturb = specs

@@ -64,6 +64,10 @@ pub struct SimulateOptions {
     pub si_units: bool,
     /// Disturbances outside the catalogue.
     pub disturb: Vec<Disturbance>,
+    /// Temperature reading noise (standard deviation), °C.
+    pub temp_noise_c: f64,
+    /// Temperature reading step, °C (0: no rounding).
+    pub temp_quantum_c: f64,
 }
 
 impl Default for SimulateOptions {
@@ -96,6 +100,8 @@ impl Default for SimulateOptions {
             session_clock_s: None,
             si_units: false,
             disturb: Vec::new(),
+            temp_noise_c: 0.0,
+            temp_quantum_c: 0.001,
         }
     }
 }
@@ -170,6 +176,8 @@ pub fn config(o: &SimulateOptions) -> Result<SimConfig, AppError> {
         }
         cfg.temperature_c = Some(t.clone());
     }
+    cfg.temp_reading = crate::simulate::thermal::TempReading { noise_c: o.temp_noise_c, quantum_c: o.temp_quantum_c };
+    cfg.temp_reading.check().map_err(AppError::Invalid)?;
     crate::simulate::check_runs(&cfg.runs, cfg.sample_rate_hz).map_err(AppError::Invalid)?;
     Ok(cfg)
 }

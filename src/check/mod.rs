@@ -104,6 +104,59 @@ pub struct RunCheck {
     /// not calibrated.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub temperature_outside: Option<String>,
+    /// The corrected error by temperature: one bin per whole degree the run's samples read,
+    /// centred on it (empty without temperatures).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub temp_bins: Vec<TempBin>,
+}
+
+/// The corrected error of the samples whose temperature reads within half a degree of
+/// `centre_c` (in [centre − 0.5, centre + 0.5) °C): what the calibration leaves at that
+/// temperature (for `accept`'s `max_residual`). Centred on whole degrees, a plateau at a
+/// whole-degree set point falls in one bin whatever its reading noise.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TempBin {
+    /// Centre, °C (a whole degree).
+    pub centre_c: f64,
+    /// Samples per axis (gyro x, y, z, accel x, y, z).
+    pub n: [u64; 6],
+    /// Mean corrected error per axis, SI.
+    pub mean: [f64; 6],
+    /// RMS corrected error per axis, SI.
+    pub rms: [f64; 6],
+}
+
+/// Samples, sums and sums of squares of the corrected error per axis.
+#[derive(Default)]
+struct Sums {
+    n: [u64; 6],
+    sum: [f64; 6],
+    sq: [f64; 6],
+}
+
+/// Accumulates errors by whole degree of temperature.
+#[derive(Default)]
+struct Bins(std::collections::BTreeMap<i64, Sums>);
+
+impl Bins {
+    fn add(&mut self, temp_c: f64, axis: usize, err: f64) {
+        if temp_c.is_finite() && err.is_finite() {
+            let b = self.0.entry((temp_c + 0.5).floor() as i64).or_default();
+            b.n[axis] += 1;
+            b.sum[axis] += err;
+            b.sq[axis] += err * err;
+        }
+    }
+
+    fn finish(self) -> Vec<TempBin> {
+        self.0
+            .into_iter()
+            .map(|(centre, b)| {
+                let per = |v: [f64; 6]| std::array::from_fn(|i| if b.n[i] > 0 { v[i] / b.n[i] as f64 } else { 0.0 });
+                TempBin { centre_c: centre as f64, n: b.n, mean: per(b.sum), rms: per(b.sq).map(f64::sqrt) }
+            })
+            .collect()
+    }
 }
 
 /// A full check.
@@ -148,6 +201,9 @@ pub fn check_run(run: &Run, track: &Track, corrected: &Corrected, raw_units: [bo
         track
     };
     let n = track.t_s.len();
+    let constant_c = run.spec.temperature_c.unwrap_or(f64::NAN);
+    let temp_c = |k: usize| run.rec.temp_c.as_ref().map_or(constant_c, |t| t.get(k).copied().unwrap_or(f64::NAN));
+    let mut bins = Bins::default();
     let mut t_s = Vec::with_capacity(n);
     let mut before = Vec::with_capacity(n);
     let mut after = Vec::with_capacity(n);
@@ -176,6 +232,7 @@ pub fn check_run(run: &Run, track: &Track, corrected: &Corrected, raw_units: [bo
                 t_s.push(track.t_s[k]);
                 before.push(out[k][i] - truth[i]);
                 after.push(corr[k][i] - truth_a[i]);
+                bins.add(temp_c(k), 3 * si + i, corr[k][i] - truth_a[i]);
             }
             axes.push(AxisCheck {
                 sensor: *sensor,
@@ -186,7 +243,13 @@ pub fn check_run(run: &Run, track: &Track, corrected: &Corrected, raw_units: [bo
             });
         }
     }
-    RunCheck { run: run.spec.name.clone(), skipped: skip, axes, temperature_outside: corrected.temp_outside.warning() }
+    RunCheck {
+        run: run.spec.name.clone(),
+        skipped: skip,
+        axes,
+        temperature_outside: corrected.temp_outside.warning(),
+        temp_bins: bins.finish(),
+    }
 }
 
 fn ratio(a: Option<f64>, b: Option<f64>) -> Option<f64> {

@@ -1,6 +1,7 @@
 //! Acceptance rules (JSON) for a unit's calibration: bounds on coefficients, on their
 //! standard errors, on the measured noise, on the corrected residual and reduction factors,
-//! on temperature behaviour (bias change over the calibrated range, the range covered) and
+//! on temperature behaviour (bias change over the calibrated range, the range covered, the
+//! bias residual after compensation per temperature bin of the checked session) and
 //! on model adequacy.
 //!
 //! ```json
@@ -11,7 +12,8 @@
 //!     { "kind": "noise", "sensor": "gyro", "term": "white", "max": 0.2, "unit": "deg/sqrt(h)" },
 //!     { "kind": "residual", "sensor": "accel", "max_pct": 0.01 },
 //!     { "kind": "reduction", "sensor": "gyro", "min": 10 },
-//!     { "kind": "temperature", "sensor": "gyro", "max_bias_change": 1e-3, "covers_c": [-20, 70] },
+//!     { "kind": "temperature", "sensor": "gyro", "max_bias_change": 1e-3, "covers_c": [-20, 70],
+//!       "max_residual": 5e-5 },
 //!     { "kind": "adequate" } ] }
 //! ```
 //!
@@ -118,6 +120,15 @@ pub enum Rule {
         /// The range, °C, the calibration must cover ([lowest, highest]).
         #[serde(default)]
         covers_c: Option<[f64; 2]>,
+        /// Largest bias residual after compensation, SI: the mean corrected error of the
+        /// checked session's samples in each temperature bin, worst bin and axis (needs a
+        /// session with temperatures).
+        #[serde(default)]
+        max_residual: Option<f64>,
+        /// Width of the temperature bins of `max_residual`, °C (whole degrees, bins centred on
+        /// multiples of it; default 1).
+        #[serde(default)]
+        bin_c: Option<f64>,
         /// Rule name.
         #[serde(default)]
         name: Option<String>,
@@ -206,6 +217,17 @@ impl Rules {
             return Err(RulesError::UnknownFormat { path: path.to_path_buf(), found: r.format });
         }
         for rule in &r.rules {
+            if let Rule::Temperature { max_residual, bin_c, .. } = rule {
+                let bad = |v: &Option<f64>, min: f64| v.is_some_and(|v| !(v.is_finite() && v >= min));
+                if bad(max_residual, 0.0) || bad(bin_c, 1.0) {
+                    return Err(RulesError::Parse {
+                        path: path.to_path_buf(),
+                        line: 0,
+                        column: 0,
+                        msg: "temperature rule: max_residual must be a non-negative number (SI) and bin_c at least 1 degC".into(),
+                    });
+                }
+            }
             if let Rule::Noise { sensor, term, unit, .. } = rule {
                 if !["white", "bias_instability", "random_walk"].contains(&term.as_str()) {
                     return Err(RulesError::Parse {
@@ -480,21 +502,123 @@ fn adequate_rule(ev: &Evidence<'_>, label: String) -> Outcome {
     }
 }
 
-/// The temperature rule: the calibrated range must cover `covers_c`, and each axis's bias
-/// b(T) = Σₖ tbₖ (T − 20)ᵏ (the profile's temperature-bias terms of degree 1–3) may change by
-/// at most `max_change` across the calibrated range (evaluated on 401 points).
-fn temperature_rule(
-    profile: &Profile,
-    sensor: SensorKind,
+/// The bounds of a `temperature` rule.
+#[derive(Debug, Clone, Copy, Default)]
+struct TemperatureLimits {
     max_change: Option<f64>,
     covers: Option<[f64; 2]>,
+    max_residual: Option<f64>,
+    bin_c: Option<f64>,
+}
+
+/// Bins with fewer samples than this are too few to judge a residual on and are left out.
+pub const MIN_BIN_SAMPLES: u64 = 100;
+
+/// The largest bias residual after compensation in a checked session (see
+/// [`worst_temperature_residual`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TemperatureResidual {
+    /// |mean corrected error| of the worst bin and axis, SI.
+    pub residual: f64,
+    /// Its axis.
+    pub axis: char,
+    /// Its bin, °C ([lo, hi), centred on a multiple of the bin width).
+    pub bin_c: [f64; 2],
+    /// Samples in it.
+    pub samples: u64,
+    /// Standard error of its mean (the bin's own spread / √n), SI.
+    pub std_error: f64,
+}
+
+/// The largest bias residual after compensation of `sensor` in a checked session: the run
+/// checks' whole-degree bins of corrected error merged over runs into `bin_c`-wide bins
+/// centred on multiples of `bin_c` (pooled mean and mean square), bins of fewer than
+/// [`MIN_BIN_SAMPLES`] left out; the worst |mean| over bins and axes. None when no bin has
+/// enough samples.
+pub fn worst_temperature_residual(check: &CheckReport, sensor: SensorKind, bin_c: f64) -> Option<TemperatureResidual> {
+    let width = bin_c.max(1.0).round();
+    // Per merged bin and axis: samples, Σ error, Σ error².
+    let mut merged: std::collections::BTreeMap<i64, [(u64, f64, f64); 3]> = Default::default();
+    for b in check.runs.iter().flat_map(|r| &r.temp_bins) {
+        let m = merged.entry((b.centre_c / width).round() as i64).or_default();
+        for (i, acc) in m.iter_mut().enumerate() {
+            let j = 3 * sensor.index() + i;
+            let n = b.n[j] as f64;
+            acc.0 += b.n[j];
+            acc.1 += b.mean[j] * n;
+            acc.2 += b.rms[j] * b.rms[j] * n;
+        }
+    }
+    let mut worst: Option<TemperatureResidual> = None;
+    for (key, axes) in merged {
+        for (i, &(n, sum, sq)) in axes.iter().enumerate() {
+            if n < MIN_BIN_SAMPLES {
+                continue;
+            }
+            let nf = n as f64;
+            let mean = sum / nf;
+            if worst.is_none_or(|w| mean.abs() > w.residual) {
+                let lo = (key as f64 - 0.5) * width;
+                worst = Some(TemperatureResidual {
+                    residual: mean.abs(),
+                    axis: crate::units::AXES[i],
+                    bin_c: [lo, lo + width],
+                    samples: n,
+                    std_error: ((sq / nf - mean * mean).max(0.0) / nf).sqrt(),
+                });
+            }
+        }
+    }
+    worst
+}
+
+/// `max_residual` of a temperature rule: pass, and the words behind it.
+fn temperature_residual(ev: &Evidence<'_>, sensor: SensorKind, max: f64, bin_c: Option<f64>) -> (bool, String) {
+    let Some(check) = ev.check else { return (false, format!("bias residual: {}", no_check(ev))) };
+    match worst_temperature_residual(check, sensor, bin_c.unwrap_or(1.0)) {
+        None => (
+            false,
+            format!(
+                "bias residual: the checked session has no temperature bin of {MIN_BIN_SAMPLES} samples or more (no temperatures?)"
+            ),
+        ),
+        Some(w) => (
+            w.residual <= max,
+            format!(
+                "largest bias residual after compensation {:.4e} (axis {}, {}..{} degC, {} samples, ±{:.1e}) against {max:.4e}",
+                w.residual, w.axis, w.bin_c[0], w.bin_c[1], w.samples, w.std_error
+            ),
+        ),
+    }
+}
+
+/// The temperature rule: the calibrated range must cover `covers_c`; each axis's bias
+/// b(T) = Σₖ tbₖ (T − 20)ᵏ (the profile's temperature-bias terms of degree 1–3) may change by
+/// at most `max_change` across the calibrated range (evaluated on 401 points); and the
+/// checked session's bias residual per temperature bin may be at most `max_residual`.
+fn temperature_rule(
+    profile: &Profile,
+    ev: &Evidence<'_>,
+    sensor: SensorKind,
+    limits: TemperatureLimits,
     label: String,
 ) -> Outcome {
-    let Some([lo, hi]) = profile.temperature_range_c() else {
-        return (label, false, "the profile records no temperature (its runs had no temp column)".into());
-    };
-    let mut detail = vec![format!("calibrated over {lo:.1}..{hi:.1} degC")];
+    let TemperatureLimits { max_change, covers, max_residual, bin_c } = limits;
+    let mut detail = Vec::new();
     let mut pass = true;
+    if let Some(max) = max_residual {
+        let (ok, words) = temperature_residual(ev, sensor, max, bin_c);
+        pass &= ok;
+        detail.push(words);
+        if max_change.is_none() && covers.is_none() {
+            return (label, pass, detail.join("; "));
+        }
+    }
+    let Some([lo, hi]) = profile.temperature_range_c() else {
+        detail.push("the profile records no temperature (its runs had no temp column)".into());
+        return (label, false, detail.join("; "));
+    };
+    detail.insert(0, format!("calibrated over {lo:.1}..{hi:.1} degC"));
     if let Some([a, b]) = covers {
         let ok = lo <= a && hi >= b;
         pass &= ok;
@@ -505,13 +629,10 @@ fn temperature_rule(
         let coef = |k: &str, ax: char| fit.value(&format!("{}.{k}_{ax}", sensor.as_str()));
         let any = crate::units::AXES.iter().any(|&ax| ["tb", "tb2", "tb3"].iter().any(|k| coef(k, ax).is_some()));
         if !any {
-            return (
-                label,
-                false,
-                format!(
-                    "the profile has no {sensor} temperature-bias terms: the bias change over the range is unknown"
-                ),
-            );
+            detail.push(format!(
+                "the profile has no {sensor} temperature-bias terms: the bias change over the range is unknown"
+            ));
+            return (label, false, detail.join("; "));
         }
         let (mut worst, mut at) = (0.0_f64, 'x');
         for ax in crate::units::AXES {
@@ -576,11 +697,16 @@ pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<Rule
                     reduction_rule(ev, *sensor, *min, name.clone().unwrap_or_else(|| format!("{sensor} reduction")))
                 }
                 Rule::Adequate { name } => adequate_rule(ev, name.clone().unwrap_or_else(|| "model adequate".into())),
-                Rule::Temperature { sensor, max_bias_change, covers_c, name } => temperature_rule(
+                Rule::Temperature { sensor, max_bias_change, covers_c, max_residual, bin_c, name } => temperature_rule(
                     profile,
+                    ev,
                     *sensor,
-                    *max_bias_change,
-                    *covers_c,
+                    TemperatureLimits {
+                        max_change: *max_bias_change,
+                        covers: *covers_c,
+                        max_residual: *max_residual,
+                        bin_c: *bin_c,
+                    },
                     name.clone().unwrap_or_else(|| format!("{sensor} temperature")),
                 ),
             };

@@ -47,7 +47,9 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Write a synthetic stand session (the paper's unit by default).
-    #[command(after_help = "Example: crosscal simulate --preset paper -o demo/")]
+    #[command(
+        after_help = "Example: crosscal simulate --preset paper -o demo/\nExample: crosscal simulate --thermal-sweep -20,0,20,45,70 --thermal-tau 120 --temp-noise 0.05 -o sweep/"
+    )]
     Simulate(simulate::Args),
     /// Fit a calibration profile to a session and store it under calib-profiles/.
     #[command(after_help = "Example: crosscal fit demo/session.json --out calib-profiles/")]
@@ -76,7 +78,9 @@ enum Command {
     #[command(after_help = "Example: crosscal noise still/session.json --report noise.html")]
     Noise(noise::Args),
     /// Predicted uncertainty of every coefficient for proposed runs, before recording; suggests a run.
-    #[command(after_help = "Example: crosscal plan --rates 10 --cone-angles 10 --mounts 1 --arw 0.15 --vrw 0.02")]
+    #[command(
+        after_help = "Example: crosscal plan --rates 10 --cone-angles 10 --mounts 1 --arw 0.15 --vrw 0.02\nExample: crosscal plan --thermal -20,0,20,45,70 --degree 3 --target-bias-std 1e-5,1e-3"
+    )]
     Plan(plan::Args),
     /// Accept or reject a unit: its profile (and session) against acceptance rules; exit 1 on reject.
     #[command(
@@ -339,6 +343,63 @@ impl RunSet {
             &crosscal::simulate::cyclic_mounts(self.mounts as usize),
             self.duration,
         )
+    }
+}
+
+/// How a thermal sweep (`simulate --thermal-sweep`, `plan --thermal`) runs in the chamber:
+/// the runs at each plateau, the soak, the unit's lag, ramps. Each flag needs the sweep.
+#[derive(Debug, clap::Args)]
+pub struct SweepArgs {
+    /// Static faces recorded at each plateau (0 to 6: up = +z, -z, +x, -x, +y, -y), each for
+    /// --duration.
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u8).range(0..=6), requires = "thermal_sweep")]
+    pub faces: u8,
+    /// Also record the conic runs of --rates × --cone-angles × --mounts at each plateau.
+    #[arg(long, requires = "thermal_sweep")]
+    pub plateau_conic: bool,
+    /// Soak at each plateau before its first run, s, not recorded (default 5 × --thermal-tau,
+    /// the unit then within 0.7 % of the step).
+    #[arg(long, requires = "thermal_sweep")]
+    pub soak: Option<f64>,
+    /// Time constant of the unit's first-order lag behind the chamber, s (0: none).
+    #[arg(long, default_value_t = 0.0, requires = "thermal_sweep")]
+    pub thermal_tau: f64,
+    /// Chamber ramp rate between set points, °C/min (default: the set point steps).
+    #[arg(long, requires = "thermal_sweep")]
+    pub ramp_rate: Option<f64>,
+    /// Record during the ramps as well (the plateau's runs in turn, as many as fit).
+    #[arg(long, requires = "ramp_rate")]
+    pub record_ramps: bool,
+    /// Chamber and unit temperature when the sweep starts, °C.
+    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true, requires = "thermal_sweep")]
+    pub chamber_start: f64,
+    /// Mark a plateau run NOT SETTLED in its note when the unit is farther than this from the
+    /// set point, °C.
+    #[arg(long, default_value_t = 0.1, requires = "thermal_sweep")]
+    pub settled_within: f64,
+}
+
+impl SweepArgs {
+    /// The sweep over `plateaus_c`: the faces and (with --plateau-conic) the conic runs of
+    /// `runs` at each plateau; refused when it cannot run.
+    pub fn sweep(
+        &self,
+        plateaus_c: &[f64],
+        runs: &RunSet,
+    ) -> anyhow::Result<crosscal::simulate::thermal::ThermalSweep> {
+        let mut at_plateau = crosscal::simulate::thermal::faces(self.faces as usize, runs.duration);
+        if self.plateau_conic {
+            at_plateau.extend(runs.plan());
+        }
+        let mut s = crosscal::simulate::thermal::ThermalSweep::new(plateaus_c.to_vec(), at_plateau);
+        s.tau_s = self.thermal_tau;
+        s.soak_s = self.soak.unwrap_or(5.0 * self.thermal_tau);
+        s.ramp_c_per_min = self.ramp_rate;
+        s.record_ramps = self.record_ramps;
+        s.start_c = self.chamber_start;
+        s.settled_within_c = self.settled_within;
+        s.check().map_err(anyhow::Error::msg)?;
+        Ok(s)
     }
 }
 

@@ -5,6 +5,7 @@ use crate::outln;
 use anyhow::Context;
 use crosscal::estimate::CoefStatus;
 use crosscal::noise::NoiseReport;
+use crosscal::plan::thermal::{plan_thermal, ThermalPlanSpec};
 use crosscal::plan::{default_candidates, plan, PlanSpec};
 use crosscal::units::SensorKind;
 use std::path::PathBuf;
@@ -33,7 +34,23 @@ pub struct Args {
     /// spans and sample rate) instead of the factorial --rates × --cone-angles × --mounts.
     #[arg(long)]
     design: Option<PathBuf>,
-    /// Do not search for an extra run.
+    /// Plan a thermal calibration instead: a chamber sweep through these plateau set points,
+    /// °C (the runs at each from --faces, --plateau-conic and --duration): the predicted
+    /// uncertainty of each sensor's temperature-compensated bias across the range.
+    #[arg(long = "thermal", alias = "thermal-sweep", value_parser = super::parse_list, allow_hyphen_values = true, conflicts_with = "design")]
+    thermal_sweep: Option<super::List>,
+    /// How the sweep runs in the chamber.
+    #[command(flatten)]
+    sweep: super::SweepArgs,
+    /// Degree of the bias polynomial in temperature (1 to 3) the thermal plan identifies.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(i32).range(1..=3), requires = "thermal_sweep")]
+    degree: i32,
+    /// Target standard uncertainty of the compensated bias at the worst temperature of the
+    /// range, GYRO,ACCEL in rad/s and m/s² (e.g. 1e-5,1e-3): the thermal plan suggests the run
+    /// duration at each plateau meeting both.
+    #[arg(long, value_parser = super::parse_list, requires = "thermal_sweep")]
+    target_bias_std: Option<super::List>,
+    /// Do not search for an extra run (or, with --thermal, an extra plateau).
     #[arg(long)]
     no_suggest: bool,
     /// Print the plan as JSON.
@@ -88,6 +105,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         spec.accel_density =
             acc.ok_or_else(|| anyhow::anyhow!("{}: no accelerometer white noise in it", path.display()))?;
     }
+    if let Some(super::List(plateaus)) = &a.thermal_sweep {
+        return run_thermal(&a, plateaus, &model, &spec);
+    }
     let candidates = if a.no_suggest { Vec::new() } else { default_candidates(&spec) };
     let r = plan(&model, &spec, &candidates)?;
     if a.json {
@@ -130,6 +150,82 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             }
         }
         None if !a.no_suggest => outln!("no candidate run improves the plan by 10 % or more"),
+        None => {}
+    }
+    Ok(Outcome::Ok)
+}
+
+/// `plan --thermal`: the thermal design's prediction, in text or JSON.
+fn run_thermal(a: &Args, plateaus: &[f64], model: &crosscal::model::Model, spec: &PlanSpec) -> anyhow::Result<Outcome> {
+    let target = match a.target_bias_std.as_ref().map(|l| l.0.as_slice()) {
+        None => None,
+        Some(&[g, acc]) if g > 0.0 && acc > 0.0 => Some([g, acc]),
+        Some(_) => anyhow::bail!("--target-bias-std expects GYRO,ACCEL: two positive values, rad/s and m/s^2"),
+    };
+    let t = ThermalPlanSpec {
+        sweep: a.sweep.sweep(plateaus, &a.runs)?,
+        sample_rate_hz: spec.sample_rate_hz,
+        gyro_density: spec.gyro_density,
+        accel_density: spec.accel_density,
+        degree: a.degree,
+        target_bias_std: target,
+    };
+    let r = plan_thermal(model, &t, !a.no_suggest)?;
+    if a.json {
+        outln!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(Outcome::Ok);
+    }
+    let plateaus: Vec<String> = r.plateaus_c.iter().map(|p| format!("{p}")).collect();
+    outln!(
+        "thermal plan: plateaus {} degC, {} runs of {:.2} s per plateau ({:.1} s recorded each, sweep {:.0} s), degree {}",
+        plateaus.join(", "),
+        r.runs_per_plateau,
+        t.sweep.runs.first().map_or(0.0, |x| x.duration_s),
+        r.dwell_s,
+        r.sweep_s,
+        r.degree
+    );
+    outln!("{:<22} {:>14}  unit", "coefficient", "predicted 1σ");
+    for c in &r.coefficients {
+        let se = match (c.status, c.std_error) {
+            (CoefStatus::Fitted, Some(se)) => format::num(se),
+            (CoefStatus::Unidentifiable, _) => "UNIDENTIFIABLE".to_string(),
+            _ => "fixed".to_string(),
+        };
+        outln!("{:<22} {:>14}  {}", c.name, se, c.unit);
+    }
+    for b in &r.bias {
+        let target = b.target.map(|t| format!(" (target {t:.3e})")).unwrap_or_default();
+        match (b.worst_std, b.worst_at) {
+            (Some(s), Some((ax, at))) => outln!(
+                "{} compensated bias: worst 1σ {s:.3e} {} at {at:.1} degC, axis {ax}{target}",
+                b.sensor,
+                b.unit
+            ),
+            _ => outln!(
+                "{} compensated bias: UNKNOWN (a coefficient is unidentifiable: a degree-{} polynomial needs at least {} plateaus){target}",
+                b.sensor,
+                r.degree,
+                r.degree + 1
+            ),
+        }
+    }
+    if let Some(d) = &r.dwell {
+        let [g, acc] = d.worst_std.map(|v| v.map_or("unknown".to_string(), |v| format!("{v:.3e}")));
+        outln!(
+            "suggested run duration: {:.2} s ({:.1} s recorded per plateau, sweep {:.0} s): worst 1σ gyro {g} rad/s, accel {acc} m/s^2{}",
+            d.run_duration_s,
+            d.dwell_s,
+            d.sweep_s,
+            if d.meets { "" } else { " — still short of the target" }
+        );
+    }
+    match &r.extra_plateau {
+        Some(p) => {
+            let [g, acc] = p.worst_std.map(|v| v.map_or("unknown".to_string(), |v| format!("{v:.3e}")));
+            outln!("suggested extra plateau: {} degC: worst 1σ gyro {g} rad/s, accel {acc} m/s^2", p.at_c);
+        }
+        None if !a.no_suggest => outln!("no extra plateau lowers the worst uncertainty by 10 % or more"),
         None => {}
     }
     Ok(Outcome::Ok)

@@ -47,8 +47,24 @@ pub struct Args {
     /// Temperature over the session, °C: START,END (a ramp) or more breakpoints evenly spaced
     /// in time, linear between them (10,40,10 warms then cools; 20,20,60,60 plateau, ramp,
     /// plateau); adds a temp column.
-    #[arg(long, value_parser = parse_list, allow_hyphen_values = true)]
+    #[arg(long, value_parser = parse_list, allow_hyphen_values = true, conflicts_with = "thermal_sweep")]
     temperature: Option<List>,
+    /// A production-line chamber sweep through these plateau set points, °C (e.g.
+    /// -20,0,20,45,70): at each, after the soak, the static faces (and conic runs) for
+    /// --duration each; the runs are named p1-face+z, p1-cone+10, …, their notes give the
+    /// plateau and mark runs the unit had not settled for.
+    #[arg(long, value_parser = parse_list, allow_hyphen_values = true)]
+    thermal_sweep: Option<List>,
+    /// How the sweep runs in the chamber.
+    #[command(flatten)]
+    sweep: super::SweepArgs,
+    /// Temperature reading noise (standard deviation), °C, on the temp column; the outputs
+    /// follow the true temperature.
+    #[arg(long, default_value_t = 0.0)]
+    temp_noise: f64,
+    /// Temperature reading step, °C (the temp column is rounded to it; 0: no rounding).
+    #[arg(long, default_value_t = 0.001)]
+    temp_quantum: f64,
     /// Gyro angle random walk (white noise), °/√h.
     #[arg(long, default_value_t = 0.0)]
     arw: f64,
@@ -133,12 +149,21 @@ impl Args {
             session_clock_s: self.session_clock,
             si_units: self.si_units,
             disturb: self.disturb.clone(),
+            temp_noise_c: self.temp_noise,
+            temp_quantum_c: self.temp_quantum,
         }
     }
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
-    let cfg = crosscal::app::simulate::config(&a.options())?;
+    let mut cfg = crosscal::app::simulate::config(&a.options())?;
+    if let Some(List(plateaus)) = &a.thermal_sweep {
+        if a.preset != "paper" {
+            anyhow::bail!("--thermal-sweep records its own runs at each plateau: leave out --preset {}", a.preset);
+        }
+        a.sweep.sweep(plateaus, &a.runs)?.apply(&mut cfg).map_err(anyhow::Error::msg)?;
+        crosscal::simulate::check_runs(&cfg.runs, cfg.sample_rate_hz).map_err(anyhow::Error::msg)?;
+    }
     let session = cfg.generate();
     let path =
         write_session(&session, &a.out).with_context(|| format!("writing the session to {}", a.out.display()))?;

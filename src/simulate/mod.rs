@@ -7,6 +7,7 @@
 pub mod noise;
 pub mod protocol;
 pub mod realism;
+pub mod thermal;
 
 use crate::atomic::write_new;
 use crate::frames::Mount;
@@ -154,6 +155,13 @@ pub struct SimConfig {
     /// start to its end, linear between them (`[start, end]` is a ramp; `[10, 40, 10]` warms
     /// then cools; `[t, t]` a plateau); when set, every run gets a `temp` column.
     pub temperature_c: Option<Vec<f64>>,
+    /// A chamber program (a thermal sweep, [`thermal::ThermalSweep::apply`]): each run's
+    /// temperature from the unit's lag behind the chamber; takes precedence over
+    /// `temperature_c`.
+    pub chamber: Option<thermal::Chamber>,
+    /// How the `temp` column reads the unit's true temperature (noise, step); the sensor
+    /// outputs follow the true temperature.
+    pub temp_reading: thermal::TempReading,
     /// Coloured noise added to each gyro axis (rad/s), on top of the white per-sample noise.
     pub gyro_process: noise::NoiseProcess,
     /// Coloured noise added to each accelerometer axis (m/s²).
@@ -209,6 +217,8 @@ impl SimConfig {
             g_m_s2: 9.80665,
             seed: 1,
             temperature_c: None,
+            chamber: None,
+            temp_reading: Default::default(),
             gyro_process: Default::default(),
             accel_process: Default::default(),
             realism: Default::default(),
@@ -285,13 +295,11 @@ impl SimConfig {
             let coloured = !(self.gyro_process.is_zero() && self.accel_process.is_zero());
             rec.gyro.reserve(n);
             rec.accel.reserve(n);
-            if let Some(points) = self.temperature_c.as_deref().filter(|p| !p.is_empty()) {
-                // Rounded to 1 mK, as a stand's sensor would log it.
-                let temp = |t: f64| (piecewise(points, (elapsed + t) / total) * 1000.0).round() / 1000.0;
-                rec.temp_c = Some(rec.t_s.iter().map(|&t| temp(t)).collect());
-            }
+            // The outputs follow the unit's true temperature; the temp column is its reading.
+            let true_c = self.true_temperatures_c(runs.len(), &rec.t_s, elapsed, total);
+            rec.temp_c = true_c.as_deref().map(|t| self.temp_reading.read(t, self.seed, runs.len()));
             for k in 0..n {
-                let state = |tr: &crate::motion::Track| state_at(tr, k, rec.temp_c.as_ref().map_or(f64::NAN, |t| t[k]));
+                let state = |tr: &crate::motion::Track| state_at(tr, k, true_c.as_ref().map_or(f64::NAN, |t| t[k]));
                 let ug = forward(&gterms, &gvals, &state(&tg));
                 let ua = forward(&aterms, &avals, &state(&ta));
                 let mut g = [0.0; 3];
@@ -324,6 +332,7 @@ impl SimConfig {
             runs.push(Run {
                 spec: RunSpec {
                     mount: plan.mount.clone(),
+                    note: self.chamber.as_ref().and_then(|c| c.note(runs.len(), plan.duration_s)),
                     ..RunSpec::new(plan.name.clone(), format!("{}.csv", plan.name), plan.motion.clone(), None)
                 },
                 path: PathBuf::from(format!("{}.csv", plan.name)),

@@ -20,6 +20,8 @@ use crate::simulate::{RunPlan, SimConfig};
 use crate::units::SensorKind;
 use serde::Serialize;
 
+pub mod thermal;
+
 /// Fits exactly `model` to prepared runs through the one entry point.
 fn refit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
     Ok(crate::estimate::fit(&FitRequest::runs(model, runs).options(*opts))?.fit)
@@ -112,12 +114,30 @@ pub fn describe(r: &RunPlan) -> String {
 
 /// The fit a plan predicts: noiseless data of the plan fitted with the plan's σ.
 pub fn predict(model: &Model, spec: &PlanSpec) -> Result<(Fit, Vec<Vec<f64>>), EstimateError> {
-    crate::simulate::check_runs(&spec.runs, spec.sample_rate_hz).map_err(EstimateError::Request)?;
     let cfg = SimConfig { runs: spec.runs.clone(), sample_rate_hz: spec.sample_rate_hz, ..SimConfig::paper() };
-    let session = cfg.generate();
+    predict_config(model, &cfg, spec.sigma())
+}
+
+/// The fit a simulated design predicts (its runs, sample rate and temperatures; the unit and
+/// noise of `cfg` are ignored: the paper's unit, noiseless, fitted with the per-sample σ of
+/// every channel, gx..az), and the RMS of every regressor over the design per sensor, in
+/// model term order.
+pub fn predict_config(model: &Model, cfg: &SimConfig, sigma: [f64; 6]) -> Result<(Fit, Vec<Vec<f64>>), EstimateError> {
+    crate::simulate::check_runs(&cfg.runs, cfg.sample_rate_hz).map_err(EstimateError::Request)?;
+    let noiseless = SimConfig {
+        truth: SimConfig::paper().truth,
+        gyro_noise_deg_s: 0.0,
+        accel_noise_g: 0.0,
+        gyro_process: Default::default(),
+        accel_process: Default::default(),
+        realism: Default::default(),
+        temp_reading: Default::default(),
+        ..cfg.clone()
+    };
+    let session = noiseless.generate();
     let tr = tracks(&session, &DerivativeConfig::default());
     let runs = fit_runs(&session, &tr);
-    let opts = FitOptions { known_sigma: Some(spec.sigma()), ..FitOptions::default() };
+    let opts = FitOptions { known_sigma: Some(sigma), ..FitOptions::default() };
     let f = refit(model, &runs, &opts)?;
     // RMS of every regressor over the plan, per sensor, in model term order.
     let mut rms = Vec::new();
