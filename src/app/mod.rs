@@ -1,6 +1,9 @@
-//! The use cases shared by the command line, batch runs and the bindings: fit a unit and
-//! store its profile ([`fit`]), validate a model on held-out runs ([`validate`]), accept a
-//! unit against rules ([`accept`]), calibrate a production lot ([`batch`]).
+//! The use cases shared by the command line, batch runs and the Python bindings: fit a unit
+//! and store its profile ([`fit`]), validate a model on held-out runs ([`validate`]), accept
+//! a unit against rules ([`accept`]), calibrate a production lot ([`batch`]), diagnose a
+//! session ([`diagnose`]), turn simulation settings into a configuration ([`simulate`]),
+//! correct and analyse samples held in memory ([`arrays`]), and the exit code of any error
+//! ([`errors`]).
 //!
 //! Top layer of the library: it may use every module below it, and nothing below uses it.
 //! Errors are typed ([`AppError`]) with their causes kept as sources; only the binary turns
