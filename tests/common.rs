@@ -219,3 +219,23 @@ pub fn simulate_g_sensitive(dir: &std::path::Path, out: &str, serial: &str, seed
     let (code, stdout, err) = run_in(dir, &args);
     assert_eq!(code, 0, "{stdout}{err}");
 }
+
+/// The thermal unit (#24), biases in SI: the gyro's cubic in temperature, the
+/// accelerometer's quadratic.
+pub const THERMAL_BIASES: [(&str, f64); 15] = [
+    ("gyro.tb_x", 2e-5),
+    ("gyro.tb2_x", -3e-7),
+    ("gyro.tb3_x", 4e-9),
+    ("gyro.tb_y", 1e-5),
+    ("gyro.tb2_y", 2e-7),
+    ("gyro.tb3_y", -3e-9),
+    ("gyro.tb_z", -1e-5),
+    ("gyro.tb2_z", 1e-7),
+    ("gyro.tb3_z", 2e-9),
+    ("accel.tb_x", 1e-4),
+    ("accel.tb2_x", -2e-6),
+    ("accel.tb_y", -1e-4),
+    ("accel.tb2_y", 1e-6),
+    ("accel.tb_z", 5e-5),
+    ("accel.tb2_z", 3e-6),
+];

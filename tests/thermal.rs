@@ -192,37 +192,20 @@ fn a_curved_scale_factor_tempco_is_recovered_term_by_term() {
     }
 }
 
-/// The unit of the issue: gyro bias cubic, accelerometer bias quadratic, gyro scale linear in
-/// temperature, over a −20 … +70 °C sweep.
-const SWEEP_UNIT: [(&str, f64); 18] = [
-    ("gyro.tb_x", 2e-5),
-    ("gyro.tb2_x", -3e-7),
-    ("gyro.tb3_x", 4e-9),
-    ("gyro.tb_y", 1e-5),
-    ("gyro.tb2_y", 2e-7),
-    ("gyro.tb3_y", -3e-9),
-    ("gyro.tb_z", -1e-5),
-    ("gyro.tb2_z", 1e-7),
-    ("gyro.tb3_z", 2e-9),
-    ("accel.tb_x", 1e-4),
-    ("accel.tb2_x", -2e-6),
-    ("accel.tb_y", -1e-4),
-    ("accel.tb2_y", 1e-6),
-    ("accel.tb_z", 5e-5),
-    ("accel.tb2_z", 3e-6),
-    ("gyro.ts_x", 1e-4),
-    ("gyro.ts_y", -1e-4),
-    ("gyro.ts_z", 2e-4),
-];
+/// The unit of the issue: gyro bias cubic, accelerometer bias quadratic
+/// ([`crate::common::THERMAL_BIASES`]), gyro scale linear in temperature (these), over a −20 … +70 °C
+/// sweep.
+const SWEEP_SCALES: [(&str, f64); 3] = [("gyro.ts_x", 1e-4), ("gyro.ts_y", -1e-4), ("gyro.ts_z", 2e-4)];
 
-/// The effects [`SWEEP_UNIT`] sets.
+/// The effects the sweep unit sets.
 const SWEEP_EFFECTS: [&str; 6] =
     ["gyro-temp-bias", "gyro-temp-bias2", "gyro-temp-bias3", "accel-temp-bias", "accel-temp-bias2", "gyro-temp-scale"];
 
 /// The sweep unit (or, with `hidden` false, a unit without temperature terms) over `temps`.
 fn simulate_sweep(d: &std::path::Path, out: &str, temps: &str, seed: &str, hidden: bool) {
     let extra = ["--temperature", temps, "--seed", seed, "--gyro-noise", "0.002", "--accel-noise", "0.0002"];
-    let truth: Vec<(String, f64)> = SWEEP_UNIT.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let truth: Vec<(String, f64)> =
+        crate::common::THERMAL_BIASES.iter().chain(&SWEEP_SCALES).map(|(n, v)| (n.to_string(), *v)).collect();
     let (hidden, truth): (&[&str], &[(String, f64)]) = if hidden { (&SWEEP_EFFECTS, &truth) } else { (&[], &[]) };
     crate::common::simulate_hidden(d, out, hidden, truth, &extra);
 }

@@ -8,23 +8,7 @@ use crosscal::profile::Profile;
 use crosscal::session::Session;
 
 /// A cubic gyro bias and a quadratic accelerometer bias (SI), the unit.
-const TRUTH: [(&str, f64); 15] = [
-    ("gyro.tb_x", 2e-5),
-    ("gyro.tb2_x", -3e-7),
-    ("gyro.tb3_x", 4e-9),
-    ("gyro.tb_y", 1e-5),
-    ("gyro.tb2_y", 2e-7),
-    ("gyro.tb3_y", -3e-9),
-    ("gyro.tb_z", -1e-5),
-    ("gyro.tb2_z", 1e-7),
-    ("gyro.tb3_z", 2e-9),
-    ("accel.tb_x", 1e-4),
-    ("accel.tb2_x", -2e-6),
-    ("accel.tb_y", -1e-4),
-    ("accel.tb2_y", 1e-6),
-    ("accel.tb_z", 5e-5),
-    ("accel.tb2_z", 3e-6),
-];
+const TRUTH: [(&str, f64); 15] = crate::common::THERMAL_BIASES;
 
 /// The effects fitted (and planned: degree 3 on both sensors; the accelerometer's true cubic
 /// term is 0).

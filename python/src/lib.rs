@@ -56,6 +56,21 @@ fn slice<'a>(py: Python<'_>, a: &'a PyReadonlyArray1<'_, f64>, what: &str) -> Py
     a.as_slice().map_err(|_| usage(py, format!("{what}: the array is not contiguous")))
 }
 
+/// A record's columns borrowed from its arrays (`temp` when given).
+fn columns<'a>(
+    py: Python<'_>,
+    t: &'a PyReadonlyArray1<'_, f64>,
+    gyro: &'a PyReadonlyArray2<'_, f64>,
+    accel: &'a PyReadonlyArray2<'_, f64>,
+    temp: Option<&'a PyReadonlyArray1<'_, f64>>,
+) -> PyResult<Columns<'a>> {
+    let temp_c = match temp {
+        Some(x) => Some(slice(py, x, "temp")?),
+        None => None,
+    };
+    Ok(Columns { t: slice(py, t, "t")?, gyro: triples(py, gyro, "gyro")?, accel: triples(py, accel, "accel")?, temp_c })
+}
+
 /// n triples as a numpy (n, 3) array, without a copy.
 fn to_numpy<'py>(py: Python<'py>, v: Vec<[f64; 3]>) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let n = v.len();
@@ -311,16 +326,7 @@ fn correct<'py>(
     let p = profile_of(py, profile_json, "<profile>")?;
     let cal = calibration(py, &p, temperature_range)?;
     let io = IoUnits::for_profile(&p, gyro_unit, accel_unit).map_err(|e| err(py, e))?;
-    let temp_c = match &temp {
-        Some(x) => Some(slice(py, x, "temp")?),
-        None => None,
-    };
-    let c = Columns {
-        t: slice(py, &t, "t")?,
-        gyro: triples(py, &gyro, "gyro")?,
-        accel: triples(py, &accel, "accel")?,
-        temp_c,
-    };
+    let c = columns(py, &t, &gyro, &accel, temp.as_ref())?;
     let r = py.detach(|| crosscal::app::arrays::correct_arrays(&cal, &io, c, mode)).map_err(|e| err(py, e))?;
     let warnings: Vec<String> = r.temp_outside.warning().into_iter().collect();
     let flags = (!r.flags.is_empty()).then(|| r.flags.into_pyarray(py));
@@ -386,16 +392,7 @@ impl Streaming {
             ),
         };
         {
-            let temp_c = match &temp {
-                Some(x) => Some(slice(py, x, "temp")?),
-                None => None,
-            };
-            let c = Columns {
-                t: slice(py, &t, "t")?,
-                gyro: triples(py, &gyro, "gyro")?,
-                accel: triples(py, &accel, "accel")?,
-                temp_c,
-            };
+            let c = columns(py, &t, &gyro, &accel, temp.as_ref())?;
             let (mut ot, mut og, mut oa, mut of): (
                 PyReadwriteArray1<f64>,
                 PyReadwriteArray2<f64>,
