@@ -173,6 +173,7 @@ pages! {
     reference_conventions => "docs/reference-conventions.md",
     background => "docs/background.md",
     performance => "docs/performance.md",
+    python => "docs/python.md",
 }
 
 #[test]
