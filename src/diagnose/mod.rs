@@ -10,7 +10,10 @@
 //! 3. Climb greedily ([`select`]): add the effect with the largest χ² reduction among those
 //!    that are supported in-sample (p and ΔBIC), predict left-out runs, and have one size
 //!    in every run; two that explain the same residual are one finding. Stop when none
-//!    qualifies.
+//!    qualifies: there is no cap on the number of steps while the evidence supports one
+//!    (each step adds a catalogue effect the model lacks, so the catalogue bounds it). A
+//!    temperature polynomial's degree comes with its uncertainty, a thermal hysteresis with
+//!    its size ([`temperature`]).
 //! 4. Verdict: adequate (nothing systematic, no line off the cone, nothing added),
 //!    explained (the added effects leave nothing systematic), or unexplained (where the
 //!    residual's systematic part or lines sit: channel, harmonic or frequency, runs, size).
@@ -27,8 +30,9 @@ mod temperature;
 
 pub use lines::Line;
 pub use picture::{channel_reports, residuals, RunMotions, RunResiduals};
-pub use select::{Evidence, BIC_EVIDENCE};
+pub use select::{Estimate, Evidence, BIC_EVIDENCE};
 pub use space::HARMONICS;
+pub use temperature::{DegreeChoice, DegreeScore};
 
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::model::{find, Model};
@@ -63,8 +67,6 @@ fn resolution(space: &Space) -> Vec<f64> {
 
 /// Normal quantile of the pooled χ² test for a systematic residual (0.001 %).
 pub const SIGNIFICANCE_Z: f64 = 4.265;
-/// At most this many effects are added by the ladder.
-pub const MAX_STEPS: usize = 6;
 /// A candidate whose χ² gain, once the chosen effect is in, keeps less than this share of
 /// its own is explained by the same residual feature (indistinguishable on these runs).
 const SHARED_FEATURE: f64 = 0.1;
@@ -129,6 +131,12 @@ pub struct Candidate {
     pub rejected: Option<String>,
     /// Physical explanation.
     pub explanation: String,
+    /// Its coefficients' sizes fitted on all runs, with standard errors (SI).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub estimates: Vec<Estimate>,
+    /// For a temperature polynomial added by the ladder: its degree and how sure that is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degree: Option<DegreeChoice>,
 }
 
 /// One step of the ladder.
@@ -374,6 +382,8 @@ fn candidate(id: &str, ev: Evidence, base_q: &[f64]) -> Candidate {
         rejected: ev.rejection(),
         evidence: ev,
         explanation: find(id).map_or("", |e| e.explain()).to_string(),
+        estimates: Vec::new(),
+        degree: None,
     }
 }
 
@@ -565,7 +575,10 @@ fn climb(
     let mut current = model.clone();
     let mut steps: Vec<Step> = Vec::new();
     let mut first_round: Option<Vec<Candidate>> = None;
-    while steps.len() < MAX_STEPS {
+    // No step cap: the loop ends when no candidate passes; each step adds an effect the
+    // model lacks, so there can be no more steps than candidates (a safety bound only).
+    let bound = a.space.universe.candidates.len();
+    while steps.len() < bound {
         let space = &a.space;
         let set = space.base_set();
         let base = space.solve(&set);
@@ -581,6 +594,7 @@ fn climb(
             })
             .collect();
         scored.extend(temperature::polynomial_candidates(space, &set, &base, &base_heldout, &base_q));
+        temperature::size_candidates(space, &set, &mut scored);
         scored.sort_by(|x, y| x.0.delta_bic.total_cmp(&y.0.delta_bic));
         // A sensor whose noise is rounding (a noiseless recording) has nothing to explain.
         let res = resolution(space);
@@ -599,6 +613,11 @@ fn climb(
             break;
         };
         let best = temperature::lowest_sufficient_degree(best, &passing);
+        let mut score = best.0.clone();
+        score.degree = temperature::degree_choice(space, &set, &base, &base_heldout, &score);
+        if let Some(d) = &score.degree {
+            score.explanation = format!("{} {}", d.describe(), score.explanation);
+        }
         let indistinguishable = aliases(space, &set, best, &passing);
         let separated_by = indistinguishable.first().and_then(|other| {
             let b = space.effect_params(other);
@@ -622,13 +641,7 @@ fn climb(
         let next = analyse(&m, f, runs, motions, has_temp);
         let noise = noise_reports(&next.space);
         let channels = pictures(&next, &next.space.base_set(), &next.base_fit, &noise);
-        steps.push(Step {
-            effect: best.0.effect.clone(),
-            score: best.0.clone(),
-            indistinguishable,
-            separated_by,
-            channels,
-        });
+        steps.push(Step { effect: best.0.effect.clone(), score, indistinguishable, separated_by, channels });
         current = m;
         a = next;
     }

@@ -1,13 +1,92 @@
-//! Temperature polynomials in the diagnosis: the powers of (T − 20 °C) of a sensor's bias or
-//! scale are separate catalogue effects, tried here together as one candidate per degree,
-//! and the degree reported is the lowest that no higher one improves on.
+//! Temperature in the diagnosis.
+//!
+//! **Polynomials.** The powers of (T − 20 °C) of a sensor's bias or scale are separate
+//! catalogue effects, tried here together as one candidate per degree; the degree reported
+//! is the lowest that no higher one improves on, chosen on runs the fit did not see, and
+//! reported with its uncertainty ([`DegreeChoice`]): each degree's χ² gain on left-out runs,
+//! how many left-out runs each degree predicts best (a decisive choice is one most runs
+//! agree on), and the size of the highest power (and of the next, not taken) over its
+//! standard error.
+//!
+//! **Hysteresis.** When the runs hold warming and cooling branches, the thermal hysteresis
+//! effects (`…-temp-hysteresis`: a bias offset of opposite sign on the two branches) compete
+//! like any other; once sized, their explanation says warming minus cooling per axis with
+//! its standard error in the sensor's unit, so a branch-dependent residual is named as what
+//! it is rather than absorbed by drift or a lever arm.
 
 use super::algebra::Lsq;
-use super::select::Space;
+use super::select::{Estimate, Space};
 use super::{candidate, Candidate};
+use crate::units::{SensorKind, AXES};
+use serde::{Deserialize, Serialize};
 
 /// The temperature families whose powers are separate catalogue effects (`…`, `…2`, `…3`).
 const TEMPERATURE_FAMILIES: [&str; 4] = ["gyro-temp-bias", "accel-temp-bias", "gyro-temp-scale", "accel-temp-scale"];
+
+/// The evidence for one degree of a temperature polynomial.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DegreeScore {
+    /// Degree (0: no temperature term of this family).
+    pub degree: usize,
+    /// In-sample χ² reduction against the model without the family.
+    pub delta_q: f64,
+    /// χ² reduction on left-out runs (each predicted by the fit on the others).
+    pub heldout_gain: f64,
+    /// Left-out runs this degree predicts best of all degrees tried.
+    pub folds_preferring: usize,
+}
+
+/// The degree chosen for a temperature polynomial and how sure the choice is.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DegreeChoice {
+    /// The family (`gyro-temp-bias`, …).
+    pub family: String,
+    /// The degree chosen.
+    pub degree: usize,
+    /// Every degree tried, 0 first.
+    pub scores: Vec<DegreeScore>,
+    /// Left-out runs (folds) compared.
+    pub folds: usize,
+    /// Per axis: the chosen degree's highest-power coefficient over its standard error.
+    pub top_power_z: Vec<f64>,
+    /// Per axis: the same for the next power up, fitted with it (None when not tried).
+    pub next_power_z: Option<Vec<f64>>,
+}
+
+impl DegreeChoice {
+    /// The choice in words.
+    pub fn describe(&self) -> String {
+        let by = |f: &dyn Fn(&DegreeScore) -> String| self.scores.iter().map(f).collect::<Vec<_>>().join(", ");
+        let gains = by(&|s| format!("{}: {:.1}", s.degree, s.heldout_gain));
+        let folds = if self.folds > 1 {
+            let agree = self.scores.iter().find(|s| s.degree == self.degree).map_or(0, |s| s.folds_preferring);
+            let others = by(&|s| format!("{} at {}", s.folds_preferring, s.degree));
+            format!("; {agree} of {} left-out runs are predicted best at degree {} ({others})", self.folds, self.degree)
+        } else {
+            String::new()
+        };
+        let z = |v: &[f64]| v.iter().map(|z| format!("{z:.1}")).collect::<Vec<_>>().join(", ");
+        let next = self
+            .next_power_z
+            .as_ref()
+            .map_or(String::new(), |v| format!("; the next power, not taken, has z = {} (x, y, z) when fitted", z(v)));
+        format!(
+            "Degree {} of {} chosen on runs the fit did not see: χ² gain on left-out runs by degree {gains}{folds}; the highest power's size over its standard error z = {} (x, y, z){next}.",
+            self.degree,
+            self.family,
+            z(&self.top_power_z)
+        )
+    }
+}
+
+/// The id of power `d` of a family (`gyro-temp-bias`, `gyro-temp-bias2`, …).
+fn power(family: &str, d: usize) -> String {
+    if d == 1 {
+        family.to_string()
+    } else {
+        format!("{family}{d}")
+    }
+}
 
 /// Temperature polynomials as single candidates: for each family, the powers 1 … d (d = 2,
 /// 3) not yet in the model, added together (`gyro-temp-bias+gyro-temp-bias2+…`). A curve in
@@ -23,7 +102,7 @@ pub(super) fn polynomial_candidates(
 ) -> Vec<(Candidate, Vec<usize>)> {
     let mut out = Vec::new();
     for family in TEMPERATURE_FAMILIES {
-        let powers = [family.to_string(), format!("{family}2"), format!("{family}3")];
+        let powers = [power(family, 1), power(family, 2), power(family, 3)];
         for degree in 2..=3 {
             let group: Vec<&str> =
                 powers[..degree].iter().map(String::as_str).filter(|p| space.universe.candidates.contains(p)).collect();
@@ -50,11 +129,11 @@ pub(super) fn lowest_sufficient_degree<'a>(
     best: &'a (Candidate, Vec<usize>),
     passing: &[&'a (Candidate, Vec<usize>)],
 ) -> &'a (Candidate, Vec<usize>) {
-    let Some(family) = TEMPERATURE_FAMILIES.iter().find(|f| best.0.effect.split('+').next() == Some(**f)) else {
+    let Some(family) = family_of(&best.0.effect) else {
         return best;
     };
     let mut chain: Vec<&(Candidate, Vec<usize>)> =
-        passing.iter().copied().filter(|c| c.0.effect.split('+').next() == Some(*family)).collect();
+        passing.iter().copied().filter(|c| c.0.effect.split('+').next() == Some(family)).collect();
     chain.sort_by_key(|c| c.1.len());
     for (i, c) in chain.iter().enumerate() {
         let improved = chain[i + 1..].iter().any(|h| {
@@ -75,4 +154,93 @@ pub(super) fn lowest_sufficient_degree<'a>(
         }
     }
     best
+}
+
+/// The temperature family a candidate starts (its first part is the family's linear term).
+fn family_of(effect: &str) -> Option<&'static str> {
+    TEMPERATURE_FAMILIES.iter().copied().find(|f| effect.split('+').next() == Some(*f))
+}
+
+/// Each candidate's coefficient sizes with their standard errors, and for a thermal
+/// hysteresis the size in words: warming minus cooling per axis (2 thy), in the sensor's
+/// display unit.
+pub(super) fn size_candidates(space: &Space, set: &[usize], scored: &mut [(Candidate, Vec<usize>)]) {
+    for (c, params) in scored.iter_mut() {
+        c.estimates = space.estimates(set, params);
+        if c.effect.ends_with("-temp-hysteresis") && c.estimates.len() == 3 {
+            let sensor = if c.effect.starts_with("accel") { SensorKind::Accel } else { SensorKind::Gyro };
+            let (unit, k) = sensor.display_unit();
+            let axes: Vec<String> = c
+                .estimates
+                .iter()
+                .zip(AXES)
+                .map(|(e, a)| format!("{a} {:+.3e} ± {:.1e}", 2.0 * e.value * k, 2.0 * e.std_error * k))
+                .collect();
+            let generic = crate::model::find(&c.effect).map_or("", |e| e.explain());
+            c.explanation = format!(
+                "Thermal hysteresis of the {sensor} bias: on the warming branch minus on the cooling branch, at the same temperature, {} {unit} (2 thy, ± one standard error); the temperature dependence differs between the branches by this offset. {generic}",
+                axes.join(", ")
+            );
+        }
+    }
+}
+
+/// The degree choice of a temperature polynomial `best` (a family's powers 1 … d), with its
+/// uncertainty: every degree from 0 to the highest available fitted on all runs and on each
+/// left-out fold. None for any other candidate.
+pub(super) fn degree_choice(
+    space: &Space,
+    set: &[usize],
+    base: &Lsq,
+    base_heldout: &[f64],
+    best: &Candidate,
+) -> Option<DegreeChoice> {
+    let family = family_of(&best.effect)?;
+    let degree = best.effect.split('+').count();
+    let available = (1..=3).take_while(|&d| space.universe.candidates.contains(&power(family, d).as_str())).count();
+    let params = |d: usize| -> Vec<usize> { (1..=d).flat_map(|p| space.effect_params(&power(family, p))).collect() };
+    let mut heldout: Vec<Vec<f64>> = vec![base_heldout.to_vec()];
+    let mut scores = vec![DegreeScore { degree: 0, delta_q: 0.0, heldout_gain: 0.0, folds_preferring: 0 }];
+    for d in 1..=available {
+        let mut with = set.to_vec();
+        with.extend(params(d));
+        let h = space.heldout(&with);
+        let heldout_gain = base_heldout.iter().zip(&h).map(|(a, b)| a - b).sum();
+        scores.push(DegreeScore {
+            degree: d,
+            delta_q: base.q - space.solve(&with).q,
+            heldout_gain,
+            folds_preferring: 0,
+        });
+        heldout.push(h);
+    }
+    let folds = base_heldout.len();
+    for f in 0..folds {
+        let best_d = (0..heldout.len()).min_by(|&a, &b| heldout[a][f].total_cmp(&heldout[b][f])).unwrap_or(0);
+        scores[best_d].folds_preferring += 1;
+    }
+    let z_of = |d: usize| -> Vec<f64> {
+        let top: Vec<usize> = space.effect_params(&power(family, d));
+        space.estimates(set, &params(d)).iter().filter(|e| top_named(space, &top, e)).map(z).collect()
+    };
+    Some(DegreeChoice {
+        family: family.to_string(),
+        degree,
+        scores,
+        folds,
+        top_power_z: z_of(degree),
+        next_power_z: (degree < available).then(|| z_of(degree + 1)),
+    })
+}
+
+fn top_named(space: &Space, top: &[usize], e: &Estimate) -> bool {
+    top.iter().any(|&p| space.universe.params[p].name == e.name)
+}
+
+fn z(e: &Estimate) -> f64 {
+    if e.std_error > 0.0 {
+        e.value / e.std_error
+    } else {
+        0.0
+    }
 }
