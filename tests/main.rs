@@ -30,5 +30,6 @@ mod robust;
 mod stand;
 mod stream;
 mod thermal;
+mod thermal_hysteresis;
 mod uncertainty;
 mod validate;

@@ -19,6 +19,7 @@
 //!    residual's systematic part or lines sit: channel, harmonic or frequency, runs, size).
 
 pub mod algebra;
+mod disagreement;
 pub mod lines;
 pub mod picture;
 pub mod protocol;
@@ -28,6 +29,7 @@ pub mod separate;
 pub mod space;
 mod temperature;
 
+pub use disagreement::{per_run_disagreements, Disagreement, DISAGREEMENT_Z};
 pub use lines::Line;
 pub use picture::{channel_reports, residuals, RunMotions, RunResiduals};
 pub use select::{Estimate, Evidence, BIC_EVIDENCE};
@@ -201,63 +203,6 @@ pub struct Diagnosis {
     pub disagreements: Vec<Disagreement>,
 }
 
-/// A coefficient whose estimate from one run differs from the all-run estimate.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Disagreement {
-    /// Coefficient.
-    pub coefficient: String,
-    /// Run.
-    pub run: String,
-    /// Estimate from that run alone (coefficients it cannot identify held at the all-run values).
-    pub run_value: f64,
-    /// Its standard error.
-    pub run_std_error: f64,
-    /// All-run estimate.
-    pub all_value: f64,
-    /// (run − all) / run standard error.
-    pub z: f64,
-}
-
-/// |z| above which a single-run estimate disagrees (many comparisons are made).
-pub const DISAGREEMENT_Z: f64 = 6.0;
-
-/// Refits the model on each run alone and lists coefficients that disagree with the
-/// all-run fit by more than [`DISAGREEMENT_Z`] standard errors. Coefficients a single run
-/// cannot identify are held at their all-run values, so the rest stay comparable.
-pub fn per_run_disagreements(model: &Model, all: &Fit, runs: &[FitRun<'_>], opts: &FitOptions) -> Vec<Disagreement> {
-    let mut out = Vec::new();
-    for run in runs {
-        let one = std::slice::from_ref(run);
-        let Ok(first) = refit(model, one, opts) else { continue };
-        let mut m = model.clone();
-        for c in first.gyro.unidentifiable.iter().chain(&first.accel.unidentifiable) {
-            if let Some(v) = all.get(&c.held).map(|c| c.value) {
-                let _ = m.fix(&c.held, v);
-            }
-        }
-        let Ok(f) = refit(&m, one, opts) else { continue };
-        for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients) {
-            let (Some(se), Some(a)) = (c.std_error, all.get(&c.name)) else { continue };
-            if c.status != CoefStatus::Fitted || a.status != CoefStatus::Fitted || se <= 0.0 {
-                continue;
-            }
-            let z = (c.value - a.value) / se;
-            if z.abs() > DISAGREEMENT_Z {
-                out.push(Disagreement {
-                    coefficient: c.name.clone(),
-                    run: run.name.to_string(),
-                    run_value: c.value,
-                    run_std_error: se,
-                    all_value: a.value,
-                    z,
-                });
-            }
-        }
-    }
-    out.sort_by(|a, b| b.z.abs().total_cmp(&a.z.abs()));
-    out
-}
-
 /// The model at the end of a diagnosis's ladder: the base model plus each added effect.
 pub fn ladder_model(base: &Model, d: &Diagnosis) -> Model {
     let mut m = base.clone();
@@ -421,6 +366,8 @@ fn conclude(
         Vec::new()
     };
     let (mut steps, first_round, mut a) = climb(a, model, runs, motions, opts, has_temp, &mut warnings)?;
+    // Each temperature polynomial's degree, again with every effect found in the model.
+    let mut changed = temperature::revisit_degrees(&a.space, &mut steps, &mut warnings);
     // A sensor still systematic after its effects: only the first of them is the closest
     // catalogued match; the later ones chased what no catalogued effect explains.
     if let Some(last) = steps.last() {
@@ -441,15 +388,18 @@ fn conclude(
                 "also tried and left out: {} (each reduced the residual a little, none explains it)",
                 dropped.join(", ")
             ));
-            let mut m = model.clone();
-            for st in &steps {
-                let _ = m.add_effect(&st.effect);
-            }
-            a = analyse(&m, refit(&m, runs, opts)?, runs, motions, has_temp);
-            let noise = noise_reports(&a.space);
-            if let Some(st) = steps.last_mut() {
-                st.channels = pictures(&a, &a.space.base_set(), &a.base_fit, &noise);
-            }
+            changed = true;
+        }
+    }
+    if changed {
+        let mut m = model.clone();
+        for st in &steps {
+            let _ = m.add_effect(&st.effect);
+        }
+        a = analyse(&m, refit(&m, runs, opts)?, runs, motions, has_temp);
+        let noise = noise_reports(&a.space);
+        if let Some(st) = steps.last_mut() {
+            st.channels = pictures(&a, &a.space.base_set(), &a.base_fit, &noise);
         }
     }
     let final_fit = a.base_fit.clone();
@@ -613,11 +563,6 @@ fn climb(
             break;
         };
         let best = temperature::lowest_sufficient_degree(best, &passing);
-        let mut score = best.0.clone();
-        score.degree = temperature::degree_choice(space, &set, &base, &base_heldout, &score);
-        if let Some(d) = &score.degree {
-            score.explanation = format!("{} {}", d.describe(), score.explanation);
-        }
         let indistinguishable = aliases(space, &set, best, &passing);
         let separated_by = indistinguishable.first().and_then(|other| {
             let b = space.effect_params(other);
@@ -641,7 +586,13 @@ fn climb(
         let next = analyse(&m, f, runs, motions, has_temp);
         let noise = noise_reports(&next.space);
         let channels = pictures(&next, &next.space.base_set(), &next.base_fit, &noise);
-        steps.push(Step { effect: best.0.effect.clone(), score, indistinguishable, separated_by, channels });
+        steps.push(Step {
+            effect: best.0.effect.clone(),
+            score: best.0.clone(),
+            indistinguishable,
+            separated_by,
+            channels,
+        });
         current = m;
         a = next;
     }

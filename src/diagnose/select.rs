@@ -163,6 +163,24 @@ impl Space {
         Self { universe, runs, folds, total, channel_total }
     }
 
+    /// The same runs around a model whose coefficients `shift` moves ((global index, new
+    /// value − fitted value) pairs): the all-run and left-out systems' cross products and χ²
+    /// are those of the moved residual r − X·shift (the Grams are unchanged). The per-run
+    /// Grams in `runs` (and so [`Self::systematic`], [`Self::heldout_channels`]) are not moved.
+    pub fn moved(&self, shift: &[(usize, f64)]) -> Space {
+        let mv = |s: &System| {
+            let (b, yy) = shifted(s, shift);
+            System { g: s.g.clone(), b, yy, n: s.n }
+        };
+        Space {
+            universe: self.universe.clone(),
+            runs: self.runs.clone(),
+            folds: self.folds.iter().map(mv).collect(),
+            total: mv(&self.total),
+            channel_total: self.channel_total.iter().map(mv).collect(),
+        }
+    }
+
     /// The base model's free parameters.
     pub fn base_set(&self) -> Vec<usize> {
         (0..self.universe.params.len()).filter(|&i| self.universe.params[i].base).collect()

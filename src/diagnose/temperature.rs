@@ -6,7 +6,8 @@
 //! reported with its uncertainty ([`DegreeChoice`]): each degree's χ² gain on left-out runs,
 //! how many left-out runs each degree predicts best (a decisive choice is one most runs
 //! agree on), and the size of the highest power (and of the next, not taken) over its
-//! standard error.
+//! standard error. At the end of the climb each degree is checked again with every effect
+//! found in the model ([`revisit_degrees`]), and what is reported is that final choice.
 //!
 //! **Hysteresis.** When the runs hold warming and cooling branches, the thermal hysteresis
 //! effects (`…-temp-hysteresis`: a bias offset of opposite sign on the two branches) compete
@@ -28,6 +29,8 @@ const TEMPERATURE_FAMILIES: [&str; 4] = ["gyro-temp-bias", "accel-temp-bias", "g
 pub struct DegreeScore {
     /// Degree (0: no temperature term of this family).
     pub degree: usize,
+    /// Coefficients of the polynomial up to this degree.
+    pub params: usize,
     /// In-sample χ² reduction against the model without the family.
     pub delta_q: f64,
     /// χ² reduction on left-out runs (each predicted by the fit on the others).
@@ -139,15 +142,7 @@ pub(super) fn lowest_sufficient_degree<'a>(
         let improved = chain[i + 1..].iter().any(|h| {
             let dq = h.0.evidence.delta_q - c.0.evidence.delta_q;
             let dof = h.0.evidence.added_params.saturating_sub(c.0.evidence.added_params);
-            let p = if dof == 0 {
-                1.0
-            } else {
-                statrs::distribution::ChiSquared::new(dof as f64).map_or(1.0, |d| {
-                    use statrs::distribution::ContinuousCDF;
-                    d.sf(dq.max(0.0))
-                })
-            };
-            p < 1e-3 && h.0.evidence.heldout_gain > c.0.evidence.heldout_gain
+            p_gain(dq, dof) < 1e-3 && h.0.evidence.heldout_gain > c.0.evidence.heldout_gain
         });
         if !improved {
             return c;
@@ -185,33 +180,29 @@ pub(super) fn size_candidates(space: &Space, set: &[usize], scored: &mut [(Candi
     }
 }
 
-/// The degree choice of a temperature polynomial `best` (a family's powers 1 … d), with its
-/// uncertainty: every degree from 0 to the highest available fitted on all runs and on each
-/// left-out fold. None for any other candidate.
-pub(super) fn degree_choice(
+/// The degree choice of a family's polynomial of `degree` fitted beside `set`: every degree
+/// from 0 to the highest whose powers `params_of` finds, fitted on all runs and on each
+/// left-out fold.
+fn degree_choice(
     space: &Space,
     set: &[usize],
-    base: &Lsq,
-    base_heldout: &[f64],
-    best: &Candidate,
-) -> Option<DegreeChoice> {
-    let family = family_of(&best.effect)?;
-    let degree = best.effect.split('+').count();
-    let available = (1..=3).take_while(|&d| space.universe.candidates.contains(&power(family, d).as_str())).count();
-    let params = |d: usize| -> Vec<usize> { (1..=d).flat_map(|p| space.effect_params(&power(family, p))).collect() };
-    let mut heldout: Vec<Vec<f64>> = vec![base_heldout.to_vec()];
-    let mut scores = vec![DegreeScore { degree: 0, delta_q: 0.0, heldout_gain: 0.0, folds_preferring: 0 }];
+    family: &str,
+    degree: usize,
+    params_of: &dyn Fn(&str) -> Vec<usize>,
+) -> DegreeChoice {
+    let base = space.solve(set);
+    let base_heldout = space.heldout(set);
+    let available = (1..=3).take_while(|&d| !params_of(&power(family, d)).is_empty()).count();
+    let params = |d: usize| -> Vec<usize> { (1..=d).flat_map(|p| params_of(&power(family, p))).collect() };
+    let mut heldout: Vec<Vec<f64>> = vec![base_heldout.clone()];
+    let mut scores = vec![DegreeScore { degree: 0, params: 0, delta_q: 0.0, heldout_gain: 0.0, folds_preferring: 0 }];
     for d in 1..=available {
         let mut with = set.to_vec();
         with.extend(params(d));
         let h = space.heldout(&with);
         let heldout_gain = base_heldout.iter().zip(&h).map(|(a, b)| a - b).sum();
-        scores.push(DegreeScore {
-            degree: d,
-            delta_q: base.q - space.solve(&with).q,
-            heldout_gain,
-            folds_preferring: 0,
-        });
+        let delta_q = base.q - space.solve(&with).q;
+        scores.push(DegreeScore { degree: d, params: params(d).len(), delta_q, heldout_gain, folds_preferring: 0 });
         heldout.push(h);
     }
     let folds = base_heldout.len();
@@ -220,17 +211,97 @@ pub(super) fn degree_choice(
         scores[best_d].folds_preferring += 1;
     }
     let z_of = |d: usize| -> Vec<f64> {
-        let top: Vec<usize> = space.effect_params(&power(family, d));
+        let top = params_of(&power(family, d));
         space.estimates(set, &params(d)).iter().filter(|e| top_named(space, &top, e)).map(z).collect()
     };
-    Some(DegreeChoice {
+    DegreeChoice {
         family: family.to_string(),
         degree,
-        scores,
         folds,
-        top_power_z: z_of(degree),
+        top_power_z: if degree >= 1 { z_of(degree) } else { Vec::new() },
         next_power_z: (degree < available).then(|| z_of(degree + 1)),
+        scores,
+    }
+}
+
+/// The upper-tail χ²(dof) probability of a χ² gain `dq` (1 when dof is 0).
+fn p_gain(dq: f64, dof: usize) -> f64 {
+    if dof == 0 {
+        return 1.0;
+    }
+    statrs::distribution::ChiSquared::new(dof as f64).map_or(1.0, |d| {
+        use statrs::distribution::ContinuousCDF;
+        d.sf(dq.max(0.0))
     })
+}
+
+/// The lowest degree from 1 to `max` that no higher one up to `max` improves on (the rule
+/// of [`lowest_sufficient_degree`] on the scores of a [`DegreeChoice`]).
+fn lowest_sufficient(c: &DegreeChoice, max: usize) -> usize {
+    let at = |d: usize| c.scores.iter().find(|s| s.degree == d);
+    (1..=max)
+        .find(|&d| {
+            let Some(lo) = at(d) else { return true };
+            !(d + 1..=max).filter_map(at).any(|h| {
+                p_gain(h.delta_q - lo.delta_q, h.params.saturating_sub(lo.params)) < 1e-3
+                    && h.heldout_gain > lo.heldout_gain
+            })
+        })
+        .unwrap_or(max)
+}
+
+/// The explanation of a family's polynomial of `degree`.
+fn polynomial_explanation(family: &str, degree: usize) -> String {
+    if degree <= 1 {
+        return crate::model::find(family).map_or("", |e| e.explain()).to_string();
+    }
+    let ids: Vec<String> = (1..=degree).map(|d| power(family, d)).collect();
+    format!(
+        "Temperature polynomial of degree {degree} in (T - 20 degC) ({}): the residual follows the temp column along a curve no single power explains. Needs a temp column or a run temperature_c.",
+        ids.join(", ")
+    )
+}
+
+/// After the climb, each temperature polynomial's degree again with every effect found in
+/// the model: a polynomial added early can take a higher degree to absorb part of an effect
+/// found later (a thermal hysteresis reaches a scale polynomial through the runs' mean
+/// rate). Its top powers are dropped while they fail the rule that chose them, and the
+/// step's degree, uncertainty ([`DegreeChoice`]), sizes and explanation are those of the
+/// final model. Returns whether a step's effect changed (the caller refits).
+pub(super) fn revisit_degrees(space: &Space, steps: &mut [super::Step], warnings: &mut Vec<String>) -> bool {
+    let all_of = |id: &str| -> Vec<usize> {
+        (0..space.universe.params.len()).filter(|&i| space.universe.params[i].effect == id).collect()
+    };
+    let mut changed = false;
+    for st in steps.iter_mut() {
+        let Some(family) = family_of(&st.effect) else { continue };
+        let degree = st.effect.split('+').count();
+        let family_params: Vec<usize> = (1..=3).flat_map(|d| all_of(&power(family, d))).collect();
+        let set: Vec<usize> = space.base_set().into_iter().filter(|p| !family_params.contains(p)).collect();
+        // The family's fitted powers moved back to nominal (absent), so that each degree is
+        // fitted from nothing beside everything else found.
+        let shift: Vec<(usize, f64)> = family_params
+            .iter()
+            .map(|&i| (i, space.universe.params[i].nominal - space.universe.params[i].value))
+            .collect();
+        let space = &space.moved(&shift);
+        let mut choice = degree_choice(space, &set, family, degree, &all_of);
+        let lowered = if choice.folds > 1 { lowest_sufficient(&choice, degree) } else { degree };
+        if lowered < degree {
+            choice = degree_choice(space, &set, family, lowered, &all_of);
+            warnings.push(format!(
+                "{family}: degree {degree} when it was added, {lowered} once every effect found is in the model (the higher powers no longer predict left-out runs better)"
+            ));
+            st.effect = (1..=lowered).map(|d| power(family, d)).collect::<Vec<_>>().join("+");
+            st.score.effect = st.effect.clone();
+            changed = true;
+        }
+        let params: Vec<usize> = (1..=lowered).flat_map(|d| all_of(&power(family, d))).collect();
+        st.score.estimates = space.estimates(&set, &params);
+        st.score.explanation = format!("{} {}", choice.describe(), polynomial_explanation(family, lowered));
+        st.score.degree = Some(choice);
+    }
+    changed
 }
 
 fn top_named(space: &Space, top: &[usize], e: &Estimate) -> bool {
