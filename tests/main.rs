@@ -30,6 +30,7 @@ mod robust;
 mod stand;
 mod stream;
 mod thermal;
+mod thermal_hysteresis;
 mod thermal_sweep;
 mod uncertainty;
 mod validate;

@@ -13,8 +13,14 @@ use crosscal::units::SensorKind;
 #[test]
 fn forward_model_is_paper_eq3_and_eq4() {
     let truth = UnitTruth::paper();
-    let s =
-        State { t_session_s: 0.0, w: [0.3, -0.7, 0.11], e: [1.3, 0.4, -2.1], a: [0.5, -9.0, 3.0], temp_c: f64::NAN };
+    let s = State {
+        t_session_s: 0.0,
+        w: [0.3, -0.7, 0.11],
+        e: [1.3, 0.4, -2.1],
+        a: [0.5, -9.0, 3.0],
+        temp_c: f64::NAN,
+        temp_rate_c_s: f64::NAN,
+    };
     let gt = truth.model.terms(SensorKind::Gyro);
     let u = forward(&gt, &truth.term_values(SensorKind::Gyro), &s);
     let (w, e) = (s.w, s.e);

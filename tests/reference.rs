@@ -40,6 +40,7 @@ fn write_reference_session(dir: &std::path::Path) -> UnitTruth {
                     e: mount.to_sensor(kin.e_rad_s2).xyz,
                     a: mount.to_sensor(kin.a_m_s2).xyz,
                     temp_c: f64::NAN,
+                    temp_rate_c_s: f64::NAN,
                 };
                 let ug = forward(&gt, &gv, &s);
                 let ua = forward(&at, &av, &s);

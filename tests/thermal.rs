@@ -210,13 +210,35 @@ fn simulate_sweep(d: &std::path::Path, out: &str, temps: &str, seed: &str, hidde
     crate::common::simulate_hidden(d, out, hidden, truth, &extra);
 }
 
-fn steps(d: &std::path::Path, session: &str) -> Vec<String> {
+fn steps(d: &std::path::Path, session: &str) -> (Vec<String>, serde_json::Value) {
     let json = run_ok(d, &["diagnose", session, "--json"]);
     let v: serde_json::Value = serde_json::from_str(&json).unwrap_or_else(|e| panic!("{e}: {json}"));
-    v["steps"]
+    let names = v["steps"]
         .as_array()
         .map(|s| s.iter().filter_map(|x| x["effect"].as_str().map(str::to_string)).collect())
-        .unwrap_or_default()
+        .unwrap_or_default();
+    (names, v)
+}
+
+/// Each temperature step's degree report (diagnose --json): every degree 0 … 3 scored on
+/// the 18 left-out runs (each run preferring one degree), the chosen degree the step's, and
+/// its highest power significant on every axis (|z| > 5: the true polynomial's top power).
+fn assert_degree_reports(v: &serde_json::Value, seed: &str) {
+    for st in v["steps"].as_array().into_iter().flatten() {
+        let effect = st["effect"].as_str().unwrap_or_default();
+        let c = &st["score"]["degree"];
+        assert!(c.is_object(), "seed {seed}: {effect} has no degree report");
+        assert_eq!(c["degree"].as_u64(), Some(effect.split('+').count() as u64), "seed {seed}: {c}");
+        let scores = c["scores"].as_array().cloned().unwrap_or_default();
+        assert_eq!(scores.len(), 4, "seed {seed}: degrees 0..3 for {effect}: {c}");
+        let folds: u64 = scores.iter().filter_map(|s| s["folds_preferring"].as_u64()).sum();
+        assert!(c["folds"].as_u64() == Some(18) && folds == 18, "seed {seed}: {c}");
+        let z: Vec<f64> = c["top_power_z"].as_array().into_iter().flatten().filter_map(|z| z.as_f64()).collect();
+        assert!(z.len() == 3 && z.iter().all(|z| z.abs() > 5.0), "seed {seed} {effect}: {z:?}");
+        let why = st["score"]["explanation"].as_str().unwrap_or_default();
+        assert!(why.contains("left-out runs are predicted best at degree"), "{why}");
+        eprintln!("seed {seed} {effect}: {}", why.split(". ").next().unwrap_or_default());
+    }
 }
 
 /// diagnose finds each temperature term at its true degree (cubic, quadratic, linear) and
@@ -232,14 +254,15 @@ fn diagnose_finds_each_temperature_term_at_its_true_degree_and_nothing_on_a_clea
     for seed in ["1", "2", "3"] {
         let out = format!("sweep{seed}");
         simulate_sweep(d, &out, "-20,70", seed, true);
-        let mut found = steps(d, &format!("{out}/session.json"));
+        let (mut found, v) = steps(d, &format!("{out}/session.json"));
+        assert_degree_reports(&v, seed);
         found.sort();
         let mut expected: Vec<String> = want.iter().map(|s| s.to_string()).collect();
         expected.sort();
         assert_eq!(found, expected, "seed {seed}");
         let clean = format!("clean{seed}");
         simulate_sweep(d, &clean, "-20,70", seed, false);
-        false_discoveries += steps(d, &format!("{clean}/session.json")).len();
+        false_discoveries += steps(d, &format!("{clean}/session.json")).0.len();
     }
     assert_eq!(false_discoveries, 0, "effects found on clean sweeps");
     // Fit what diagnose found; a run at 0 … 60 °C the fit never saw is corrected to the noise.

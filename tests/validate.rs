@@ -152,6 +152,7 @@ proptest! {
             e: [e[0], e[1], e[2]],
             a: [a[0] * G, a[1] * G, a[2] * G],
             temp_c: temp,
+            temp_rate_c_s: f64::NAN,
         };
         let gv: Vec<f64> = m.terms(SensorKind::Gyro).iter().map(|t| match t.status { crosscal::model::TermStatus::Fixed(v) => v, _ => 0.0 }).collect();
         let av: Vec<f64> = m.terms(SensorKind::Accel).iter().map(|t| match t.status { crosscal::model::TermStatus::Fixed(v) => v, _ => 0.0 }).collect();

@@ -26,6 +26,7 @@ fn to_json(e: &CatalogEffect) -> serde_json::Value {
         (i.force, "specific_force"),
         (i.time, "time"),
         (i.temperature, "temperature"),
+        (i.temperature_rate, "temperature_rate"),
     ]
     .iter()
     .filter(|x| x.0)

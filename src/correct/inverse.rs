@@ -177,7 +177,8 @@ impl Calibration {
     /// Inverts one sample exactly, given the true angular acceleration ε (rad/s²): the
     /// fixed point x = A⁻¹(u − b − E ε − g(x)) iterated from the linear solution, then the
     /// nonlinear inverses. Returns (ω, a, flags) or None if it does not converge in 100
-    /// passes (coefficients too large for the effects to be a perturbation).
+    /// passes (coefficients too large for the effects to be a perturbation). One sample has
+    /// no temperature history: a thermal hysteresis term reads no branch (0).
     pub fn invert_state(
         &self,
         gyro: [f64; 3],
@@ -193,7 +194,7 @@ impl Calibration {
         for _ in 0..100 {
             // The effects' regressors see the input as the sensor saw it (before the inverses
             // of the nonlinear effects), exactly as in the forward model.
-            let s = State { t_session_s: t_s, w, e, a: acc, temp_c };
+            let s = State { t_session_s: t_s, w, e, a: acc, temp_c, temp_rate_c_s: f64::NAN };
             let og = g.other(&s);
             let oa = a.other(&s);
             let wn = solve(g.scale_inv.matrix(), gyro, g.bias, ee, og);
@@ -208,6 +209,11 @@ impl Calibration {
             }
         }
         None
+    }
+
+    /// Whether an effect reads the temperature's rate of change (thermal hysteresis).
+    pub fn needs_temperature_rate(&self) -> bool {
+        self.gyro.others.iter().chain(&self.accel.others).any(|o| o.effect.inputs().temperature_rate)
     }
 
     /// The first effect that needs a temperature, if any.

@@ -19,6 +19,11 @@
 //!   computed once. The causal slope lags the centred one by a bias of order (ω·N·dt)²,
 //!   which is why offline correction is more accurate on fast motion.
 //!
+//! A thermal hysteresis term reads the temperature's rate of change
+//! ([`crate::stats::temp_rate`]): offline the centred smoothed rate the fit used, streaming a
+//! causal one (double exponential smoothing, four numbers of state) that lags it by about
+//! ten seconds, so for that long after a sweep turns the streamed branch is the old one.
+//!
 //! Nonlinear effects carry their own inverse ([`crate::model::NonlinearEffect`]): a dead
 //! zone is undone per sample (x = z + d·sign z) and samples inside the band are flagged,
 //! not invented; a time delay τ is undone by re-stamping: sample k is the truth at t_k − τ

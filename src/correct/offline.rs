@@ -1,5 +1,6 @@
 //! Offline correction of a whole record: centred derivative window, iterated to a fixed
-//! point (each pass re-estimates ε̂ and the effect terms from the previous pass).
+//! point (each pass re-estimates ε̂ and the effect terms from the previous pass). The
+//! temperature's rate of change (thermal hysteresis) is the centred smoothed one the fit uses.
 
 use super::{check_inputs, ensure_finite, mv, set_flags, solve, Calibration, CorrectError, Corrected};
 use crate::model::State;
@@ -15,6 +16,10 @@ pub fn correct_offline(
 ) -> Result<Corrected, CorrectError> {
     let n = t_s.len();
     check_inputs(cal, n, gyro, accel, temp_c)?;
+    // The thermal branch from the column as recorded (a clamped temperature still changes),
+    // centred like the fit's.
+    let rates: Option<Vec<f64>> =
+        temp_c.filter(|_| cal.needs_temperature_rate()).map(|t| crate::stats::temp_rate::centred(t_s, t));
     // Temperatures outside the calibrated range: guarded once (one copy of the column).
     let mut temp_outside = cal.temp_guard();
     let guarded: Option<Vec<f64>> =
@@ -52,7 +57,14 @@ pub fn correct_offline(
         let (mut change_w, mut size_w, mut change_a, mut size_a) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
         for k in 0..n {
             let (sw, sa) = if nonlinear { seen[k] } else { (w[k], acc[k]) };
-            let s = State { t_session_s: t_s[k], w: sw, e: e[k], a: sa, temp_c: temp_c.map_or(f64::NAN, |t| t[k]) };
+            let s = State {
+                t_session_s: t_s[k],
+                w: sw,
+                e: e[k],
+                a: sa,
+                temp_c: temp_c.map_or(f64::NAN, |t| t[k]),
+                temp_rate_c_s: rates.as_ref().map_or(f64::NAN, |r| r[k]),
+            };
             let ee = mv(g.eps.matrix(), e[k]);
             let og = g.other(&s);
             let oa = a.other(&s);

@@ -180,6 +180,8 @@ pub struct Streaming {
     last_flags: u8,
     /// The calibrated temperature range's guard and what it met.
     temp: super::TempOutside,
+    /// The temperature's causal smoothed rate of change (the thermal branch).
+    temp_rate: crate::stats::temp_rate::Causal,
 }
 
 impl Streaming {
@@ -209,6 +211,7 @@ impl Streaming {
             t_last: f64::NAN,
             last_flags: 0,
             temp: cal_temp_guard,
+            temp_rate: crate::stats::temp_rate::Causal::new(),
         }
     }
 
@@ -228,6 +231,7 @@ impl Streaming {
         self.head = 0;
         self.steady = 0;
         self.t_last = f64::NAN;
+        self.temp_rate.reset();
     }
 
     /// The accelerometer's linear inverse `−A⁻¹b + A⁻¹(u − other)`.
@@ -252,6 +256,8 @@ impl Streaming {
     /// The body of [`Self::push`].
     #[inline(always)]
     fn push_one(&mut self, t_s: f64, gyro: [f64; 3], accel: [f64; 3], temp_c: f64) -> ([f64; 3], [f64; 3]) {
+        // The branch from the temperature as recorded, before the range guard clamps it.
+        let temp_rate_c_s = self.temp_rate.push(t_s, temp_c);
         let temp_c = self.temp.guard(t_s, temp_c);
         let n = self.window;
         // Uniform sampling: count consecutive steps equal to the last one.
@@ -311,6 +317,7 @@ impl Streaming {
                     e: [p[0] + h0 * w4[0], p[1] + h0 * w4[1], p[2] + h0 * w4[2]],
                     a: acc,
                     temp_c,
+                    temp_rate_c_s,
                 };
                 let og = g.other(&s);
                 let oa = a.other(&s);

@@ -10,12 +10,16 @@
 //! 3. Climb greedily ([`select`]): add the effect with the largest χ² reduction among those
 //!    that are supported in-sample (p and ΔBIC), predict left-out runs, and have one size
 //!    in every run; two that explain the same residual are one finding. Stop when none
-//!    qualifies.
+//!    qualifies: there is no cap on the number of steps while the evidence supports one
+//!    (each step adds a catalogue effect the model lacks, so the catalogue bounds it). A
+//!    temperature polynomial's degree comes with its uncertainty, a thermal hysteresis with
+//!    its size ([`temperature`]).
 //! 4. Verdict: adequate (nothing systematic, no line off the cone, nothing added),
 //!    explained (the added effects leave nothing systematic), or unexplained (where the
 //!    residual's systematic part or lines sit: channel, harmonic or frequency, runs, size).
 
 pub mod algebra;
+mod disagreement;
 pub mod lines;
 pub mod picture;
 pub mod protocol;
@@ -25,10 +29,12 @@ pub mod separate;
 pub mod space;
 mod temperature;
 
+pub use disagreement::{per_run_disagreements, Disagreement, DISAGREEMENT_Z};
 pub use lines::Line;
 pub use picture::{channel_reports, residuals, RunMotions, RunResiduals};
-pub use select::{Evidence, BIC_EVIDENCE};
+pub use select::{Estimate, Evidence, BIC_EVIDENCE};
 pub use space::HARMONICS;
+pub use temperature::{DegreeChoice, DegreeScore};
 
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::model::{find, Model};
@@ -63,8 +69,6 @@ fn resolution(space: &Space) -> Vec<f64> {
 
 /// Normal quantile of the pooled χ² test for a systematic residual (0.001 %).
 pub const SIGNIFICANCE_Z: f64 = 4.265;
-/// At most this many effects are added by the ladder.
-pub const MAX_STEPS: usize = 6;
 /// A candidate whose χ² gain, once the chosen effect is in, keeps less than this share of
 /// its own is explained by the same residual feature (indistinguishable on these runs).
 const SHARED_FEATURE: f64 = 0.1;
@@ -129,6 +133,12 @@ pub struct Candidate {
     pub rejected: Option<String>,
     /// Physical explanation.
     pub explanation: String,
+    /// Its coefficients' sizes fitted on all runs, with standard errors (SI).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub estimates: Vec<Estimate>,
+    /// For a temperature polynomial added by the ladder: its degree and how sure that is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degree: Option<DegreeChoice>,
 }
 
 /// One step of the ladder.
@@ -191,63 +201,6 @@ pub struct Diagnosis {
     /// Coefficients whose single-run estimates disagree with the all-run fit (a sign that
     /// something depends on rate, direction, cone angle or mount).
     pub disagreements: Vec<Disagreement>,
-}
-
-/// A coefficient whose estimate from one run differs from the all-run estimate.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Disagreement {
-    /// Coefficient.
-    pub coefficient: String,
-    /// Run.
-    pub run: String,
-    /// Estimate from that run alone (coefficients it cannot identify held at the all-run values).
-    pub run_value: f64,
-    /// Its standard error.
-    pub run_std_error: f64,
-    /// All-run estimate.
-    pub all_value: f64,
-    /// (run − all) / run standard error.
-    pub z: f64,
-}
-
-/// |z| above which a single-run estimate disagrees (many comparisons are made).
-pub const DISAGREEMENT_Z: f64 = 6.0;
-
-/// Refits the model on each run alone and lists coefficients that disagree with the
-/// all-run fit by more than [`DISAGREEMENT_Z`] standard errors. Coefficients a single run
-/// cannot identify are held at their all-run values, so the rest stay comparable.
-pub fn per_run_disagreements(model: &Model, all: &Fit, runs: &[FitRun<'_>], opts: &FitOptions) -> Vec<Disagreement> {
-    let mut out = Vec::new();
-    for run in runs {
-        let one = std::slice::from_ref(run);
-        let Ok(first) = refit(model, one, opts) else { continue };
-        let mut m = model.clone();
-        for c in first.gyro.unidentifiable.iter().chain(&first.accel.unidentifiable) {
-            if let Some(v) = all.get(&c.held).map(|c| c.value) {
-                let _ = m.fix(&c.held, v);
-            }
-        }
-        let Ok(f) = refit(&m, one, opts) else { continue };
-        for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients) {
-            let (Some(se), Some(a)) = (c.std_error, all.get(&c.name)) else { continue };
-            if c.status != CoefStatus::Fitted || a.status != CoefStatus::Fitted || se <= 0.0 {
-                continue;
-            }
-            let z = (c.value - a.value) / se;
-            if z.abs() > DISAGREEMENT_Z {
-                out.push(Disagreement {
-                    coefficient: c.name.clone(),
-                    run: run.name.to_string(),
-                    run_value: c.value,
-                    run_std_error: se,
-                    all_value: a.value,
-                    z,
-                });
-            }
-        }
-    }
-    out.sort_by(|a, b| b.z.abs().total_cmp(&a.z.abs()));
-    out
 }
 
 /// The model at the end of a diagnosis's ladder: the base model plus each added effect.
@@ -374,6 +327,8 @@ fn candidate(id: &str, ev: Evidence, base_q: &[f64]) -> Candidate {
         rejected: ev.rejection(),
         evidence: ev,
         explanation: find(id).map_or("", |e| e.explain()).to_string(),
+        estimates: Vec::new(),
+        degree: None,
     }
 }
 
@@ -411,6 +366,8 @@ fn conclude(
         Vec::new()
     };
     let (mut steps, first_round, mut a) = climb(a, model, runs, motions, opts, has_temp, &mut warnings)?;
+    // Each temperature polynomial's degree, again with every effect found in the model.
+    let mut changed = temperature::revisit_degrees(&a.space, &mut steps, &mut warnings);
     // A sensor still systematic after its effects: only the first of them is the closest
     // catalogued match; the later ones chased what no catalogued effect explains.
     if let Some(last) = steps.last() {
@@ -431,15 +388,18 @@ fn conclude(
                 "also tried and left out: {} (each reduced the residual a little, none explains it)",
                 dropped.join(", ")
             ));
-            let mut m = model.clone();
-            for st in &steps {
-                let _ = m.add_effect(&st.effect);
-            }
-            a = analyse(&m, refit(&m, runs, opts)?, runs, motions, has_temp);
-            let noise = noise_reports(&a.space);
-            if let Some(st) = steps.last_mut() {
-                st.channels = pictures(&a, &a.space.base_set(), &a.base_fit, &noise);
-            }
+            changed = true;
+        }
+    }
+    if changed {
+        let mut m = model.clone();
+        for st in &steps {
+            let _ = m.add_effect(&st.effect);
+        }
+        a = analyse(&m, refit(&m, runs, opts)?, runs, motions, has_temp);
+        let noise = noise_reports(&a.space);
+        if let Some(st) = steps.last_mut() {
+            st.channels = pictures(&a, &a.space.base_set(), &a.base_fit, &noise);
         }
     }
     let final_fit = a.base_fit.clone();
@@ -565,7 +525,10 @@ fn climb(
     let mut current = model.clone();
     let mut steps: Vec<Step> = Vec::new();
     let mut first_round: Option<Vec<Candidate>> = None;
-    while steps.len() < MAX_STEPS {
+    // No step cap: the loop ends when no candidate passes; each step adds an effect the
+    // model lacks, so there can be no more steps than candidates (a safety bound only).
+    let bound = a.space.universe.candidates.len();
+    while steps.len() < bound {
         let space = &a.space;
         let set = space.base_set();
         let base = space.solve(&set);
@@ -581,6 +544,7 @@ fn climb(
             })
             .collect();
         scored.extend(temperature::polynomial_candidates(space, &set, &base, &base_heldout, &base_q));
+        temperature::size_candidates(space, &set, &mut scored);
         scored.sort_by(|x, y| x.0.delta_bic.total_cmp(&y.0.delta_bic));
         // A sensor whose noise is rounding (a noiseless recording) has nothing to explain.
         let res = resolution(space);

@@ -115,6 +115,18 @@ impl Evidence {
     }
 }
 
+/// The size of one candidate coefficient from the all-run solution, with its standard error
+/// under the noise model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Estimate {
+    /// Coefficient name.
+    pub name: String,
+    /// Value (SI).
+    pub value: f64,
+    /// Standard error (SI).
+    pub std_error: f64,
+}
+
 /// The runs' Grams in the global parameter space.
 #[derive(Clone)]
 pub struct Space {
@@ -151,6 +163,24 @@ impl Space {
         Self { universe, runs, folds, total, channel_total }
     }
 
+    /// The same runs around a model whose coefficients `shift` moves ((global index, new
+    /// value − fitted value) pairs): the all-run and left-out systems' cross products and χ²
+    /// are those of the moved residual r − X·shift (the Grams are unchanged). The per-run
+    /// Grams in `runs` (and so [`Self::systematic`], [`Self::heldout_channels`]) are not moved.
+    pub fn moved(&self, shift: &[(usize, f64)]) -> Space {
+        let mv = |s: &System| {
+            let (b, yy) = shifted(s, shift);
+            System { g: s.g.clone(), b, yy, n: s.n }
+        };
+        Space {
+            universe: self.universe.clone(),
+            runs: self.runs.clone(),
+            folds: self.folds.iter().map(mv).collect(),
+            total: mv(&self.total),
+            channel_total: self.channel_total.iter().map(mv).collect(),
+        }
+    }
+
     /// The base model's free parameters.
     pub fn base_set(&self) -> Vec<usize> {
         (0..self.universe.params.len()).filter(|&i| self.universe.params[i].base).collect()
@@ -182,6 +212,25 @@ impl Space {
     /// Whitened samples over all runs.
     pub fn samples(&self) -> usize {
         self.total.n
+    }
+
+    /// The sizes of `cand` fitted with `set` on all runs and their standard errors. The
+    /// Gram is whitened to unit innovation variance, so the covariance of the generalised
+    /// least-squares solution is its (pseudo-)inverse on `set ∪ cand`.
+    pub fn estimates(&self, set: &[usize], cand: &[usize]) -> Vec<Estimate> {
+        let mut with: Vec<usize> = set.to_vec();
+        with.extend(cand.iter().filter(|c| !set.contains(c)));
+        let g = DMatrix::from_fn(with.len(), with.len(), |i, j| self.total.g[(with[i], with[j])]);
+        let b = DVector::from_fn(with.len(), |i, _| self.total.b[with[i]]);
+        let (pinv, _) = pinv_sym(&g);
+        let beta = &pinv * &b;
+        cand.iter()
+            .filter_map(|&p| {
+                let i = with.iter().position(|&w| w == p)?;
+                let name = self.universe.params[p].name.clone();
+                Some(Estimate { name, value: beta[i], std_error: pinv[(i, i)].max(0.0).sqrt() })
+            })
+            .collect()
     }
 
     /// χ² of each left-out run predicted by the set fitted on the other runs.

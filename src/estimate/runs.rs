@@ -48,7 +48,8 @@ impl FitRun<'_> {
         self.len() == 0
     }
 
-    /// The true state at sample k (time on the session clock).
+    /// The true state at sample k (time on the session clock; the temperature's rate of
+    /// change from the track, 0 at a declared constant temperature).
     #[inline]
     pub fn state(&self, k: usize) -> State {
         let tr = self.track;
@@ -59,6 +60,11 @@ impl FitRun<'_> {
             e: s.e_rad_s2.xyz,
             a: s.a_m_s2.xyz,
             temp_c: self.temp_c.map(|t| t[k]).or(self.temp_const_c).unwrap_or(f64::NAN),
+            temp_rate_c_s: match (self.temp_c, self.temp_const_c) {
+                (Some(_), _) => tr.temp_rate_c_s(k),
+                (None, Some(_)) => 0.0,
+                (None, None) => f64::NAN,
+            },
         }
     }
 

@@ -424,6 +424,7 @@ fn linearise(
                             e: x.e_rad_s2.xyz,
                             a: x.a_m_s2.xyz,
                             temp_c: st.temp_c,
+                            temp_rate_c_s: st.temp_rate_c_s,
                         }
                     };
                     let (ph, pl) = (pred.predict(&at(hi)), pred.predict(&at(lo)));

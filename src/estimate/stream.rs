@@ -104,7 +104,14 @@ impl<'a> StreamRun<'a> {
     /// What the profile records of this run (after a fit has read it).
     pub fn used(&self) -> RunUsed {
         let Seen { sha256, samples, temp_range_c, .. } = self.seen();
-        RunUsed { name: self.spec.name.clone(), file: self.spec.file.clone(), sha256, samples, temp_range_c }
+        RunUsed {
+            name: self.spec.name.clone(),
+            file: self.spec.file.clone(),
+            sha256,
+            samples,
+            temp_range_c,
+            temp_rate_range_c_s: None,
+        }
     }
 
     /// Non-fatal findings in the run's file (after a fit has read it).
@@ -174,7 +181,9 @@ impl Blocks<'_, '_> {
         }
         let (w, e, a) = self.reference.at(row.t_s);
         let t_session_s = crate::estimate::runs::session_time(self.start_s, row.t_s, self.t0);
-        self.states.push(State { t_session_s, w, e, a, temp_c: row.temp_c });
+        // The temperature's rate of change needs the samples after this one: a model that
+        // reads it is not streamed (see `fit_streaming`), so it stays unknown here.
+        self.states.push(State { t_session_s, w, e, a, temp_c: row.temp_c, temp_rate_c_s: f64::NAN });
         self.gyro.push(row.gyro);
         self.accel.push(row.accel);
         self.used += 1;
@@ -381,6 +390,12 @@ pub(crate) fn fit_streaming(
                 )))
             }
         }
+    }
+    if let Some(e) = model.effects().iter().find(|e| e.inputs().temperature_rate) {
+        return Err(StreamError::NotStreamable(format!(
+            "effect '{}' reads the temperature's rate of change, smoothed over the samples around each one: fit without --stream",
+            e.id()
+        )));
     }
     if let Some(e) = model.effects().iter().find(|e| e.needs_temperature()) {
         if manifest.runs.iter().any(|r| r.temperature_c.is_none()) {

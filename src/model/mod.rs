@@ -8,7 +8,8 @@
 //! ```text
 //! u_i = Σ_k θ_ik φ_ik(state)            (forward model, u = f(true))
 //! ```
-//! where φ are the regressors an effect defines from the true state (ω, ε, a, t, temp).
+//! where φ are the regressors an effect defines from the true state (ω, ε, a, t, temp and
+//! its rate of change).
 //! The paper's model (eqs. 3–4) is the special case `u = b + C_ω ω + C_ε ε` (gyro) and
 //! `u = b + K a` (accelerometer); matrices are row-major: `C_ω[i][j]` (named `c_ij`) is the
 //! weight of true rate j in output i.
@@ -30,6 +31,7 @@ pub mod nonlinear;
 mod quadratic;
 mod scale_asymmetry;
 mod temp_bias;
+mod temp_hysteresis;
 mod temp_scale;
 mod time_delay;
 
@@ -47,6 +49,7 @@ pub use nonlinear::{NonlinearEffect, ParamDef};
 pub use quadratic::Quadratic;
 pub use scale_asymmetry::ScaleAsymmetry;
 pub use temp_bias::TempBias;
+pub use temp_hysteresis::TempHysteresis;
 pub use temp_scale::TempScale;
 pub use time_delay::TimeDelay;
 
@@ -69,6 +72,10 @@ pub struct State {
     pub a: [f64; 3],
     /// Temperature, °C (NaN when unknown).
     pub temp_c: f64,
+    /// The temperature's rate of change, °C/s, smoothed over seconds
+    /// ([`crate::stats::temp_rate`]: centred offline, causal when streaming; 0 at a run's
+    /// declared constant temperature; NaN when unknown): the thermal branch a sample is on.
+    pub temp_rate_c_s: f64,
 }
 
 /// How a coefficient enters the correction (lets the shared corrector invert linear parts
@@ -151,11 +158,14 @@ pub struct Inputs {
     pub time: bool,
     /// Temperature.
     pub temperature: bool,
+    /// The temperature's rate of change (which thermal branch a sample is on).
+    pub temperature_rate: bool,
 }
 
 impl Inputs {
     /// Nothing: a constant.
-    pub const NONE: Self = Self { rate: false, ang_accel: false, force: false, time: false, temperature: false };
+    pub const NONE: Self =
+        Self { rate: false, ang_accel: false, force: false, time: false, temperature: false, temperature_rate: false };
     /// The angular rate alone.
     pub const RATE: Self = Self { rate: true, ..Self::NONE };
     /// The specific force alone.
@@ -177,6 +187,7 @@ impl Inputs {
             force: self.force || other.force,
             time: self.time || other.time,
             temperature: self.temperature || other.temperature,
+            temperature_rate: self.temperature_rate || other.temperature_rate,
         }
     }
 }
@@ -407,6 +418,8 @@ fn linear_catalog() -> Vec<Arc<dyn Effect>> {
         Arc::new(TempScale::with_degree(SensorKind::Accel, 2)),
         Arc::new(TempScale::with_degree(SensorKind::Gyro, 3)),
         Arc::new(TempScale::with_degree(SensorKind::Accel, 3)),
+        Arc::new(TempHysteresis::new(SensorKind::Gyro)),
+        Arc::new(TempHysteresis::new(SensorKind::Accel)),
         Arc::new(Drift::new(SensorKind::Gyro)),
         Arc::new(Drift::new(SensorKind::Accel)),
         Arc::new(LeverArm::new()),

@@ -5,7 +5,9 @@
 //! session's tracks take 8 MB instead of 80 MB, and a time shift of a conic track is exact
 //! (no interpolation). Recorded reference motion is stored sample by sample. Input-side
 //! effects (a dead zone) are [`SampleMap`]s applied on the way out, so a transformed track
-//! shares its stamps and source with the original instead of copying them.
+//! shares its stamps and source with the original instead of copying them. A track also
+//! carries its run's smoothed rate of change of temperature (the thermal branch), computed
+//! once from the whole `temp` column.
 
 use super::{derivative_offline, ConicAt, DerivativeConfig, Kinematics, EPSILON_CONIC, EPSILON_STATIC};
 use crate::frames::{Mount, Sensor, Stand, V3};
@@ -51,6 +53,10 @@ pub struct Track {
     maps: Vec<Arc<dyn SampleMap>>,
     /// How ε was obtained (exact, given, or which derivative).
     pub epsilon_source: String,
+    /// The rate of change of the run's `temp` column at each stamp, °C/s, smoothed and
+    /// centred ([`crate::stats::temp_rate::centred`]; None without a column): the thermal
+    /// branch each sample is on, computed once per run from the whole column.
+    pub temp_rate_c_s: Option<Arc<[f64]>>,
 }
 
 impl PartialEq for Track {
@@ -58,6 +64,7 @@ impl PartialEq for Track {
         self.t_s == other.t_s
             && self.source == other.source
             && self.epsilon_source == other.epsilon_source
+            && self.temp_rate_c_s == other.temp_rate_c_s
             && self.maps.len() == other.maps.len()
             && self.maps.iter().zip(&other.maps).all(|(a, b)| Arc::ptr_eq(a, b))
     }
@@ -83,6 +90,7 @@ impl Track {
             source: Source::Sampled { w: w_rad_s, e: e_rad_s2, a: a_m_s2 },
             maps: Vec::new(),
             epsilon_source,
+            temp_rate_c_s: None,
         }
     }
 
@@ -118,6 +126,13 @@ impl Track {
             m.apply(&mut s);
         }
         s
+    }
+
+    /// The temperature's smoothed rate of change at sample `k`, °C/s (NaN without a `temp`
+    /// column).
+    #[inline]
+    pub fn temp_rate_c_s(&self, k: usize) -> f64 {
+        self.temp_rate_c_s.as_ref().and_then(|r| r.get(k).copied()).unwrap_or(f64::NAN)
     }
 
     /// The mount of a conic track (None for stored or constant motion).
@@ -167,6 +182,7 @@ impl Track {
                     source: Source::Sampled { w, e, a },
                     maps: Vec::new(),
                     epsilon_source: self.epsilon_source.clone(),
+                    temp_rate_c_s: self.temp_rate_c_s.clone(),
                 }
             }
         }
@@ -184,7 +200,8 @@ impl Track {
             }
             other => other.clone(),
         };
-        Track { t_s, source, maps: self.maps.clone(), epsilon_source: self.epsilon_source.clone() }
+        let temp_rate_c_s = self.temp_rate_c_s.as_ref().map(|r| r.iter().step_by(step).copied().collect());
+        Track { t_s, source, maps: self.maps.clone(), epsilon_source: self.epsilon_source.clone(), temp_rate_c_s }
     }
 }
 
@@ -242,7 +259,8 @@ pub fn track_for(
             return Track::default();
         }
     }
-    Track { t_s: rec.t_s.clone(), source, maps: Vec::new(), epsilon_source }
+    let temp_rate_c_s = rec.temp_c.as_ref().map(|t| crate::stats::temp_rate::centred(&rec.t_s, t).into());
+    Track { t_s: rec.t_s.clone(), source, maps: Vec::new(), epsilon_source, temp_rate_c_s }
 }
 
 /// A reference run's stored states, with ε given or derived from the reference rate.

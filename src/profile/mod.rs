@@ -353,6 +353,12 @@ impl Profile {
         crate::session::temp_range(self.runs.iter().filter_map(|r| r.temp_range_c).flatten())
     }
 
+    /// The range of the temperature's rate of change in the calibration data, °C/s: the
+    /// union of its runs' (None when no run recorded one).
+    pub fn temperature_rate_range_c_s(&self) -> Option<[f64; 2]> {
+        crate::session::temp_range(self.runs.iter().filter_map(|r| r.temp_rate_range_c_s).flatten())
+    }
+
     /// Whether the profile's model has temperature terms (its correction reads temperatures).
     pub fn uses_temperature(&self) -> bool {
         self.effects.iter().any(|e| e.contains("temp"))

@@ -211,6 +211,12 @@ pub struct RunUsed {
     /// `temperature_c`), when the run has one: the range a profile is calibrated over.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub temp_range_c: Option<[f64; 2]>,
+    /// Lowest and highest rate of change of the temperature, °C/s, smoothed over
+    /// [`crate::stats::temp_rate::WINDOW_S`] (centred; 0 at a run's constant
+    /// `temperature_c`): how fast the calibration data warmed and cooled. None when not
+    /// known (no temperature, or a streamed fit, which sees each sample once).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temp_rate_range_c_s: Option<[f64; 2]>,
 }
 
 /// The lowest and highest finite value of `temps` (None when there is none).
@@ -368,6 +374,10 @@ impl Session {
                 temp_range_c: match &r.rec.temp_c {
                     Some(t) => temp_range(t.iter().copied()),
                     None => r.spec.temperature_c.map(|t| [t, t]),
+                },
+                temp_rate_range_c_s: match &r.rec.temp_c {
+                    Some(t) => temp_range(crate::stats::temp_rate::centred(&r.rec.t_s, t)),
+                    None => r.spec.temperature_c.map(|_| [0.0, 0.0]),
                 },
             })
             .collect()

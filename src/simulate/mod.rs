@@ -298,8 +298,12 @@ impl SimConfig {
             // The outputs follow the unit's true temperature; the temp column is its reading.
             let true_c = self.true_temperatures_c(runs.len(), &rec.t_s, elapsed, total);
             rec.temp_c = true_c.as_deref().map(|t| self.temp_reading.read(t, self.seed, runs.len()));
+            // The thermal branch: the smoothed rate of the true temperature (what the fit reads
+            // off the logged column, without the reading's noise).
+            let rates = true_c.as_ref().map(|t| crate::stats::temp_rate::centred(&rec.t_s, t));
             for k in 0..n {
-                let state = |tr: &crate::motion::Track| state_at(tr, k, true_c.as_ref().map_or(f64::NAN, |t| t[k]));
+                let temp_at = |v: &Option<Vec<f64>>| v.as_ref().map_or(f64::NAN, |t| t[k]);
+                let state = |tr: &crate::motion::Track| state_at(tr, k, temp_at(&true_c), temp_at(&rates));
                 let ug = forward(&gterms, &gvals, &state(&tg));
                 let ua = forward(&aterms, &avals, &state(&ta));
                 let mut g = [0.0; 3];
@@ -399,9 +403,9 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
 }
 
 /// The true state at sample `k` of a track, the time as stamped (the simulator's clock).
-fn state_at(tr: &crate::motion::Track, k: usize, temp_c: f64) -> State {
+fn state_at(tr: &crate::motion::Track, k: usize, temp_c: f64, temp_rate_c_s: f64) -> State {
     let x = tr.at(k);
-    State { t_session_s: tr.t_s[k], w: x.w_rad_s.xyz, e: x.e_rad_s2.xyz, a: x.a_m_s2.xyz, temp_c }
+    State { t_session_s: tr.t_s[k], w: x.w_rad_s.xyz, e: x.e_rad_s2.xyz, a: x.a_m_s2.xyz, temp_c, temp_rate_c_s }
 }
 
 /// The piecewise-linear value at `pos` (0 … 1 over the whole) of breakpoints evenly spaced

@@ -1,6 +1,7 @@
 //! Leaf layer: the statistics and numerical kernels every other layer shares — one median,
 //! one robust scale, the chi-square quantiles, autocovariances and the long-run variance,
-//! harmonic regression on a phase, and the streamed QR factor.
+//! harmonic regression on a phase, the streamed QR factor, and the smoothed rate of change
+//! of a temperature reading.
 //!
 //! Nothing here knows about sessions, motions or models: inputs are plain slices.
 
@@ -10,6 +11,7 @@ pub mod harmonics;
 pub mod qr;
 pub mod segment;
 pub mod spectrum;
+pub mod temp_rate;
 
 pub use ar::ArModel;
 pub use autocov::{dot, newey_west_lags, AutoCov, LongRunVariance};
