@@ -723,11 +723,11 @@ fn bench_rust_streaming(
     let block = block.max(1);
     Ok(py.detach(|| {
         let mut s = crosscal::correct::Streaming::new(cal);
-        let (mut w, mut f) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        let (mut w, mut f) = (vec![[0.0; 3]; block], vec![[0.0; 3]; block]);
         let start = std::time::Instant::now();
         for k in (0..n).step_by(block) {
             let e = (k + block).min(n);
-            s.push_block(&t[k..e], &g[k..e], &a[k..e], &mut w[k..e], &mut f[k..e]);
+            s.push_block(&t[k..e], &g[k..e], &a[k..e], &mut w[..e - k], &mut f[..e - k]);
         }
         let took = start.elapsed().as_secs_f64();
         std::hint::black_box((&w, &f));

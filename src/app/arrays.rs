@@ -92,6 +92,9 @@ pub fn correct_arrays(
     mode: Mode,
 ) -> Result<CorrectedArrays, AppError> {
     let what = "the arrays".to_string();
+    if mode == Mode::Streaming {
+        return streamed(cal, io, c, what);
+    }
     let (t_s, gyro, accel) = columns_to_si("arrays", c, &io.input, io.g_m_s2)
         .map_err(|source| AppError::Session { path: "<memory>".into(), source })?;
     let n = t_s.len();
@@ -111,6 +114,31 @@ pub fn correct_arrays(
         warmup: corrected.warmup.min(n),
         time_offset_s: offset,
         temp_outside: corrected.temp_outside,
+    })
+}
+
+/// Streaming mode of [`correct_arrays`]: the block corrector straight into the output
+/// buffers (no SI copy of the inputs), after the inputs are checked as the reader checks a
+/// file.
+fn streamed(cal: &Calibration, io: &IoUnits, c: Columns<'_>, what: String) -> Result<CorrectedArrays, AppError> {
+    crate::session::memory::check_columns("arrays", c, &io.input)
+        .map_err(|source| AppError::Session { path: "<memory>".into(), source })?;
+    let n = c.t.len();
+    let mut b = BlockCorrector::new(cal.clone(), *io);
+    let (mut t, mut gyro, mut accel, mut flags) = (vec![0.0; n], vec![[0.0; 3]; n], vec![[0.0; 3]; n], vec![0u8; n]);
+    b.push(c, BlockOut { t: &mut t, gyro: &mut gyro, accel: &mut accel, flags: &mut flags })
+        .map_err(|source| AppError::Correct { what, source })?;
+    if flags.iter().all(|&f| f == 0) {
+        flags = Vec::new();
+    }
+    Ok(CorrectedArrays {
+        t,
+        gyro,
+        accel,
+        flags,
+        warmup: b.warmup_samples().min(n),
+        time_offset_s: b.time_offset_s(),
+        temp_outside: *b.temperature_outside(),
     })
 }
 

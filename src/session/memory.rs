@@ -33,11 +33,10 @@ fn err(problem: Problem, run: &str, row: usize, column: &str, msg: String) -> Se
 /// Columns converted to SI: t in s, rates in rad/s, specific forces in m/s².
 pub type SiColumns = (Vec<f64>, Vec<[f64; 3]>, Vec<[f64; 3]>);
 
-/// Run `run`'s columns in `units` (gravity `g_m_s2` for g) converted to SI with the CSV
-/// reader's factors: refused when empty, of unequal lengths, with a value that is not
-/// finite or time stamps that do not increase (the error names the 1-based row and the
-/// column).
-pub fn columns_to_si(run: &str, c: Columns<'_>, units: &Units, g_m_s2: f64) -> Result<SiColumns, SessionError> {
+/// Checks run `run`'s columns as the CSV reader checks a file, without copying them:
+/// refused when empty, of unequal lengths, with a value that is not finite or time stamps
+/// that do not increase (the error names the 1-based row and the column).
+pub fn check_columns(run: &str, c: Columns<'_>, units: &Units) -> Result<(), SessionError> {
     let n = c.t.len();
     if n == 0 {
         return Err(err(Problem::Empty, run, 0, "-", "no samples".into()));
@@ -52,11 +51,8 @@ pub fn columns_to_si(run: &str, c: Columns<'_>, units: &Units, g_m_s2: f64) -> R
             format!("columns of unequal length: t {n}, gyro {}, accel {}, temp {}", lengths[0], lengths[1], lengths[2]),
         ));
     }
-    let (kt, kg, ka) = (units.time.to_s(), units.gyro.to_rad_s(), units.accel.to_m_s2(g_m_s2));
     const NAMES: [&str; 8] = ["1 (t)", "2 (gx)", "3 (gy)", "4 (gz)", "5 (ax)", "6 (ay)", "7 (az)", "8 (temp)"];
-    let mut t_s = Vec::with_capacity(n);
-    let mut gyro = Vec::with_capacity(n);
-    let mut accel = Vec::with_capacity(n);
+    let kt = units.time.to_s();
     let mut last = f64::NEG_INFINITY;
     for k in 0..n {
         let (g, a) = (c.gyro[k], c.accel[k]);
@@ -72,10 +68,18 @@ pub fn columns_to_si(run: &str, c: Columns<'_>, units: &Units, g_m_s2: f64) -> R
             return Err(err(Problem::Time, run, k + 1, NAMES[0], msg));
         }
         last = t;
-        t_s.push(t);
-        gyro.push([g[0] * kg, g[1] * kg, g[2] * kg]);
-        accel.push([a[0] * ka, a[1] * ka, a[2] * ka]);
     }
+    Ok(())
+}
+
+/// Run `run`'s columns in `units` (gravity `g_m_s2` for g) converted to SI with the CSV
+/// reader's factors, once [`check_columns`] accepts them.
+pub fn columns_to_si(run: &str, c: Columns<'_>, units: &Units, g_m_s2: f64) -> Result<SiColumns, SessionError> {
+    check_columns(run, c, units)?;
+    let (kt, kg, ka) = (units.time.to_s(), units.gyro.to_rad_s(), units.accel.to_m_s2(g_m_s2));
+    let t_s = c.t.iter().map(|t| t * kt).collect();
+    let gyro = c.gyro.iter().map(|g| [g[0] * kg, g[1] * kg, g[2] * kg]).collect();
+    let accel = c.accel.iter().map(|a| [a[0] * ka, a[1] * ka, a[2] * ka]).collect();
     Ok((t_s, gyro, accel))
 }
 
