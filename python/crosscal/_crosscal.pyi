@@ -42,6 +42,7 @@ class Streaming:
 
 class Diagnosis:
     kind: str
+    verdict: str
     temperature_note: Optional[str]
     def json(self) -> str: ...
     def html(self) -> str: ...

@@ -214,13 +214,9 @@ class Diagnosis:
 
     @property
     def verdict(self) -> str:
-        """``adequate``, ``explained`` or ``unexplained`` (protocol sessions: ``adequate``,
-        ``missing-effect`` or ``not-adequate``)."""
-        if self.kind == "stand":
-            return self.data["verdict"]
-        if self.data.get("proposal"):
-            return "missing-effect"
-        return "adequate" if not self.data.get("outlier_poses") and not self.data.get("beyond_noise") else "not-adequate"
+        """Stand runs: ``adequate``, ``explained`` or ``unexplained``; a protocol session:
+        ``missing-effect``, ``adequate`` or ``not-adequate`` (as the command's verdict line)."""
+        return self._native.verdict
 
     @property
     def proposal(self) -> list[str]:

@@ -461,6 +461,24 @@ impl Diagnosis {
         }
     }
 
+    /// The verdict: stand runs `adequate`, `explained` or `unexplained`; a protocol session
+    /// `missing-effect` (a proposal), `adequate`, or `not-adequate` (poses or turns stand out
+    /// that no catalogued effect explains), as the command's verdict line says.
+    #[getter]
+    fn verdict(&self) -> &'static str {
+        use crosscal::diagnose::Verdict;
+        match &self.found {
+            Diagnosed::Stand(d) => match d.verdict {
+                Verdict::Adequate => "adequate",
+                Verdict::Explained => "explained",
+                Verdict::Unexplained => "unexplained",
+            },
+            Diagnosed::Protocol(d) if d.proposal.is_some() => "missing-effect",
+            Diagnosed::Protocol(d) if d.adequate() => "adequate",
+            Diagnosed::Protocol(_) => "not-adequate",
+        }
+    }
+
     /// The diagnosis as JSON text (as `crosscal diagnose --json`).
     fn json(&self) -> PyResult<String> {
         let r = match &self.found {
