@@ -724,7 +724,9 @@ fn mode_of(py: Python<'_>, mode: &str) -> PyResult<Mode> {
 /// The benchmark's peer: the Rust library's own streaming corrector
 /// (`crosscal::correct::Streaming::push_block`) on SI arrays, in blocks of `block`
 /// samples into preallocated buffers, as a Rust program would call it. Returns the
-/// seconds it took (GIL released). For `benches/python_streaming.py`.
+/// seconds it took (GIL released); `block` 0: the whole record at once with
+/// `crosscal::correct::correct_streaming` (outputs allocated). For
+/// `benches/python_streaming.py`.
 #[pyfunction]
 fn bench_rust_streaming(
     py: Python<'_>,
@@ -738,7 +740,18 @@ fn bench_rust_streaming(
     let cal = crosscal::correct::Calibration::from_profile(&p).map_err(|e| err(py, e))?;
     let (t, g, a) = (slice(py, &t_s, "t")?, triples(py, &gyro_rad_s, "gyro")?, triples(py, &accel_m_s2, "accel")?);
     let n = t.len().min(g.len()).min(a.len());
-    let block = block.max(1);
+    if block == 0 {
+        // The whole record at once: the library's `correct_streaming`, outputs allocated.
+        return py
+            .detach(|| {
+                let start = std::time::Instant::now();
+                let r = crosscal::correct::correct_streaming(&cal, &t[..n], &g[..n], &a[..n], None);
+                let took = start.elapsed().as_secs_f64();
+                std::hint::black_box(&r);
+                r.map(|_| took)
+            })
+            .map_err(|e| err(py, e));
+    }
     Ok(py.detach(|| {
         let mut s = crosscal::correct::Streaming::new(cal);
         let (mut w, mut f) = (vec![[0.0; 3]; block], vec![[0.0; 3]; block]);
