@@ -138,17 +138,7 @@ fn a_profile_without_temperature_terms_guards_nothing() {
 fn a_cubic_temperature_bias_is_recovered_term_by_term() {
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let d = dir.path();
-    let truth = [
-        ("gyro.tb_x", 2e-5),
-        ("gyro.tb2_x", -3e-7),
-        ("gyro.tb3_x", 4e-9),
-        ("gyro.tb_y", 1e-5),
-        ("gyro.tb2_y", 2e-7),
-        ("gyro.tb3_y", -3e-9),
-        ("gyro.tb_z", -1e-5),
-        ("gyro.tb2_z", 1e-7),
-        ("gyro.tb3_z", 2e-9),
-    ];
+    let truth = &crate::common::THERMAL_BIASES[..9];
     let owned: Vec<(String, f64)> = truth.iter().map(|(n, v)| (n.to_string(), *v)).collect();
     let effects = ["gyro-temp-bias", "gyro-temp-bias2", "gyro-temp-bias3"];
     let sweep = ["--temperature", "-20,70", "--gyro-noise", "0.002", "--accel-noise", "0.0002"];

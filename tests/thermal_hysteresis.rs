@@ -192,39 +192,30 @@ fn correction_with_a_hysteresis_profile_removes_the_branch_offset() {
 fn a_unit_with_seven_hidden_effects_is_found_in_seven_steps() {
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let d = dir.path();
-    let sets: [(&str, f64); 31] = [
-        ("gyro.tb_x", 2e-5),
-        ("gyro.tb2_x", -3e-7),
-        ("gyro.tb3_x", 4e-9),
-        ("gyro.tb_y", 1e-5),
-        ("gyro.tb2_y", 2e-7),
-        ("gyro.tb3_y", -3e-9),
-        ("gyro.tb_z", -1e-5),
-        ("gyro.tb2_z", 1e-7),
-        ("gyro.tb3_z", 2e-9),
-        ("accel.tb_x", 1e-4),
-        ("accel.tb2_x", -2e-6),
-        ("accel.tb_y", -1e-4),
-        ("accel.tb2_y", 1e-6),
-        ("accel.tb_z", 5e-5),
-        ("accel.tb2_z", 1e-6),
-        ("gyro.ts_x", 5e-5),
-        ("gyro.ts_y", -4e-5),
-        ("gyro.ts_z", 3e-5),
-        HYSTERESIS[0],
-        HYSTERESIS[1],
-        HYSTERESIS[2],
-        HYSTERESIS[3],
-        HYSTERESIS[4],
-        HYSTERESIS[5],
-        ("gyro.g_xx", 3.6e-5),
-        ("gyro.g_yz", -2.7e-5),
-        ("gyro.g_zy", 1.8e-5),
-        ("accel.r_xx", 0.03),
-        ("accel.r_yy", 0.04),
-        ("accel.r_zz", -0.02),
-        ("accel.r_xy", 0.01),
-    ];
+    // The gyro biases, a quadratic accelerometer bias, then the rest.
+    let sets: Vec<(&str, f64)> = crate::common::THERMAL_BIASES[..14]
+        .iter()
+        .copied()
+        .chain([
+            ("accel.tb2_z", 1e-6),
+            ("gyro.ts_x", 5e-5),
+            ("gyro.ts_y", -4e-5),
+            ("gyro.ts_z", 3e-5),
+            HYSTERESIS[0],
+            HYSTERESIS[1],
+            HYSTERESIS[2],
+            HYSTERESIS[3],
+            HYSTERESIS[4],
+            HYSTERESIS[5],
+            ("gyro.g_xx", 3.6e-5),
+            ("gyro.g_yz", -2.7e-5),
+            ("gyro.g_zy", 1.8e-5),
+            ("accel.r_xx", 0.03),
+            ("accel.r_yy", 0.04),
+            ("accel.r_zz", -0.02),
+            ("accel.r_xy", 0.01),
+        ])
+        .collect();
     let hidden = [
         "gyro-temp-bias",
         "gyro-temp-bias2",
