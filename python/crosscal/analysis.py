@@ -6,7 +6,6 @@ the library call the ``crosscal`` command makes, so the numbers are the command'
 from __future__ import annotations
 
 import json
-import os
 from typing import Any, Optional, Sequence, Union
 
 import numpy as np

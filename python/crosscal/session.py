@@ -23,13 +23,6 @@ COLUMNS = ("t", "gx", "gy", "gz", "ax", "ay", "az")
 PathLike = Union[str, "os.PathLike[str]"]
 
 
-def _f64(a: Any, shape_note: str) -> np.ndarray:
-    arr = np.ascontiguousarray(a, dtype=np.float64)
-    if arr.ndim not in (1, 2):
-        raise ValueError(f"{shape_note}: expected a 1-D or 2-D array")
-    return arr
-
-
 class Session:
     """A session in memory (read with :func:`read_session`, built with
     :meth:`Session.from_arrays` / :meth:`Session.from_dataframe`, or made by
