@@ -98,11 +98,8 @@ pub fn correct_arrays(
     let (t_s, gyro, accel) = columns_to_si("arrays", c, &io.input, io.g_m_s2)
         .map_err(|source| AppError::Session { path: "<memory>".into(), source })?;
     let n = t_s.len();
-    let corrected = match mode {
-        Mode::Offline => correct_offline(cal, &t_s, &gyro, &accel, c.temp_c),
-        Mode::Streaming => crate::correct::correct_streaming(cal, &t_s, &gyro, &accel, c.temp_c),
-    }
-    .map_err(|source| AppError::Correct { what, source })?;
+    let corrected =
+        correct_offline(cal, &t_s, &gyro, &accel, c.temp_c).map_err(|source| AppError::Correct { what, source })?;
     let s = io.scale();
     let scale3 = |v: [f64; 3], k: f64| [v[0] * k, v[1] * k, v[2] * k];
     let offset = corrected.time_offset_s;
@@ -110,7 +107,7 @@ pub fn correct_arrays(
         t: t_s.iter().map(|t| (t - offset) * s.time).collect(),
         gyro: corrected.w_rad_s.iter().map(|&w| scale3(w, s.gyro)).collect(),
         accel: corrected.a_m_s2.iter().map(|&a| scale3(a, s.accel)).collect(),
-        flags: if corrected.flags.is_empty() { Vec::new() } else { corrected.flags.clone() },
+        flags: corrected.flags,
         warmup: corrected.warmup.min(n),
         time_offset_s: offset,
         temp_outside: corrected.temp_outside,
