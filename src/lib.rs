@@ -15,6 +15,7 @@ pub mod app;
 pub mod atomic;
 pub mod check;
 pub mod correct;
+pub mod datasheet;
 pub mod diagnose;
 pub mod estimate;
 pub mod frames;

@@ -13,7 +13,7 @@ const LAYERS: &[&[&str]] = &[
     &["model"],
     &["estimate", "simulate"],
     &["profile"],
-    &["correct"],
+    &["correct", "datasheet"],
     &["check", "plan"],
     &["diagnose"],
     &["app"],

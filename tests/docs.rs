@@ -284,6 +284,7 @@ fn help_has_an_example_for_every_command_and_topics_print() {
         ("catalogue", "reference-effects.md"),
         ("conventions", "reference-conventions.md"),
         ("errors", "reference-exit-codes.md"),
+        ("datasheet", "reference-datasheet.md"),
     ] {
         let text = std::fs::read_to_string(root().join("docs").join(page)).unwrap();
         assert!(

@@ -6,6 +6,7 @@ mod bad_input;
 mod batch;
 mod cli;
 mod common;
+mod datasheet;
 mod diagnose;
 mod diagnose_hard;
 mod docs;

@@ -148,3 +148,56 @@ fn batch_report_has_its_tables_and_distributions_and_renders() {
     assert!(plots_are_labelled(&html, "batch report") >= 30, "a distribution per coefficient");
     render(&d.path().join("lot/batch-report.html"), "batch");
 }
+
+/// Renders `page` in headless Chromium with a script (added to a copy, the report itself
+/// has none) that measures every text of every plot, and fails when two texts of one plot
+/// overlap (tick labels running into each other). Skipped with a message without Chromium.
+pub fn no_overlapping_text(page: &Path, what: &str) {
+    let chromium = Path::new("/usr/bin/chromium");
+    if !chromium.is_file() {
+        eprintln!("skipped: measuring {what}'s plots needs /usr/bin/chromium (apt-get install chromium)");
+        return;
+    }
+    const SCRIPT: &str = r#"<script>
+const bad = []; let texts = 0;
+document.querySelectorAll('svg').forEach((svg, k) => {
+  const ts = [...svg.querySelectorAll('text')].filter(t => t.textContent.trim() !== '')
+    .map(t => ({ s: t.textContent, r: t.getBoundingClientRect() }));
+  texts += ts.length;
+  for (let i = 0; i < ts.length; i++) for (let j = i + 1; j < ts.length; j++) {
+    const a = ts[i].r, b = ts[j].r;
+    const ox = Math.min(a.right, b.right) - Math.max(a.left, b.left);
+    const oy = Math.min(a.bottom, b.bottom) - Math.max(a.top, b.top);
+    if (ox > 1 && oy > 1) bad.push('plot ' + k + ': "' + ts[i].s + '" over "' + ts[j].s + '"');
+  }
+});
+const p = document.createElement('pre');
+p.textContent = 'MEASURED ' + texts + ' OVERLAPS[' + bad.join(' | ') + ']END';
+document.body.appendChild(p);
+</script></body>"#;
+    let html = std::fs::read_to_string(page).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("measure.html");
+    std::fs::write(&copy, html.replace("</body>", SCRIPT)).unwrap();
+    let profile = tempfile::tempdir().unwrap();
+    let out = std::process::Command::new("timeout")
+        .arg("120")
+        .arg(chromium)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking"])
+        .arg("--disable-component-update")
+        .arg("--window-size=1200,2400")
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg("--dump-dom")
+        .arg(format!("file://{}", copy.display()))
+        .output()
+        .unwrap();
+    let dom = String::from_utf8_lossy(&out.stdout);
+    let found = dom.split("OVERLAPS[").nth(1).and_then(|s| s.split("]END").next());
+    let Some(found) = found else {
+        panic!("{what}: the measuring script did not run: {}", String::from_utf8_lossy(&out.stderr))
+    };
+    let measured = dom.split("MEASURED ").nth(1).and_then(|s| s.split(' ').next()).unwrap_or("0");
+    println!("{what}: {measured} plot texts measured in Chromium");
+    assert!(measured.parse::<usize>().unwrap_or(0) > 20, "{what}: too few texts measured ({measured})");
+    assert!(found.is_empty(), "{what}: overlapping texts: {found}");
+}

@@ -38,12 +38,14 @@ from .analysis import (
     simulate,
 )
 from .errors import CrosscalError
+from .lot import capability, cpk, datasheet
 from .profile import Profile
 from .session import Session, read_session
 
 __version__ = _version()
 
 __all__ = [
-    "AllanResult", "CheckResult", "Corrected", "CrosscalError", "Diagnosis", "Profile", "Session", "Streaming", "check", "correct",
+    "AllanResult", "CheckResult", "Corrected", "CrosscalError", "Diagnosis", "Profile", "Session", "Streaming", "capability",
+    "check", "correct", "cpk", "datasheet",
     "diagnose", "errors", "exit_codes", "fit", "noise", "paper_table", "plan", "read_session", "simulate",
 ]

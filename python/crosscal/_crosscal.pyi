@@ -82,6 +82,16 @@ def correct(
 def diagnose(
     session: Session, preset: str, effects: list[str], profile_json: Optional[str], trim_rest: bool
 ) -> Diagnosis: ...
+def datasheet(
+    store: str,
+    unit: str,
+    at: Optional[str],
+    gyro_range_deg_s: Optional[float],
+    accel_range_g: Optional[float],
+) -> str: ...
+def cpk(
+    values: list[float], lsl: Optional[float], usl: Optional[float]
+) -> tuple[float, float, Optional[float], Optional[float], Optional[float]]: ...
 def noise(
     data: F64,
     channels: list[str],

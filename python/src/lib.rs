@@ -274,6 +274,44 @@ fn profile_read(py: Python<'_>, path: PathBuf) -> PyResult<(String, String)> {
     Ok((used.display().to_string(), p.to_json()))
 }
 
+/// A unit's datasheet from a profile store (`crosscal datasheet --json`): its JSON.
+#[pyfunction]
+#[pyo3(signature = (store, unit, at, gyro_range_deg_s, accel_range_g))]
+fn datasheet(
+    py: Python<'_>,
+    store: PathBuf,
+    unit: &str,
+    at: Option<String>,
+    gyro_range_deg_s: Option<f64>,
+    accel_range_g: Option<f64>,
+) -> PyResult<String> {
+    let opts = crosscal::datasheet::DatasheetOptions {
+        gyro_range_rad_s: gyro_range_deg_s.map(f64::to_radians),
+        accel_range_m_s2: accel_range_g.map(|g| g * 9.80665),
+    };
+    let d = py
+        .detach(|| crosscal::app::datasheet::datasheet(&store, unit, at.as_deref(), &opts))
+        .map_err(|e| err(py, e))?;
+    serde_json::to_string(&d).map_err(|e| usage(py, e.to_string()))
+}
+
+/// Mean, standard deviation, Cpk and its 95 % interval (Bissell) of values against limits.
+#[pyfunction]
+#[pyo3(signature = (values, lsl, usl))]
+fn cpk(
+    py: Python<'_>,
+    values: Vec<f64>,
+    lsl: Option<f64>,
+    usl: Option<f64>,
+) -> PyResult<(f64, f64, Option<f64>, Option<f64>, Option<f64>)> {
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err(usage(py, "values must be finite numbers"));
+    }
+    let (m, s, c) =
+        crosscal::datasheet::lot::cpk(&values, lsl, usl).ok_or_else(|| usage(py, "Cpk needs at least two values"))?;
+    Ok((m, s, c.map(|c| c[0]), c.map(|c| c[1]), c.map(|c| c[2])))
+}
+
 /// Stores a profile in a store folder (never overwriting; written atomically): its path.
 #[pyfunction]
 fn profile_save(py: Python<'_>, json: &str, store: PathBuf) -> PyResult<String> {
@@ -789,6 +827,8 @@ fn _crosscal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(profile_normalise, m)?)?;
     m.add_function(wrap_pyfunction!(profile_read, m)?)?;
     m.add_function(wrap_pyfunction!(profile_save, m)?)?;
+    m.add_function(wrap_pyfunction!(datasheet, m)?)?;
+    m.add_function(wrap_pyfunction!(cpk, m)?)?;
     m.add_function(wrap_pyfunction!(correct, m)?)?;
     m.add_function(wrap_pyfunction!(diagnose, m)?)?;
     m.add_function(wrap_pyfunction!(noise, m)?)?;

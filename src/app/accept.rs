@@ -66,3 +66,50 @@ pub fn acceptance(
     };
     Ok(Acceptance { check, protocol, adequacy })
 }
+
+/// Tells every indeterminate datasheet result what measurement would resolve it
+/// ([`resolve`]).
+pub fn add_resolutions(results: &mut [crate::check::rules::RuleResult], rules: &crate::check::rules::Rules) {
+    for (r, rule) in results.iter_mut().zip(&rules.rules) {
+        if let crate::check::rules::Rule::Datasheet { quantity, k, .. } = rule {
+            let k = k.or(rules.k).unwrap_or(crate::check::guarded::DEFAULT_K);
+            r.resolve = resolve(quantity, r, k);
+        }
+    }
+}
+
+/// The measurement that would turn an indeterminate decision into pass or fail: the
+/// standard uncertainty must fall below margin / k, margin the distance from the value to
+/// the limit. A fitted quantity's variance falls as 1/samples
+/// ([`crate::plan::duration_factor`]); so does an Allan-deviation reading's (its degrees of
+/// freedom grow with the recording); a repeatability's u = s/√(2(n − 1)) needs n
+/// calibrations; a trend's u falls as 1/(span √n).
+pub fn resolve(quantity: &str, r: &crate::check::rules::RuleResult, k: f64) -> Option<String> {
+    use crate::check::guarded::Decision;
+    let ax = r.axes.iter().filter(|a| a.decision == Decision::Indeterminate).max_by(|a, b| {
+        let need = |x: &crate::check::guarded::AxisDecision| x.uncertainty * k / x.margin.max(f64::MIN_POSITIVE);
+        need(a).total_cmp(&need(b))
+    })?;
+    let target = ax.margin / k;
+    if !(target > 0.0) {
+        return Some(format!(
+            "axis {}: the value sits on the limit; no measurement can resolve it (review the limit)",
+            ax.axis
+        ));
+    }
+    let f = crate::plan::duration_factor(ax.uncertainty, target);
+    let what = if quantity.ends_with("bias_repeatability") {
+        let n = 1.0 + (ax.value * ax.value / (2.0 * target * target)).ceil();
+        format!("{n:.0} calibrations (power cycles) of the unit instead of its present ones")
+    } else if quantity.ends_with("_trend") {
+        format!("a calibration history {:.1}× as long (or {f:.1}× the calibrations)", f.sqrt())
+    } else if ["bias_instability", "arw", "vrw"].iter().any(|q| quantity.ends_with(q)) {
+        format!("a rest recording {f:.1}× as long (crosscal noise)")
+    } else {
+        format!("a calibration session {f:.1}× as long, or {f:.1}× its runs (the fit's variance falls as 1/samples; `crosscal plan` predicts a design)")
+    };
+    Some(format!(
+        "axis {}: u = {:.3e} must fall below {:.3e} (margin {:.3e} / k = {k}): {what}",
+        ax.axis, ax.uncertainty, target, ax.margin
+    ))
+}

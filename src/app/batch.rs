@@ -11,8 +11,17 @@
 //! Outliers: for every coefficient, the robust z-score (x − median)/σ over the units that
 //! were fitted, σ the small-sample-corrected 1.4826·MAD floored by the units' own standard
 //! errors; |z| > 5 flags the unit even when it passes the fixed rules.
+//!
+//! Datasheet rules: every unit's datasheet (with its stored calibrations) is judged with its
+//! uncertainty; an indeterminate unit is counted as such and told which measurement would
+//! resolve it ([`super::accept::resolve`]). The lot's capability per datasheet rule and axis
+//! (mean, std, Cpk with its 95 % interval, counts) is in the report, and is stored in the
+//! profile store (`.lots/`) so that a control chart across the lots of a store
+//! ([`crate::datasheet::lot::control_chart`]) flags the lot whose mean or spread shifted.
 
-use crate::check::rules::{evaluate, Evidence, RuleResult, Rules};
+use crate::check::guarded::Decision;
+use crate::check::rules::{evaluate, Evidence, Rule, RuleResult, Rules};
+use crate::datasheet::lot::{cpk, Capability, ChartPoint};
 use crate::estimate::{FitData, FitRequest, ModelChoice};
 use crate::model::ModelSpec;
 use crate::profile::{history, save, Profile};
@@ -37,6 +46,8 @@ pub struct BatchOptions {
     pub resume: bool,
     /// Worker threads (0: all cores).
     pub jobs: usize,
+    /// Lot name (the batch folder's name): the control chart's label for this lot.
+    pub lot: String,
 }
 
 /// Verdict of one unit.
@@ -47,6 +58,9 @@ pub enum Verdict {
     Pass,
     /// A rule failed.
     Fail,
+    /// No rule failed, but a datasheet rule could not tell (its value within k·u of a
+    /// limit): neither accepted nor rejected until measured better.
+    Indeterminate,
     /// The unit could not be processed (files, identifiability).
     Error,
 }
@@ -75,6 +89,9 @@ pub struct UnitResult {
     pub std_errors: Vec<Option<f64>>,
     /// Coefficients where the unit is a batch outlier, with their robust z.
     pub outliers: Vec<(String, f64)>,
+    /// The coefficients' units (SI), in the same order.
+    #[serde(default)]
+    pub units: Vec<String>,
 }
 
 /// The whole batch.
@@ -84,6 +101,36 @@ pub struct BatchReport {
     pub units: Vec<UnitResult>,
     /// Per coefficient: (name, median, robust σ) over the fitted units.
     pub spread: Vec<(String, f64, f64)>,
+    /// Per datasheet rule and axis: the lot's capability.
+    #[serde(default)]
+    pub capability: Vec<Capability>,
+    /// Per datasheet rule's quantity and axis: this lot and the store's earlier lots on a
+    /// control chart.
+    #[serde(default)]
+    pub control: Vec<ControlChart>,
+    /// What went wrong besides the units (the lot summary could not be stored).
+    #[serde(default)]
+    pub warnings: Vec<String>,
+}
+
+/// The control chart of one quantity and axis across the store's lots.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ControlChart {
+    /// Quantity.
+    pub quantity: String,
+    /// Axis.
+    pub axis: String,
+    /// Unit.
+    pub unit: String,
+    /// Lots, oldest first, each against the limits of the ones before it.
+    pub lots: Vec<ChartPoint>,
+}
+
+impl ControlChart {
+    /// The lots flagged (mean shifted or spread up).
+    pub fn flagged(&self) -> impl Iterator<Item = &ChartPoint> {
+        self.lots.iter().filter(|p| p.shifted || p.spread_up)
+    }
 }
 
 impl BatchReport {
@@ -124,6 +171,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
         coefficients: Vec::new(),
         std_errors: Vec::new(),
         outliers: Vec::new(),
+        units: Vec::new(),
     };
     let manifest = dir.join("session.json");
     let session = match Session::load(&manifest) {
@@ -165,6 +213,7 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
         .map(|c| (c.name.clone(), c.value))
         .collect();
     r.std_errors = profile.gyro.coefficients.iter().chain(&profile.accel.coefficients).map(|c| c.std_error).collect();
+    r.units = profile.gyro.coefficients.iter().chain(&profile.accel.coefficients).map(|c| c.unit.clone()).collect();
     let diagnose = opts.rules.rules.iter().any(|x| matches!(x, crate::check::rules::Rule::Adequate { .. }));
     let acc = match super::accept::acceptance(&profile, &session, diagnose) {
         Ok(a) => a,
@@ -173,10 +222,22 @@ fn process_unit(dir: &Path, opts: &BatchOptions) -> UnitResult {
             return r;
         }
     };
-    let ev = Evidence { check: acc.check.as_ref(), adequacy: acc.adequacy.clone(), protocol: acc.protocol };
+    let sheet = super::datasheet::datasheet_of(&opts.store, r.profile.as_deref(), &profile);
+    let ev = Evidence {
+        check: acc.check.as_ref(),
+        adequacy: acc.adequacy.clone(),
+        protocol: acc.protocol,
+        datasheet: Some(&sheet),
+    };
     r.rules = evaluate(&opts.rules, &profile, &ev);
+    super::accept::add_resolutions(&mut r.rules, &opts.rules);
     r.reasons = r.rules.iter().filter(|x| !x.pass).map(|x| format!("{}: {}", x.rule, x.detail)).collect();
-    r.verdict = if r.reasons.is_empty() { Verdict::Pass } else { Verdict::Fail };
+    let worst = r.rules.iter().map(RuleResult::decided).max().unwrap_or(Decision::Pass);
+    r.verdict = match worst {
+        Decision::Pass => Verdict::Pass,
+        Decision::Indeterminate => Verdict::Indeterminate,
+        Decision::Fail => Verdict::Fail,
+    };
     r
 }
 
@@ -273,7 +334,56 @@ pub fn run(
             }
         }
     }
-    Ok(BatchReport { units, spread })
+    let capability = capability(&units, &opts.rules);
+    let (control, warning) = super::lots::control(&opts.store, &opts.lot, &capability);
+    Ok(BatchReport { units, spread, capability, control, warnings: warning.into_iter().collect() })
+}
+
+/// The lot's capability on every datasheet rule and axis, from the units' decided axes.
+fn capability(units: &[UnitResult], rules: &Rules) -> Vec<Capability> {
+    let mut out = Vec::new();
+    for (i, rule) in rules.rules.iter().enumerate() {
+        let Rule::Datasheet { quantity, min, max, magnitude, .. } = rule else { continue };
+        let results: Vec<&RuleResult> = units.iter().filter_map(|u| u.rules.get(i)).collect();
+        let mut axes: Vec<String> = Vec::new();
+        for a in results.iter().flat_map(|r| &r.axes) {
+            if !axes.contains(&a.axis) {
+                axes.push(a.axis.clone());
+            }
+        }
+        let bounds = crate::check::guarded::Bounds {
+            min: *min,
+            max: *max,
+            magnitude: magnitude.unwrap_or(true),
+            rule: crate::check::guarded::DecisionRule::Simple,
+            k: 0.0,
+        };
+        let (lsl, usl) = bounds.limits();
+        for axis in axes {
+            let picked: Vec<_> = results.iter().flat_map(|r| r.axes.iter().find(|a| a.axis == axis)).collect();
+            let values: Vec<f64> = picked.iter().map(|a| a.value).collect();
+            let count = |d: Decision| picked.iter().filter(|a| a.decision == d).count();
+            let Some((mean, std, c)) = cpk(&values, lsl, usl) else { continue };
+            out.push(Capability {
+                rule: results.first().map_or_else(|| quantity.clone(), |r| r.rule.clone()),
+                quantity: quantity.clone(),
+                axis,
+                unit: crate::datasheet::spec(quantity).map_or_else(String::new, |s| s.unit.to_string()),
+                n: values.len(),
+                mean,
+                std,
+                lsl,
+                usl,
+                cpk: c.map(|c| c[0]),
+                cpk_low: c.map(|c| c[1]),
+                cpk_high: c.map(|c| c[2]),
+                pass: count(Decision::Pass),
+                fail: count(Decision::Fail),
+                indeterminate: count(Decision::Indeterminate),
+            });
+        }
+    }
+    out
 }
 
 /// The batch as CSV: one row per unit (quoted by the csv crate where a field needs it).
@@ -299,8 +409,10 @@ pub fn to_csv(r: &BatchReport) -> String {
     w.into_inner().map(|b| String::from_utf8_lossy(&b).into_owned()).unwrap_or_default()
 }
 
-/// The batch as a self-contained HTML page: verdict table, then each coefficient's
-/// distribution over the batch (histogram) with its median and robust σ.
+/// The batch as a self-contained HTML page: verdict table, the lot's capability on each
+/// datasheet rule (table, histogram in datasheet units with the limits drawn and Cpk in the
+/// title, control chart across the store's lots), then each coefficient's distribution
+/// over the batch (histogram, its unit) with its median and robust σ.
 pub fn to_html(r: &BatchReport, title: &str) -> String {
     use crate::html::{esc, page_start};
     use std::fmt::Write;
@@ -318,6 +430,7 @@ pub fn to_html(r: &BatchReport, title: &str) -> String {
         let colour = match u.verdict {
             Verdict::Pass => "#dfd",
             Verdict::Fail => "#fdd",
+            Verdict::Indeterminate => "#ffd",
             Verdict::Error => "#fcc",
         };
         let _ = write!(
@@ -330,29 +443,107 @@ pub fn to_html(r: &BatchReport, title: &str) -> String {
             esc(&outl.join("; "))
         );
     }
-    s.push_str("</table><h2>coefficients across the batch</h2>");
+    s.push_str("</table>");
+    capability_html(&mut s, r);
+    s.push_str("<h2>coefficients across the batch</h2>");
     for (name, med, sigma) in &r.spread {
-        let vals: Vec<f64> =
-            r.units.iter().filter_map(|u| u.coefficients.iter().find(|c| &c.0 == name).map(|c| c.1)).collect();
-        let (lo, hi) = vals.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| (a.0.min(v), a.1.max(v)));
-        let bins = 20usize;
-        let width = ((hi - lo) / bins as f64).max(f64::MIN_POSITIVE);
-        let mut counts = vec![0usize; bins];
-        for v in &vals {
-            counts[(((v - lo) / width) as usize).min(bins - 1)] += 1;
-        }
-        let bars: Vec<(String, f64)> = counts
+        let mut unit = "1".to_string();
+        let vals: Vec<f64> = r
+            .units
             .iter()
-            .enumerate()
-            .map(|(i, &c)| (format!("{:.3e}", lo + (i as f64 + 0.5) * width), c as f64))
+            .filter_map(|u| {
+                let i = u.coefficients.iter().position(|c| &c.0 == name)?;
+                if let Some(x) = u.units.get(i) {
+                    unit.clone_from(x);
+                }
+                Some(u.coefficients[i].1)
+            })
             .collect();
-        s.push_str(&crate::html::plot::bars(
+        s.push_str(&crate::html::plot::histogram(
             &format!("{name} over the lot: median {med:.6e}, robust σ {sigma:.2e}"),
-            "coefficient value, SI (bin centre)",
-            "number of units",
-            &bars,
+            &format!("{name} ({unit})"),
+            &vals,
+            &[],
         ));
     }
     s.push_str("</body></html>\n");
     s
+}
+
+/// The capability section of the batch page: a table per datasheet rule and axis, each
+/// quantity's histogram with its limits and Cpk, each control chart.
+fn capability_html(s: &mut String, r: &BatchReport) {
+    use crate::html::esc;
+    use std::fmt::Write;
+    if r.capability.is_empty() {
+        return;
+    }
+    let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
+    s.push_str("<h2>lot capability on the datasheet rules</h2><table><tr><th>rule</th><th>axis</th><th>n</th><th>mean</th><th>std</th><th>unit</th><th>Cpk</th><th>95 % interval</th><th>pass</th><th>fail</th><th>indeterminate</th></tr>");
+    for c in &r.capability {
+        let _ = write!(
+            s,
+            "<tr><td style=\"text-align:left\">{}</td><td>{}</td><td>{}</td><td>{:.4e}</td><td>{:.3e}</td><td>{}</td><td>{}</td><td>{} – {}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            esc(&c.rule), esc(&c.axis), c.n, c.mean, c.std, esc(&c.unit), f(c.cpk), f(c.cpk_low), f(c.cpk_high), c.pass, c.fail, c.indeterminate
+        );
+    }
+    s.push_str("</table>");
+    let indet: Vec<&UnitResult> = r.units.iter().filter(|u| u.verdict == Verdict::Indeterminate).collect();
+    if !indet.is_empty() {
+        s.push_str("<h3>indeterminate units and what would resolve them</h3><ul>");
+        for u in indet {
+            let how: Vec<String> =
+                u.rules.iter().filter_map(|x| x.resolve.as_ref().map(|h| format!("{}: {h}", x.rule))).collect();
+            let _ = write!(s, "<li>{}: {}</li>", esc(&u.dir.display().to_string()), esc(&how.join("; ")));
+        }
+        s.push_str("</ul>");
+    }
+    for c in &r.capability {
+        let vals: Vec<f64> = r
+            .units
+            .iter()
+            .filter_map(|u| {
+                u.rules.iter().find(|x| x.rule == c.rule)?.axes.iter().find(|a| a.axis == c.axis).map(|a| a.value)
+            })
+            .collect();
+        let limits: Vec<(String, f64)> = [("lower limit", c.lsl), ("upper limit", c.usl)]
+            .iter()
+            .filter_map(|(n, v)| v.map(|v| (format!("{n} {v}"), v)))
+            .collect();
+        s.push_str(&crate::html::plot::histogram(
+            &format!(
+                "{} {}: Cpk {} (95 %: {} – {}), n = {}",
+                c.quantity,
+                c.axis,
+                f(c.cpk),
+                f(c.cpk_low),
+                f(c.cpk_high),
+                c.n
+            ),
+            &format!("{} {} ({})", c.quantity, c.axis, c.unit),
+            &vals,
+            &limits,
+        ));
+    }
+    for ch in r.control.iter().filter(|c| c.lots.len() > 1) {
+        let pts: Vec<(f64, f64, Option<[f64; 2]>, bool)> = ch
+            .lots
+            .iter()
+            .map(|p| (p.point.mean, p.point.std, p.mean_limits.map(|l| [l[0], l[2]]), p.shifted || p.spread_up))
+            .collect();
+        let flagged: Vec<String> = ch.flagged().map(|p| p.point.lot.clone()).collect();
+        let names: Vec<String> =
+            ch.lots.iter().enumerate().map(|(i, p)| format!("{} {}", i + 1, p.point.lot)).collect();
+        s.push_str(&crate::html::plot::control_chart(
+            &format!(
+                "{} {} across lots: {}",
+                ch.quantity,
+                ch.axis,
+                if flagged.is_empty() { "in control".to_string() } else { format!("shift at {}", flagged.join(", ")) }
+            ),
+            &format!("lot mean ± std ({})", ch.unit),
+            &pts,
+        ));
+        let _ = write!(s, "<p>lots: {}</p>", esc(&names.join("; ")));
+    }
 }

@@ -16,9 +16,11 @@
 pub mod accept;
 pub mod arrays;
 pub mod batch;
+pub mod datasheet;
 pub mod diagnose;
 pub mod errors;
 pub mod fit;
+pub mod lots;
 pub mod simulate;
 pub mod validate;
 

@@ -11,6 +11,7 @@
 //! from its white noise (one χ² test pooled over all runs, at 0.001 %) is reported as
 //! noise-limited and passes: the data cannot show a remaining error.
 
+pub mod guarded;
 pub mod paper;
 pub mod rules;
 

@@ -14,8 +14,14 @@
 //!     { "kind": "reduction", "sensor": "gyro", "min": 10 },
 //!     { "kind": "temperature", "sensor": "gyro", "max_bias_change": 1e-3, "covers_c": [-20, 70],
 //!       "max_residual": 5e-5 },
-//!     { "kind": "adequate" } ] }
+//!     { "kind": "adequate" },
+//!     { "kind": "datasheet", "quantity": "gyro.misalignment", "max": 1.0, "unit": "mrad" } ],
+//!   "decision": "guarded", "k": 2 }
 //! ```
+//!
+//! A `datasheet` rule bounds a quantity of the unit's datasheet ([`crate::datasheet`]) in
+//! its datasheet unit and decides with its uncertainty ([`super::guarded`]: `guarded`, the
+//! default, or `simple`, per file or per rule, coverage factor `k`).
 //!
 //! `select` is a coefficient name with `*` wildcards. A deviation is |value − nominal|
 //! (nominal 1 for a diagonal scale, 0 otherwise). Noise units: SI by default, or
@@ -24,6 +30,7 @@
 //! (gyro random walk). Rules that need a session (residual, reduction, adequate) fail with
 //! that reason when none was checked.
 
+use super::guarded::{AxisDecision, Bounds, Decision, DecisionRule};
 use super::CheckReport;
 use crate::profile::Profile;
 use crate::units::SensorKind;
@@ -41,6 +48,12 @@ pub struct Rules {
     pub format: String,
     /// The rules, all of which must pass.
     pub rules: Vec<Rule>,
+    /// Decision rule of the `datasheet` rules that do not name one (default `guarded`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decision: Option<DecisionRule>,
+    /// Coverage factor of guarded decisions (default 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub k: Option<f64>,
 }
 
 /// One rule.
@@ -133,6 +146,35 @@ pub enum Rule {
         #[serde(default)]
         name: Option<String>,
     },
+    /// Bounds on a datasheet quantity, decided with its uncertainty.
+    Datasheet {
+        /// Quantity name (`gyro.misalignment`; `crosscal help datasheet` lists them).
+        quantity: String,
+        /// Only this axis (default: every axis of the quantity).
+        #[serde(default)]
+        axis: Option<String>,
+        /// Lower limit, datasheet unit.
+        #[serde(default)]
+        min: Option<f64>,
+        /// Upper limit, datasheet unit.
+        #[serde(default)]
+        max: Option<f64>,
+        /// The quantity's datasheet unit (checked: a limit in another unit is refused).
+        #[serde(default)]
+        unit: Option<String>,
+        /// Bound |value| (default true: datasheet limits are ± a number).
+        #[serde(default)]
+        magnitude: Option<bool>,
+        /// Decision rule (default: the file's, else `guarded`).
+        #[serde(default)]
+        decision: Option<DecisionRule>,
+        /// Coverage factor (default: the file's, else 2).
+        #[serde(default)]
+        k: Option<f64>,
+        /// Rule name.
+        #[serde(default)]
+        name: Option<String>,
+    },
     /// `diagnose` finds no unexplained systematic residual.
     Adequate {
         /// Rule name.
@@ -216,7 +258,14 @@ impl Rules {
         if r.format != RULES_FORMAT {
             return Err(RulesError::UnknownFormat { path: path.to_path_buf(), found: r.format });
         }
+        let bad = |msg: String| RulesError::Parse { path: path.to_path_buf(), line: 0, column: 0, msg };
+        if r.k.is_some_and(|k| !(k.is_finite() && k > 0.0)) {
+            return Err(bad("k must be a positive number".into()));
+        }
         for rule in &r.rules {
+            if let Rule::Datasheet { .. } = rule {
+                datasheet_rule_ok(rule).map_err(bad)?;
+            }
             if let Rule::Temperature { max_residual, bin_c, .. } = rule {
                 let bad = |v: &Option<f64>, min: f64| v.is_some_and(|v| !(v.is_finite() && v >= min));
                 if bad(max_residual, 0.0) || bad(bin_c, 1.0) {
@@ -266,6 +315,25 @@ impl Rules {
     }
 }
 
+/// Whether a datasheet rule names a known quantity in its unit, with a limit.
+fn datasheet_rule_ok(rule: &Rule) -> Result<(), String> {
+    let Rule::Datasheet { quantity, min, max, unit, k, .. } = rule else { return Ok(()) };
+    let Some(sp) = crate::datasheet::spec(quantity) else {
+        let names: Vec<&str> = crate::datasheet::QUANTITIES.iter().map(|q| q.name).collect();
+        return Err(format!("datasheet quantity '{quantity}' is not known: expected one of {}", names.join(", ")));
+    };
+    if let Some(u) = unit.as_deref().filter(|u| *u != sp.unit) {
+        return Err(format!("datasheet rule on {quantity}: unit '{u}', but {quantity} is in {}", sp.unit));
+    }
+    if min.is_none() && max.is_none() {
+        return Err(format!("datasheet rule on {quantity}: give min, max or both"));
+    }
+    if [*min, *max].iter().flatten().any(|v| !v.is_finite()) || k.is_some_and(|k| !(k.is_finite() && k > 0.0)) {
+        return Err(format!("datasheet rule on {quantity}: limits must be numbers and k positive"));
+    }
+    Ok(())
+}
+
 /// `file:line:column`, or the file alone when there is no single place (line 0).
 fn place(path: &std::path::Path, line: usize, column: usize) -> String {
     if line == 0 {
@@ -284,6 +352,50 @@ pub struct RuleResult {
     pub pass: bool,
     /// The numbers behind the verdict, or why it failed.
     pub detail: String,
+    /// pass, fail or (a datasheet rule under `guarded`) indeterminate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decision: Option<Decision>,
+    /// Datasheet rules: the deciding axis's value, datasheet unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value: Option<f64>,
+    /// Its standard uncertainty.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<f64>,
+    /// The limit it is judged against (the nearest).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limit: Option<f64>,
+    /// The datasheet unit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
+    /// Every axis's decision.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub axes: Vec<AxisDecision>,
+    /// The measurement that would resolve an indeterminate decision.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolve: Option<String>,
+}
+
+impl RuleResult {
+    /// A pass/fail outcome without numbers.
+    pub fn plain(rule: String, pass: bool, detail: String) -> Self {
+        Self {
+            rule,
+            pass,
+            detail,
+            decision: Some(if pass { Decision::Pass } else { Decision::Fail }),
+            value: None,
+            uncertainty: None,
+            limit: None,
+            unit: None,
+            axes: Vec::new(),
+            resolve: None,
+        }
+    }
+
+    /// The decision (pass/fail from `pass` where none was recorded).
+    pub fn decided(&self) -> Decision {
+        self.decision.unwrap_or(if self.pass { Decision::Pass } else { Decision::Fail })
+    }
 }
 
 /// What was learnt from the unit's session besides its profile.
@@ -296,6 +408,9 @@ pub struct Evidence<'a> {
     /// The session is a protocol session (poses and turns): it has no per-sample reference,
     /// so rules on the check say that rather than "no session was checked".
     pub protocol: bool,
+    /// The unit's datasheet (with its stored calibrations); built from the profile alone
+    /// when absent.
+    pub datasheet: Option<&'a crate::datasheet::Datasheet>,
 }
 
 /// Why a rule that needs the session's check has none.
@@ -465,7 +580,7 @@ pub fn evaluate_noise(rules: &Rules, noise: &crate::noise::NoiseReport) -> Vec<R
             Rule::Noise { sensor, term, max, unit, name } => {
                 let label = name.clone().unwrap_or_else(|| format!("{sensor} {term} noise"));
                 let (rule, pass, detail) = noise_rule(Some(noise), *sensor, term, *max, unit.as_deref(), label);
-                Some(RuleResult { rule, pass, detail })
+                Some(RuleResult::plain(rule, pass, detail))
             }
             _ => None,
         })
@@ -664,11 +779,20 @@ pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<Rule
     let coefs: Vec<&crate::estimate::Coefficient> =
         profile.gyro.coefficients.iter().chain(&profile.accel.coefficients).collect();
     let model = profile.model().ok();
+    let own;
+    let sheet = match ev.datasheet {
+        Some(d) => d,
+        None => {
+            own = crate::datasheet::build("the profile", profile, &[], &Default::default());
+            &own
+        }
+    };
     rules
         .rules
         .iter()
         .map(|rule| {
             let (rule, pass, detail) = match rule {
+                Rule::Datasheet { .. } => return datasheet_rule(rules, rule, sheet),
                 Rule::Coefficient { select, min, max, max_abs_deviation, name } => coefficient_rule(
                     &coefs,
                     model.as_ref(),
@@ -710,9 +834,69 @@ pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<Rule
                     name.clone().unwrap_or_else(|| format!("{sensor} temperature")),
                 ),
             };
-            RuleResult { rule, pass, detail }
+            RuleResult::plain(rule, pass, detail)
         })
         .collect()
+}
+
+/// A datasheet rule on a unit's datasheet: every axis decided, the unit's decision the
+/// worst, reported with the deciding axis's value, uncertainty and nearest limit.
+fn datasheet_rule(rules: &Rules, rule: &Rule, sheet: &crate::datasheet::Datasheet) -> RuleResult {
+    let Rule::Datasheet { quantity, axis, min, max, unit, magnitude, decision, k, name } = rule else {
+        return RuleResult::plain("?".into(), false, "not a datasheet rule".into());
+    };
+    let label = name.clone().unwrap_or_else(|| format!("datasheet {quantity}"));
+    let bounds = Bounds {
+        min: *min,
+        max: *max,
+        magnitude: magnitude.unwrap_or(true),
+        rule: decision.or(rules.decision).unwrap_or_default(),
+        k: k.or(rules.k).unwrap_or(super::guarded::DEFAULT_K),
+    };
+    let unit = unit.clone().or_else(|| crate::datasheet::spec(quantity).map(|s| s.unit.to_string()));
+    let axes = match super::guarded::decide(sheet, quantity, axis.as_deref(), &bounds) {
+        Ok(a) => a,
+        Err(why) => {
+            let mut r = RuleResult::plain(label, false, why);
+            r.unit = unit;
+            return r;
+        }
+    };
+    let Some(worst) = super::guarded::deciding(&axes).cloned() else {
+        return RuleResult::plain(label, false, format!("{quantity}: nothing to decide"));
+    };
+    let shown = if bounds.magnitude { worst.value.abs() } else { worst.value };
+    let limit = match (bounds.min, bounds.max) {
+        (Some(lo), Some(hi)) => Some(if (shown - lo).abs() < (hi - shown).abs() { lo } else { hi }),
+        (lo, hi) => hi.or(lo),
+    };
+    let u_name = unit.clone().unwrap_or_default();
+    let how = match bounds.rule {
+        DecisionRule::Guarded => format!("guarded, k = {}", bounds.k),
+        DecisionRule::Simple => "simple".into(),
+    };
+    let detail = format!(
+        "{}{} = {:.4e} ± {:.2e} {u_name} against {} {:.4e} ({how}): {}",
+        if bounds.magnitude { "|" } else { "" },
+        format_args!("{quantity} {}{}", worst.axis, if bounds.magnitude { "|" } else { "" }),
+        shown,
+        worst.uncertainty,
+        if limit == bounds.max { "max" } else { "min" },
+        limit.unwrap_or(f64::NAN),
+        worst.decision.word()
+    );
+    RuleResult {
+        rule: label,
+        pass: worst.decision == Decision::Pass,
+        detail,
+        decision: Some(worst.decision),
+        value: Some(worst.value),
+        uncertainty: Some(worst.uncertainty),
+        limit,
+        unit,
+        axes,
+        resolve: None,
+    }
 }
 
 #[cfg(test)]

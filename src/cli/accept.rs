@@ -3,6 +3,7 @@
 use super::Outcome;
 use crate::outln;
 use anyhow::Context;
+use crosscal::check::guarded::Decision;
 use crosscal::check::rules::{evaluate, Evidence, Rules};
 use crosscal::session::Session;
 use std::path::PathBuf;
@@ -28,7 +29,10 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let rules = Rules::read(&a.rules)?;
-    let profile = super::read_profile(&a.profile)?;
+    let (used, profile) = crosscal::profile::Profile::read_or_latest(&a.profile)?;
+    if used != a.profile {
+        eprintln!("profile: {} (the newest of unit {})", used.display(), profile.serial);
+    }
     let acc = match &a.session {
         Some(path) => {
             let s = Session::load(path).with_context(|| format!("reading session {}", path.display()))?;
@@ -38,20 +42,43 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         None if a.diagnose => anyhow::bail!("--diagnose needs --session"),
         None => None,
     };
+    // The unit's other calibrations: the store the profile sits in (STORE/SERIAL/file.json).
+    let store = used
+        .parent()
+        .filter(|d| d.file_name().is_some_and(|n| n == profile.serial.as_str()))
+        .and_then(|d| d.parent())
+        .unwrap_or(std::path::Path::new(""));
+    let sheet = crosscal::app::datasheet::datasheet_of(store, Some(&used), &profile);
     let ev = Evidence {
+        datasheet: Some(&sheet),
         check: acc.as_ref().and_then(|x| x.check.as_ref()),
         adequacy: acc.as_ref().and_then(|x| x.adequacy.clone()),
         protocol: acc.as_ref().is_some_and(|x| x.protocol),
     };
-    let results = evaluate(&rules, &profile, &ev);
-    let pass = results.iter().all(|r| r.pass);
+    let mut results = evaluate(&rules, &profile, &ev);
+    crosscal::app::accept::add_resolutions(&mut results, &rules);
+    let worst = results.iter().map(|r| r.decided()).max().unwrap_or(Decision::Pass);
+    let pass = worst == Decision::Pass;
     if a.json {
         outln!("{}", serde_json::to_string_pretty(&results)?);
     } else {
         for r in &results {
-            outln!("{:<5} {:<32} {}", if r.pass { "pass" } else { "FAIL" }, r.rule, r.detail);
+            let word = match r.decided() {
+                Decision::Pass => "pass",
+                Decision::Indeterminate => "INDET",
+                Decision::Fail => "FAIL",
+            };
+            outln!("{word:<5} {:<32} {}", r.rule, r.detail);
+            if let Some(how) = &r.resolve {
+                outln!("      to resolve: {how}");
+            }
         }
-        outln!("unit {}: {}", profile.serial, if pass { "ACCEPTED" } else { "REJECTED" });
+        let verdict = match worst {
+            Decision::Pass => "ACCEPTED",
+            Decision::Indeterminate => "INDETERMINATE (neither accepted nor rejected: measure it better, as above)",
+            Decision::Fail => "REJECTED",
+        };
+        outln!("unit {}: {verdict}", profile.serial);
     }
     Ok(if pass { Outcome::Ok } else { Outcome::CheckFailed })
 }

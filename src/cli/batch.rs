@@ -41,7 +41,11 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if dirs.is_empty() {
         anyhow::bail!("{}: no unit folders (expected one sub-folder per unit with its session.json)", a.dir.display());
     }
-    let opts = BatchOptions { model, store: a.out.clone(), rules, resume: a.resume, jobs: a.jobs };
+    let lot = std::fs::canonicalize(&a.dir)
+        .ok()
+        .and_then(|d| d.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| a.dir.display().to_string());
+    let opts = BatchOptions { model, store: a.out.clone(), rules, resume: a.resume, jobs: a.jobs, lot };
     // Where the results go is settled before the first unit is fitted.
     crosscal::app::batch::prepare(&opts)?;
     let rdir = a.report_dir.clone().unwrap_or_else(|| a.dir.clone());
@@ -89,10 +93,11 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     write("batch-report.html", to_html(&report, &format!("crosscal batch: {}", a.dir.display())))?;
     let outliers: Vec<&UnitResult> = report.units.iter().filter(|u| !u.outliers.is_empty()).collect();
     outln!(
-        "{} units: {} pass, {} fail, {} could not be processed; {} batch outlier(s); reports in {}",
+        "{} units: {} pass, {} fail, {} indeterminate, {} could not be processed; {} batch outlier(s); reports in {}",
         report.units.len(),
         report.passed(),
         report.units.iter().filter(|u| u.verdict == Verdict::Fail).count(),
+        report.units.iter().filter(|u| u.verdict == Verdict::Indeterminate).count(),
         report.units.iter().filter(|u| u.verdict == Verdict::Error).count(),
         outliers.len(),
         rdir.display()
@@ -100,6 +105,44 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     for u in outliers {
         let o: Vec<String> = u.outliers.iter().map(|(n, z)| format!("{n} z = {z:+.1}")).collect();
         outln!("outlier: {} ({})", u.dir.display(), o.join(", "));
+    }
+    for u in report.units.iter().filter(|u| u.verdict == Verdict::Indeterminate) {
+        let how: Vec<String> =
+            u.rules.iter().filter_map(|r| r.resolve.as_ref().map(|h| format!("{}: {h}", r.rule))).collect();
+        outln!("indeterminate: {} ({})", u.dir.display(), how.join("; "));
+    }
+    for c in &report.capability {
+        outln!(
+            "capability {} {}: mean {:.4e} {}, std {:.3e}, Cpk {} [{}, {}]; {} pass, {} fail, {} indeterminate",
+            c.rule,
+            c.axis,
+            c.mean,
+            c.unit,
+            c.std,
+            c.cpk.map_or("-".into(), |v| format!("{v:.2}")),
+            c.cpk_low.map_or("-".into(), |v| format!("{v:.2}")),
+            c.cpk_high.map_or("-".into(), |v| format!("{v:.2}")),
+            c.pass,
+            c.fail,
+            c.indeterminate
+        );
+    }
+    for ch in &report.control {
+        for p in ch.flagged() {
+            outln!(
+                "process shift: {} {} at lot {} (mean {:.4e}, std {:.3e} {} against the earlier lots' limits {})",
+                ch.quantity,
+                ch.axis,
+                p.point.lot,
+                p.point.mean,
+                p.point.std,
+                ch.unit,
+                p.mean_limits.map_or("-".into(), |l| format!("{:.4e}..{:.4e}", l[0], l[2]))
+            );
+        }
+    }
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
     }
     Ok(if report.passed() == report.units.len() { Outcome::Ok } else { Outcome::CheckFailed })
 }

@@ -5,6 +5,7 @@ mod batch;
 mod check;
 mod compare;
 mod correct;
+mod datasheet;
 mod demo;
 mod diagnose;
 mod effects;
@@ -37,7 +38,7 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
     long_about = None,
     disable_help_subcommand = true,
     after_help = "Example: crosscal simulate --preset paper -o demo/ && crosscal fit demo/session.json --out calib-profiles/\n\
-                  More: crosscal help COMMAND, or crosscal help TOPIC for one of: session, formats, profile-format, rules, catalogue, conventions, errors"
+                  More: crosscal help COMMAND, or crosscal help TOPIC for one of: session, formats, profile-format, rules, catalogue, conventions, errors, datasheet"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -87,6 +88,9 @@ enum Command {
         after_help = "Example: crosscal accept calib-profiles/I1426-0042 --rules rules.json --session demo/session.json"
     )]
     Accept(accept::Args),
+    /// A unit's datasheet: bias, repeatability, ARW, scale factor, misalignment … in datasheet units with uncertainties.
+    #[command(after_help = "Example: crosscal datasheet I1426-0042 --store calib-profiles --report datasheet.html")]
+    Datasheet(datasheet::Args),
     /// The profile store: list units and histories, show the profile in force, diff two profiles.
     #[command(after_help = "Example: crosscal profile list")]
     Profile(profile::Args),
@@ -102,7 +106,7 @@ enum Command {
     /// List the exit codes and what each means (as the guide's table).
     #[command(after_help = "Example: crosscal exit-codes")]
     ExitCodes,
-    /// Help on a command, or a topic: session, formats, profile-format, rules, catalogue, conventions, errors.
+    /// Help on a command, or a topic: session, formats, profile-format, rules, catalogue, conventions, errors, datasheet.
     #[command(after_help = "Example: crosscal help conventions")]
     Help {
         /// A command name or a topic; without one, the list of commands and topics.
@@ -117,6 +121,7 @@ const TOPICS: &[(&str, &str)] = &[
     ("formats", include_str!("../../docs/reference-session.md")),
     ("profile-format", include_str!("../../docs/reference-profile.md")),
     ("rules", include_str!("../../docs/reference-rules.md")),
+    ("datasheet", include_str!("../../docs/reference-datasheet.md")),
     ("catalogue", include_str!("../../docs/reference-effects.md")),
     ("conventions", include_str!("../../docs/reference-conventions.md")),
     ("errors", include_str!("../../docs/reference-exit-codes.md")),
@@ -284,6 +289,7 @@ pub fn main() -> ExitCode {
         Command::Noise(a) => noise::run(a),
         Command::Plan(a) => plan::run(a),
         Command::Accept(a) => accept::run(a),
+        Command::Datasheet(a) => datasheet::run(a),
         Command::Profile(a) => profile::run(a),
         Command::Batch(a) => batch::run(a),
         Command::Import(a) => import::run(a),

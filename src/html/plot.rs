@@ -244,3 +244,136 @@ pub fn ladder(title: &str, y_label: &str, rungs: &[String], series: &[(String, V
     }
     buf
 }
+
+/// A tick label of `v` on an axis whose ticks are `step` apart: as many decimals as the
+/// step needs and no more (`0.25`, `12`, `-0.004`), exponent form outside 1e-3..1e5, so
+/// neighbouring labels differ and stay short.
+pub fn tick_label(v: f64, step: f64) -> String {
+    let mag = v.abs().max(step.abs());
+    if v == 0.0 {
+        return "0".into();
+    }
+    if !(1e-3..1e5).contains(&mag) {
+        let digits = ((mag / step.abs().max(f64::MIN_POSITIVE)).log10().ceil().max(0.0) as usize).min(6);
+        return format!("{v:.digits$e}");
+    }
+    let decimals = (-(step.abs().log10().floor())).max(0.0) as usize;
+    format!("{v:.decimals$}")
+}
+
+/// A round step (1, 2 or 5 × 10ⁿ) giving at most `max_ticks` ticks over `span`.
+fn nice_step(span: f64, max_ticks: usize) -> f64 {
+    let raw = span / max_ticks.max(1) as f64;
+    let p = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * p).find(|s| *s >= raw).unwrap_or(10.0 * p)
+}
+
+/// A histogram of `values` (x in the quantity's unit, named in `x_label`) with vertical
+/// lines at named `limits`, as an SVG string: at most 7 x ticks at round values labelled
+/// with the decimals their step needs, counts on an integer axis.
+pub fn histogram(title: &str, x_label: &str, values: &[f64], limits: &[(String, f64)]) -> String {
+    let mut buf = String::new();
+    let finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    let (vlo, vhi) = range(finite.iter().copied());
+    let bins = ((finite.len() as f64).log2().ceil() as usize + 1).clamp(5, 20);
+    let width = (vhi - vlo) / bins as f64;
+    let mut counts = vec![0i32; bins];
+    for v in &finite {
+        counts[(((v - vlo) / width) as usize).min(bins - 1)] += 1;
+    }
+    let (x0, x1) = range(finite.iter().copied().chain(limits.iter().map(|l| l.1)));
+    let step = nice_step(x1 - x0, 6);
+    let ymax = counts.iter().copied().max().unwrap_or(1).max(1) + 1;
+    {
+        let root = SVGBackend::with_string(&mut buf, (720, 260)).into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let Ok(mut chart) = builder(&root, title).build_cartesian_2d(x0..x1, 0..ymax) else {
+            return String::new();
+        };
+        let ticks = ((x1 - x0) / step).floor() as usize + 1;
+        let _ = chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc("number of units (count)")
+            .axis_desc_style(DESC_FONT)
+            .label_style(TICK_FONT)
+            .x_labels(ticks.min(7))
+            .x_label_formatter(&|x| tick_label(*x, step))
+            .y_labels((ymax as usize + 1).min(6))
+            .y_label_formatter(&|y| y.to_string())
+            .light_line_style(WHITE)
+            .draw();
+        let _ = chart.draw_series(counts.iter().enumerate().filter(|(_, &c)| c > 0).map(|(i, &c)| {
+            let a = vlo + i as f64 * width;
+            Rectangle::new([(a + 0.04 * width, 0), (a + 0.96 * width, c)], COLORS[0].filled())
+        }));
+        for (i, (name, x)) in limits.iter().enumerate() {
+            let c = COLORS[(3 + i) % COLORS.len()];
+            let line = PathElement::new(vec![(*x, 0), (*x, ymax)], c.stroke_width(2));
+            if let Ok(s) = chart.draw_series(std::iter::once(line)) {
+                s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
+            }
+        }
+        if !limits.is_empty() {
+            legend(&mut chart, SeriesLabelPosition::UpperRight);
+        }
+        let _ = root.present();
+    }
+    buf
+}
+
+/// A control chart as an SVG string: each lot's mean (points, lots numbered 1, 2, … in
+/// time order) with ±1 standard deviation bars, and the lower and upper limits each lot is
+/// judged against (from the lots before it); a lot out of control is drawn in red.
+pub fn control_chart(title: &str, y_label: &str, lots: &[(f64, f64, Option<[f64; 2]>, bool)]) -> String {
+    let mut buf = String::new();
+    let n = lots.len().max(1);
+    let ys =
+        lots.iter().flat_map(|l| [l.0 - l.1, l.0 + l.1]).chain(lots.iter().flat_map(|l| l.2.into_iter().flatten()));
+    let (y0, y1) = range(ys);
+    let step = nice_step(y1 - y0, 6);
+    {
+        let root = SVGBackend::with_string(&mut buf, (720, 260)).into_drawing_area();
+        let _ = root.fill(&WHITE);
+        let Ok(mut chart) = builder(&root, title).build_cartesian_2d(0.5..n as f64 + 0.5, y0..y1) else {
+            return String::new();
+        };
+        let _ = chart
+            .configure_mesh()
+            .x_desc("lot (in time order)")
+            .y_desc(y_label)
+            .axis_desc_style(DESC_FONT)
+            .label_style(TICK_FONT)
+            .x_labels(n.min(8))
+            .x_label_formatter(&|x| if (x - x.round()).abs() < 1e-6 { format!("{}", x.round()) } else { String::new() })
+            .y_labels(7)
+            .y_label_formatter(&|y| tick_label(*y, step))
+            .light_line_style(WHITE)
+            .draw();
+        let grey = RGBColor(90, 90, 90);
+        for side in 0..2 {
+            let pts: Vec<(f64, f64)> = lots
+                .iter()
+                .enumerate()
+                .filter_map(|(i, l)| l.2.map(|b| (i as f64 + 1.0, b[side])))
+                .flat_map(|(x, y)| [(x - 0.4, y), (x + 0.4, y), (f64::NAN, f64::NAN)])
+                .collect();
+            let segs: Vec<Vec<(f64, f64)>> =
+                pts.split(|p| p.0.is_nan()).filter(|s| !s.is_empty()).map(<[_]>::to_vec).collect();
+            let drawn = chart.draw_series(segs.into_iter().map(|s| PathElement::new(s, grey.stroke_width(2))));
+            if side == 0 {
+                if let Ok(s) = drawn {
+                    s.label("limits from the earlier lots")
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], grey));
+                }
+            }
+        }
+        let _ = chart.draw_series(lots.iter().enumerate().map(|(i, l)| {
+            let c = if l.3 { COLORS[3] } else { COLORS[0] };
+            ErrorBar::new_vertical(i as f64 + 1.0, l.0 - l.1, l.0, l.0 + l.1, c.filled(), 8)
+        }));
+        legend(&mut chart, SeriesLabelPosition::UpperLeft);
+        let _ = root.present();
+    }
+    buf
+}

@@ -22,6 +22,18 @@ use serde::Serialize;
 
 pub mod thermal;
 
+/// How many times the present data (session length, or number of runs of the same design)
+/// it takes to bring a standard error from `u_now` down to `u_target`: the Cramér–Rao
+/// covariance σ² (ΦᵀΦ)⁻¹ of a fixed design falls as 1/samples, so the factor is
+/// (u_now / u_target)². Infinite when the target is 0.
+pub fn duration_factor(u_now: f64, u_target: f64) -> f64 {
+    if u_target > 0.0 {
+        (u_now / u_target).powi(2)
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// Fits exactly `model` to prepared runs through the one entry point.
 fn refit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
     Ok(crate::estimate::fit(&FitRequest::runs(model, runs).options(*opts))?.fit)
