@@ -190,12 +190,12 @@ fn guarded_acceptance_never_accepts_a_bad_unit_or_rejects_a_good_one() {
     let guarded = Rules::parse(Path::new("g.json"), &text("guarded")).unwrap();
     let simple = Rules::parse(Path::new("s.json"), &text("simple")).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(99);
-    let law = LotLaw { delta_xy: (1.0, 0.12), ..LAW };
+    let law = LotLaw { delta_xy: (1.0, 0.25), ..LAW };
     let truths: Vec<Truth> = (0..40).map(|_| draw(&mut rng, &law)).collect();
     let items: Vec<(usize, Truth)> = truths.iter().copied().enumerate().collect();
     let out = par_map(&items, |(i, t)| {
-        // Noisier units (u ≈ 0.04 mrad) so that some are within 2u of the limit.
-        let p = fit(&config(&format!("G-{i}"), 500 + *i as u64, t, 0.01));
+        // u ≈ 0.06 mrad: some units are within 2u of the limit.
+        let p = fit(&config(&format!("G-{i}"), 500 + *i as u64, t, 0.002));
         let d = sheet(&p);
         let ev = Evidence { datasheet: Some(&d), ..Default::default() };
         (evaluate(&guarded, &p, &ev).remove(0), evaluate(&simple, &p, &ev).remove(0))
@@ -245,7 +245,11 @@ fn bias_repeatability_interval_holds_the_turn_on_sigma() {
         hits += usize::from(lo <= sigma && sigma <= hi);
         let mean = turn_on.iter().sum::<f64>() / 6.0;
         let sd = (turn_on.iter().map(|b| (b - mean).powi(2)).sum::<f64>() / 5.0).sqrt();
-        assert!((q.value.unwrap() - sd).abs() < 0.1, "{} vs the true biases' {sd}", q.value.unwrap());
+        // The fitted biases carry their own estimation error (standard error se): the
+        // spread of the fitted biases differs from the true ones' by less than ~3 se.
+        let se = profiles.iter().map(|p| p.gyro.get("gyro.b_x").unwrap().std_error.unwrap()).fold(0.0, f64::max);
+        let tol = 3.0 * se * DEG_H_PER_RAD_S;
+        assert!((q.value.unwrap() - sd).abs() < tol, "{} vs the true biases' {sd} (±{tol})", q.value.unwrap());
     }
     println!("σ inside the 90 % interval in {hits} of 20 trials");
     assert!(hits >= 15, "{hits}");

@@ -192,11 +192,12 @@ document.body.appendChild(p);
         .output()
         .unwrap();
     let dom = String::from_utf8_lossy(&out.stdout);
-    let found = dom.split("OVERLAPS[").nth(1).and_then(|s| s.split("]END").next());
+    // The script's own text is in the DOM too: the result is the last occurrence.
+    let found = dom.rsplit("OVERLAPS[").next().filter(|_| dom.contains("]END")).and_then(|s| s.split("]END").next());
     let Some(found) = found else {
         panic!("{what}: the measuring script did not run: {}", String::from_utf8_lossy(&out.stderr))
     };
-    let measured = dom.split("MEASURED ").nth(1).and_then(|s| s.split(' ').next()).unwrap_or("0");
+    let measured = dom.rsplit("MEASURED ").next().and_then(|s| s.split(' ').next()).unwrap_or("0");
     println!("{what}: {measured} plot texts measured in Chromium");
     assert!(measured.parse::<usize>().unwrap_or(0) > 20, "{what}: too few texts measured ({measured})");
     assert!(found.is_empty(), "{what}: overlapping texts: {found}");
