@@ -82,6 +82,7 @@ fn batch(table: &mut Table) {
             rules: rules.clone(),
             resume: false,
             jobs,
+            lot: format!("bench{jobs}"),
         };
         let t0 = Instant::now();
         let r = run(&dirs, &opts, &|_| {}).expect("batch");

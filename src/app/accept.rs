@@ -91,7 +91,7 @@ pub fn resolve(quantity: &str, r: &crate::check::rules::RuleResult, k: f64) -> O
         need(a).total_cmp(&need(b))
     })?;
     let target = ax.margin / k;
-    if !(target > 0.0) {
+    if target.is_nan() || target <= 0.0 {
         return Some(format!(
             "axis {}: the value sits on the limit; no measurement can resolve it (review the limit)",
             ax.axis
