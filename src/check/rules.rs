@@ -30,7 +30,7 @@
 //! (gyro random walk). Rules that need a session (residual, reduction, adequate) fail with
 //! that reason when none was checked.
 
-use super::guarded::{AxisDecision, Bounds, Decision, DecisionRule};
+use super::guarded::{AxisDecision, Decision, DecisionRule};
 use super::CheckReport;
 use crate::profile::Profile;
 use crate::units::SensorKind;
@@ -792,7 +792,7 @@ pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<Rule
         .iter()
         .map(|rule| {
             let (rule, pass, detail) = match rule {
-                Rule::Datasheet { .. } => return datasheet_rule(rules, rule, sheet),
+                Rule::Datasheet { .. } => return super::guarded::datasheet_rule(rules, rule, sheet),
                 Rule::Coefficient { select, min, max, max_abs_deviation, name } => coefficient_rule(
                     &coefs,
                     model.as_ref(),
@@ -837,66 +837,6 @@ pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<Rule
             RuleResult::plain(rule, pass, detail)
         })
         .collect()
-}
-
-/// A datasheet rule on a unit's datasheet: every axis decided, the unit's decision the
-/// worst, reported with the deciding axis's value, uncertainty and nearest limit.
-fn datasheet_rule(rules: &Rules, rule: &Rule, sheet: &crate::datasheet::Datasheet) -> RuleResult {
-    let Rule::Datasheet { quantity, axis, min, max, unit, magnitude, decision, k, name } = rule else {
-        return RuleResult::plain("?".into(), false, "not a datasheet rule".into());
-    };
-    let label = name.clone().unwrap_or_else(|| format!("datasheet {quantity}"));
-    let bounds = Bounds {
-        min: *min,
-        max: *max,
-        magnitude: magnitude.unwrap_or(true),
-        rule: decision.or(rules.decision).unwrap_or_default(),
-        k: k.or(rules.k).unwrap_or(super::guarded::DEFAULT_K),
-    };
-    let unit = unit.clone().or_else(|| crate::datasheet::spec(quantity).map(|s| s.unit.to_string()));
-    let axes = match super::guarded::decide(sheet, quantity, axis.as_deref(), &bounds) {
-        Ok(a) => a,
-        Err(why) => {
-            let mut r = RuleResult::plain(label, false, why);
-            r.unit = unit;
-            return r;
-        }
-    };
-    let Some(worst) = super::guarded::deciding(&axes).cloned() else {
-        return RuleResult::plain(label, false, format!("{quantity}: nothing to decide"));
-    };
-    let shown = if bounds.magnitude { worst.value.abs() } else { worst.value };
-    let limit = match (bounds.min, bounds.max) {
-        (Some(lo), Some(hi)) => Some(if (shown - lo).abs() < (hi - shown).abs() { lo } else { hi }),
-        (lo, hi) => hi.or(lo),
-    };
-    let u_name = unit.clone().unwrap_or_default();
-    let how = match bounds.rule {
-        DecisionRule::Guarded => format!("guarded, k = {}", bounds.k),
-        DecisionRule::Simple => "simple".into(),
-    };
-    let detail = format!(
-        "{}{} = {:.4e} ± {:.2e} {u_name} against {} {:.4e} ({how}): {}",
-        if bounds.magnitude { "|" } else { "" },
-        format_args!("{quantity} {}{}", worst.axis, if bounds.magnitude { "|" } else { "" }),
-        shown,
-        worst.uncertainty,
-        if limit == bounds.max { "max" } else { "min" },
-        limit.unwrap_or(f64::NAN),
-        worst.decision.word()
-    );
-    RuleResult {
-        rule: label,
-        pass: worst.decision == Decision::Pass,
-        detail,
-        decision: Some(worst.decision),
-        value: Some(worst.value),
-        uncertainty: Some(worst.uncertainty),
-        limit,
-        unit,
-        axes,
-        resolve: None,
-    }
 }
 
 #[cfg(test)]
