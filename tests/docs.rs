@@ -168,6 +168,7 @@ pages! {
     reference_session => "docs/reference-session.md",
     reference_profile => "docs/reference-profile.md",
     reference_rules => "docs/reference-rules.md",
+    reference_datasheet => "docs/reference-datasheet.md",
     reference_effects => "docs/reference-effects.md",
     reference_exit_codes => "docs/reference-exit-codes.md",
     reference_conventions => "docs/reference-conventions.md",
@@ -284,7 +285,7 @@ fn help_has_an_example_for_every_command_and_topics_print() {
         ("catalogue", "reference-effects.md"),
         ("conventions", "reference-conventions.md"),
         ("errors", "reference-exit-codes.md"),
-        ("datasheet", "reference-datasheet.md"),
+        ("quantities", "reference-datasheet.md"),
     ] {
         let text = std::fs::read_to_string(root().join("docs").join(page)).unwrap();
         assert!(

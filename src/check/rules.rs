@@ -148,7 +148,7 @@ pub enum Rule {
     },
     /// Bounds on a datasheet quantity, decided with its uncertainty.
     Datasheet {
-        /// Quantity name (`gyro.misalignment`; `crosscal help datasheet` lists them).
+        /// Quantity name (`gyro.misalignment`; `crosscal help quantities` lists them).
         quantity: String,
         /// Only this axis (default: every axis of the quantity).
         #[serde(default)]

@@ -38,7 +38,7 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
     long_about = None,
     disable_help_subcommand = true,
     after_help = "Example: crosscal simulate --preset paper -o demo/ && crosscal fit demo/session.json --out calib-profiles/\n\
-                  More: crosscal help COMMAND, or crosscal help TOPIC for one of: session, formats, profile-format, rules, catalogue, conventions, errors, datasheet"
+                  More: crosscal help COMMAND, or crosscal help TOPIC for one of: session, formats, profile-format, rules, catalogue, conventions, errors, quantities"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -106,7 +106,7 @@ enum Command {
     /// List the exit codes and what each means (as the guide's table).
     #[command(after_help = "Example: crosscal exit-codes")]
     ExitCodes,
-    /// Help on a command, or a topic: session, formats, profile-format, rules, catalogue, conventions, errors, datasheet.
+    /// Help on a command, or a topic: session, formats, profile-format, rules, catalogue, conventions, errors, quantities.
     #[command(after_help = "Example: crosscal help conventions")]
     Help {
         /// A command name or a topic; without one, the list of commands and topics.
@@ -121,7 +121,7 @@ const TOPICS: &[(&str, &str)] = &[
     ("formats", include_str!("../../docs/reference-session.md")),
     ("profile-format", include_str!("../../docs/reference-profile.md")),
     ("rules", include_str!("../../docs/reference-rules.md")),
-    ("datasheet", include_str!("../../docs/reference-datasheet.md")),
+    ("quantities", include_str!("../../docs/reference-datasheet.md")),
     ("catalogue", include_str!("../../docs/reference-effects.md")),
     ("conventions", include_str!("../../docs/reference-conventions.md")),
     ("errors", include_str!("../../docs/reference-exit-codes.md")),

@@ -53,7 +53,7 @@ pub fn text(d: &Datasheet) -> String {
     }
     let _ = writeln!(
         s,
-        "from: {}\ndefinitions: `crosscal help datasheet` (docs/reference-datasheet.md); uncertainties are standard (k = 1), from the fit's covariance or the noise reading's 68 % interval",
+        "from: {}\ndefinitions: `crosscal help quantities` (docs/reference-datasheet.md); uncertainties are standard (k = 1), from the fit's covariance or the noise reading's 68 % interval",
         d.quantities.iter().find_map(|q| q.sources.first()).map_or("-", String::as_str)
     );
     s
