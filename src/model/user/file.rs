@@ -323,12 +323,12 @@ description = "scale step above a rate"
     fn reads_the_issue_form_and_evaluates() {
         let v = load_str("f.toml", KNEE).unwrap();
         let e = &v[0];
-        assert_eq!(e.def.parameters[0].start, 4.0f64.to_radians());
+        assert!((e.def.parameters[0].start - 4.0f64.to_radians()).abs() < 1e-15);
         let s = crate::model::State { w: [0.1, 0.0, 0.0], ..Default::default() };
         use crate::model::Effect;
         assert!((e.regressor(0, &s) - (0.1 - 4.0f64.to_radians())).abs() < 1e-15);
         let inline = KNEE.replace("\"4 deg\"", "0.0698");
-        assert_eq!(load_str("f.toml", &inline).unwrap()[0].def.parameters[0].start, 0.0698);
+        assert!((load_str("f.toml", &inline).unwrap()[0].def.parameters[0].start - 0.0698).abs() < 1e-15);
     }
 
     fn err(text: &str) -> String {
