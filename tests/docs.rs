@@ -175,6 +175,7 @@ pages! {
     background => "docs/background.md",
     performance => "docs/performance.md",
     python => "docs/python.md",
+    your_own_effect => "docs/your-own-effect.md",
 }
 
 #[test]

@@ -180,6 +180,10 @@ fn case(code: u8, dir: &Path) -> Vec<String> {
             std::fs::write(dir.join("out.csv"), "keep me").unwrap();
             s(&["correct", "--profile", &p(dir), "s/cone+10.csv", "-o", "out.csv"])
         }
+        25 => {
+            std::fs::write(dir.join("bad.toml"), "[[effect]]\nid = \"x\"\nsensor = \"gyro\"\noutput = \"x\"\nexpr = \"k * w_q\"\ncoefficients = [\"k\"]\n").unwrap();
+            s(&["effects", "--effects-file", "bad.toml"])
+        }
         _ => panic!("no case for exit code {code}: add one"),
     }
 }
@@ -206,7 +210,7 @@ fn the_guides_table_is_the_binarys() {
         out.trim(),
         "regenerate the table of docs/reference-exit-codes.md with `crosscal exit-codes`"
     );
-    assert_eq!(codes, (0..=24).collect::<Vec<u8>>());
+    assert_eq!(codes, (0..=25).collect::<Vec<u8>>());
 }
 
 #[test]

@@ -34,4 +34,5 @@ mod thermal;
 mod thermal_hysteresis;
 mod thermal_sweep;
 mod uncertainty;
+mod user_effects;
 mod validate;

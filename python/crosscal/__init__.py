@@ -32,6 +32,7 @@ from .analysis import (
     diagnose,
     exit_codes,
     fit,
+    load_effects,
     noise,
     paper_table,
     plan,
@@ -47,5 +48,5 @@ __version__ = _version()
 __all__ = [
     "AllanResult", "CheckResult", "Corrected", "CrosscalError", "Diagnosis", "Profile", "Session", "Streaming", "capability",
     "check", "correct", "cpk", "datasheet",
-    "diagnose", "errors", "exit_codes", "fit", "noise", "paper_table", "plan", "read_session", "simulate",
+    "diagnose", "errors", "exit_codes", "fit", "load_effects", "noise", "paper_table", "plan", "read_session", "simulate",
 ]

@@ -35,6 +35,8 @@ def fit(
     trim_rest: bool = False,
     stream: bool = False,
     noise: Optional["AllanResult"] = None,
+    effects_file: Optional[PathLike] = None,
+    effect_definitions: Optional[str] = None,
 ) -> Profile:
     """Fit a calibration profile to a session (``crosscal fit``).
 
@@ -65,6 +67,11 @@ def fit(
         ``--trim-rest`` and ``--stream``.
     noise : AllanResult, optional
         A noise characterisation to store in the profile (``fit --noise``).
+    effects_file : path, optional
+        An effects file (TOML) whose user effects may then be named in ``effects``, as
+        ``crosscal fit --effects-file F --effect ID`` (see ``docs/your-own-effect.md``).
+    effect_definitions : str, optional
+        The same ``[[effect]]`` tables given as TOML text instead of a file.
 
     Returns
     -------
@@ -78,6 +85,7 @@ def fit(
     >>> p.coefficients.head()
     """
     s = _session(session)
+    load_effects(effects_file, effect_definitions)
     noise_json = None if noise is None else noise.to_json()
     text, samples, streamed, warnings, validation = _crosscal.fit(
         s._native, model, list(effects), list(disable), robust, strict, list(holdout), stand,
@@ -85,6 +93,19 @@ def fit(
     )
     return Profile(text, samples=samples, streamed=streamed, warnings=warnings,
                    validation=None if validation is None else json.loads(validation))
+
+
+def load_effects(path: Optional[PathLike] = None, text: Optional[str] = None) -> list[str]:
+    """Add user effects to this process's catalogue, from an effects file (``path``) or
+    TOML text (``text``): afterwards their ids work wherever a catalogue effect's does
+    (``fit``, ``simulate``'s hidden effects, ``diagnose``). Returns the ids loaded.
+    Errors (syntax, unknown variables, unused coefficients) raise with exit code 25."""
+    ids: list[str] = []
+    if path is not None:
+        ids += _crosscal.register_effects(str(path), False)
+    if text is not None:
+        ids += _crosscal.register_effects(text, True)
+    return ids
 
 
 def _profile_json(profile: Union[Profile, PathLike, str]) -> str:

@@ -52,6 +52,7 @@ ProfileError = _kind("ProfileError", 21, "an invalid profile")
 EstimateError = _kind("EstimateError", 22, "the estimate failed")
 CorrectionError = _kind("CorrectionError", 23, "the correction cannot be made")
 OutputExistsError = _kind("OutputExistsError", 24, "the output already exists (crosscal never overwrites)", FileExistsError)
+EffectsFileError = _kind("EffectsFileError", 25, "an invalid effects file, or a user effect not finite on the data", ValueError)
 
 BY_CODE: dict[int, type] = {
     c.exit_code: c
@@ -60,7 +61,7 @@ BY_CODE: dict[int, type] = {
         FieldCountError, TimeOrderError, TimeGapError, UnitError, JsonError, SessionFormatError,
         MissingFileError, MountError, ProfileFormatError, WrongUnitError, UnidentifiableError,
         ManifestError, MalformedCsvError, RulesError, ProfileError, EstimateError, CorrectionError,
-        OutputExistsError,
+        OutputExistsError, EffectsFileError,
     )
 }
 

@@ -256,6 +256,21 @@ fn fit(
     Ok((fitted.profile.to_json(), fitted.samples, fitted.streamed, fitted.warnings, validation))
 }
 
+/// Loads user effects (an effects file, or TOML text when `is_text`) into the process's
+/// catalogue, as `--effects-file` does for a command; returns their ids.
+#[pyfunction]
+#[pyo3(signature = (source, is_text))]
+fn register_effects(py: Python<'_>, source: &str, is_text: bool) -> PyResult<Vec<String>> {
+    let loaded = if is_text {
+        crosscal::model::user::load_str("<effects>", source)
+    } else {
+        crosscal::model::user::load_file(std::path::Path::new(source))
+    }
+    .map_err(|e| err(py, e))?;
+    crosscal::model::user::register(&loaded);
+    Ok(loaded.iter().map(|e| e.definition().id.clone()).collect())
+}
+
 /// A profile from JSON text, checked as a profile file is (`label` names it in messages).
 fn profile_of(py: Python<'_>, json: &str, label: &str) -> PyResult<crosscal::profile::Profile> {
     crosscal::profile::Profile::from_json(Path::new(label), json).map_err(|e| err(py, e))
@@ -824,6 +839,7 @@ fn _crosscal(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_session, m)?)?;
     m.add_function(wrap_pyfunction!(session_from_columns, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(register_effects, m)?)?;
     m.add_function(wrap_pyfunction!(profile_normalise, m)?)?;
     m.add_function(wrap_pyfunction!(profile_read, m)?)?;
     m.add_function(wrap_pyfunction!(profile_save, m)?)?;

@@ -41,6 +41,7 @@ pub const EXIT_CODES: &[(u8, &str)] = &[
     (22, "the estimate failed (a nonlinear search did not converge, too few samples, values too large to compute with)"),
     (23, "the correction cannot be made (a non-finite result; an offline correction that does not converge; no temperature for a temperature model; temperatures outside the calibrated range with `--temperature-range error`)"),
     (24, "the output already exists (crosscal never overwrites without --force)"),
+    (25, "invalid effects file (TOML syntax, an unknown variable or function, a coefficient never used or not linear, an expression not finite on the data)"),
 ];
 
 /// The exit code of a session reading problem.
@@ -85,9 +86,15 @@ pub fn code_of(cause: &(dyn std::error::Error + 'static)) -> Option<u8> {
             _ => 20,
         });
     }
+    if let Some(u) = cause.downcast_ref::<crate::model::user::UserEffectError>() {
+        return Some(match u {
+            crate::model::user::UserEffectError::Io { .. } => 3,
+            _ => 25,
+        });
+    }
     if let Some(e) = cause.downcast_ref::<EstimateError>() {
         return match e {
-            EstimateError::Read { .. } => None,
+            EstimateError::Read { .. } | EstimateError::UserEffect(_) => None,
             EstimateError::Unidentifiable(_) => Some(17),
             EstimateError::NoData => Some(4),
             EstimateError::NotConverged(_) | EstimateError::NonFinite { .. } | EstimateError::TooFewSamples { .. } => {

@@ -76,6 +76,18 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             })
             .collect();
         outln!("  coefficients: {}", names.join(", "));
+        if let Some(u) = crosscal::model::user::find_registered(e.id()) {
+            let d = u.definition();
+            let params: Vec<String> = d.parameters.iter().map(|p| format!("{} (start {})", p.name, p.start)).collect();
+            let on = match d.side {
+                crosscal::model::user::UserSide::Output => "output",
+                crosscal::model::user::UserSide::Input => "true input",
+            };
+            outln!("  user effect: {} {on} {} += {}", d.sensor, d.output, d.expr);
+            if !params.is_empty() {
+                outln!("  parameters: {}", params.join(", "));
+            }
+        }
         if e.needs_temperature() {
             outln!("  needs: a temp column or a run temperature_c");
         }
@@ -95,7 +107,9 @@ pub fn markdown(chosen: &[CatalogEffect]) -> String {
          or hide in a simulation with `crosscal simulate --hidden ID --set NAME=VALUE` (SI values). \
          *Input* effects act on the physical input, before the scale/coupling matrix; *output* effects \
          are added to the sensor's output. Nonlinear effects are fitted jointly with the linear model by \
-         variable projection.\n\n| effect | sensor | kind | acts on | coefficients |\n|---|---|---|---|---|\n",
+         variable projection. Physics the catalogue lacks can be written in an effects file and used \
+         with `--effects-file F` wherever a catalogue effect is ([Your own effect](your-own-effect.md)); \
+         `crosscal effects --effects-file F` lists those effects after the catalogue's.\n\n| effect | sensor | kind | acts on | coefficients |\n|---|---|---|---|---|\n",
     );
     for e in chosen {
         let j = to_json(e);

@@ -43,6 +43,11 @@ pub fn exit_code(e: &anyhow::Error) -> u8 {
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// An effects file (TOML): its user effects join the catalogue for this command, usable
+    /// wherever a catalogue effect is (`--effect ID`, `--hidden ID`, diagnose, compare);
+    /// repeatable. See `docs/your-own-effect.md`.
+    #[arg(long = "effects-file", global = true, value_name = "FILE")]
+    effects_file: Vec<std::path::PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -277,6 +282,16 @@ pub fn main() -> ExitCode {
             return if e.use_stderr() { ExitCode::from(EXIT_INPUT) } else { ExitCode::SUCCESS };
         }
     };
+    for f in &cli.effects_file {
+        match crosscal::model::user::load_file(f) {
+            Ok(v) => crosscal::model::user::register(&v),
+            Err(e) => {
+                let e = anyhow::Error::new(e);
+                eprintln!("error: {e:#}");
+                return ExitCode::from(exit_code(&e));
+            }
+        }
+    }
     let result = match cli.command {
         Command::Simulate(a) => simulate::run(a),
         Command::Fit(a) => fit::run(a),

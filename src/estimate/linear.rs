@@ -4,33 +4,16 @@
 //! ([`QrAccumulator`]) in one pass per source, each channel is solved from R (so the
 //! condition number is never squared), and a second pass gives the residual statistics.
 
-use super::channel::{channel_plan, prediction, ChannelPlan};
+pub(crate) use super::channel::BLOCK;
+use super::channel::{channel_plan, plan_norm, prediction, reduce, solve_reduced, ChannelPlan, Columns};
 use super::robust::robust_refit;
-use super::{identify, nonlinear, ChannelFit, CoefStatus, Coefficient, Correlation, EstimateError, Fit, FitOptions};
+use super::{identify, ChannelFit, CoefStatus, Coefficient, Correlation, EstimateError, Fit, FitOptions};
 use super::{FitRun, SensorFit, Unidentifiable};
 use crate::model::{Model, State, TermStatus};
 use crate::stats::{newey_west_lags, AutoCov, LongRunVariance, QrAccumulator};
 use crate::units::{SensorKind, AXES};
 use faer::Mat;
 use nalgebra::DMatrix;
-
-/// Fits both sensors of a model to in-memory runs (nonlinear effects by variable
-/// projection).
-pub(crate) fn fit_in_memory(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, EstimateError> {
-    if runs.iter().all(|r| r.is_empty()) {
-        return Err(EstimateError::NoData);
-    }
-    for e in model.effects().iter().filter(|e| e.needs_temperature()) {
-        if let Some(r) = runs.iter().find(|r| r.temp_c.is_none() && r.temp_const_c.is_none()) {
-            return Err(EstimateError::MissingTemperature { effect: e.id().to_string(), run: r.name.to_string() });
-        }
-    }
-    if !model.nonlinear().is_empty() {
-        return nonlinear::fit(model, runs, opts);
-    }
-    let sources: Vec<&dyn Samples> = runs.iter().map(|r| r as &dyn Samples).collect();
-    fit_samples(model, &sources, runs, opts).map_err(SamplesError::in_memory)
-}
 
 /// Fits both sensors of a linear model to any [`Samples`] (streamed files or in-memory
 /// runs) in one pass per source plus one residual pass; `robust_runs` serve the robust
@@ -49,104 +32,6 @@ pub(crate) fn fit_samples(
     let gyro = v.pop().ok_or(EstimateError::NoData)?;
     Ok(Fit { gyro, accel, nonlinear: Vec::new(), stand: Vec::new() })
 }
-
-/// Regressor columns of one sensor: unique keys, with the term that evaluates each.
-pub(crate) struct Columns {
-    /// Index (into the sensor's term list) of the term that evaluates column c.
-    pub source: Vec<usize>,
-    /// Column of each term.
-    pub of_term: Vec<usize>,
-    /// Per term on the input side: (input axis, column) of each component of its input
-    /// perturbation (empty for output-side terms); see [`super::channel`].
-    pub inputs: Vec<Vec<(usize, usize)>>,
-}
-
-impl Columns {
-    pub(crate) fn new(terms: &[crate::model::TermRef<'_>]) -> Self {
-        let mut keys: Vec<crate::model::Key> = Vec::new();
-        let mut source = Vec::new();
-        let mut of_term = Vec::with_capacity(terms.len());
-        for (ti, t) in terms.iter().enumerate() {
-            match keys.iter().position(|k| *k == t.term.key) {
-                Some(c) => of_term.push(c),
-                None => {
-                    keys.push(t.term.key);
-                    source.push(ti);
-                    of_term.push(keys.len() - 1);
-                }
-            }
-        }
-        let inputs = terms
-            .iter()
-            .map(|t| {
-                t.input_components()
-                    .into_iter()
-                    .filter_map(|(j, k)| {
-                        let ti = terms.iter().position(|u| std::ptr::addr_eq(u.effect, t.effect) && u.index == k)?;
-                        Some((j, of_term[ti]))
-                    })
-                    .collect()
-            })
-            .collect();
-        Self { source, of_term, inputs }
-    }
-
-    pub(crate) fn len(&self) -> usize {
-        self.source.len()
-    }
-
-    /// Design row of sample k: the regressor columns, then the sensor's three outputs.
-    #[inline]
-    pub(crate) fn fill_row(
-        &self,
-        terms: &[crate::model::TermRef<'_>],
-        run: &FitRun<'_>,
-        sensor: SensorKind,
-        k: usize,
-        row: &mut [f64],
-    ) {
-        self.fill_state_row(terms, &run.state(k), &run.output(sensor, k), row);
-    }
-
-    /// Design columns of a block of samples, column-major with stride [`BLOCK`]: regressor
-    /// column c at `cols[c·BLOCK..][..n]`, then the sensor's three outputs.
-    pub(crate) fn fill_block(
-        &self,
-        terms: &[crate::model::TermRef<'_>],
-        states: &[State],
-        outputs: &[[f64; 3]],
-        cols: &mut [f64],
-    ) {
-        let n = states.len();
-        for (c, &ti) in self.source.iter().enumerate() {
-            terms[ti].regressors(states, &mut cols[c * BLOCK..c * BLOCK + n]);
-        }
-        let q = self.source.len();
-        for ch in 0..3 {
-            for (o, u) in cols[(q + ch) * BLOCK..(q + ch) * BLOCK + n].iter_mut().zip(outputs) {
-                *o = u[ch];
-            }
-        }
-    }
-
-    /// Design row at a state with the sensor's output.
-    #[inline]
-    pub(crate) fn fill_state_row(
-        &self,
-        terms: &[crate::model::TermRef<'_>],
-        s: &State,
-        output: &[f64; 3],
-        row: &mut [f64],
-    ) {
-        for (c, &ti) in self.source.iter().enumerate() {
-            row[c] = terms[ti].regressor(s);
-        }
-        row[self.source.len()..].copy_from_slice(output);
-    }
-}
-
-/// Samples per block handed to the estimator by [`Samples`].
-pub(crate) const BLOCK: usize = 256;
 
 /// The per-block callback of [`Samples`]: true states, gyro outputs, accelerometer
 /// outputs (equal lengths, 1 to [`BLOCK`] samples).
@@ -222,10 +107,11 @@ fn accumulate(
     designs: &[SensorDesign<'_>],
     src: &dyn Samples,
     chunk: usize,
-) -> Result<(Vec<QrAccumulator>, usize), crate::session::SessionError> {
+) -> Result<(Vec<QrAccumulator>, usize), SamplesError> {
     let mut accs: Vec<QrAccumulator> = designs.iter().map(|d| QrAccumulator::new(d.cols.len() + 3, chunk)).collect();
     let mut cols: Vec<Vec<f64>> = designs.iter().map(|d| vec![0.0; (d.cols.len() + 3) * BLOCK]).collect();
     let mut n = 0usize;
+    let mut bad: Option<(&'static str, State)> = None;
     src.for_each_block(&mut |states, g, a| {
         for ((d, acc), cols) in designs.iter().zip(accs.iter_mut()).zip(cols.iter_mut()) {
             let u = match d.sensor {
@@ -233,10 +119,22 @@ fn accumulate(
                 SensorKind::Accel => a,
             };
             d.cols.fill_block(&d.terms, states, u, cols);
+            if bad.is_none() {
+                bad = d.cols.non_finite_user_column(&d.terms, states, cols);
+            }
             acc.push_columns(cols, BLOCK, states.len());
         }
         n += states.len();
     })?;
+    if let Some((id, s)) = bad {
+        return Err(EstimateError::UserEffect(crate::model::user::UserEffectError::NonFinite {
+            id: id.to_string(),
+            run: "(streamed)".into(),
+            t_s: s.t_session_s,
+            state: format!("w = {:.4?} rad/s, a = {:.4?} m/s^2, T = {} C", s.w, s.a, s.temp_c),
+        })
+        .into());
+    }
     Ok((accs, n))
 }
 
@@ -604,98 +502,4 @@ fn rescale(c: &mut ChannelFit, fitted: &[usize], std_errors: &mut [Option<f64>],
     for (a, &ti) in fitted.iter().enumerate() {
         std_errors[ti] = Some(c.covariance[a][a].max(0.0).sqrt());
     }
-}
-
-/// The channel's reduced problem `[R_s | z; 0 | ρ]` ((q+1) × (q+1)) from the accumulated R:
-/// QR of the plan's columns of R beside the output column minus the plan's known part.
-pub(crate) fn reduce(r: &Mat<f64>, plan: &ChannelPlan, p: usize, ch: usize) -> Mat<f64> {
-    let rows = r.nrows();
-    let q = plan.columns.len();
-    let mut m = Mat::<f64>::zeros(rows, q + 1);
-    for (a, col) in plan.columns.iter().enumerate() {
-        match col.as_slice() {
-            // One column as it is (the same bits as before input-side effects existed).
-            [(c, w)] if w.to_bits() == 1.0f64.to_bits() => {
-                for i in 0..rows {
-                    m[(i, a)] = r[(i, *c)];
-                }
-            }
-            _ => {
-                for &(c, w) in col {
-                    for i in 0..rows {
-                        m[(i, a)] += w * r[(i, c)];
-                    }
-                }
-            }
-        }
-    }
-    for i in 0..rows {
-        m[(i, q)] = r[(i, p + ch)];
-    }
-    for &(c, w) in &plan.offset {
-        for i in 0..rows {
-            m[(i, q)] -= w * r[(i, c)];
-        }
-    }
-    let qr = m.as_ref().qr();
-    let mut out = Mat::<f64>::zeros(q + 1, q + 1);
-    let rr = qr.thin_R();
-    for i in 0..rr.nrows().min(q + 1) {
-        for j in i..q + 1 {
-            out[(i, j)] = rr[(i, j)];
-        }
-    }
-    // Keep the diagonal of R_s positive so that the residual norm sits in out[(q, q)].
-    out[(q, q)] = out[(q, q)].abs();
-    out
-}
-
-/// The data norm of a plan column `Σ w · column`: ‖R w‖ (R preserves norms); the
-/// accumulated norm when it is one column.
-fn plan_norm(r: &Mat<f64>, norms: &[f64], col: &[(usize, f64)]) -> f64 {
-    match col {
-        [(c, w)] if w.to_bits() == 1.0f64.to_bits() => norms[*c],
-        _ => (0..r.nrows()).map(|i| col.iter().map(|&(c, w)| w * r[(i, c)]).sum::<f64>().powi(2)).sum::<f64>().sqrt(),
-    }
-}
-
-/// Solves the reduced problem `[R_s | z; 0 | ρ]`: θ by back substitution, the covariance
-/// `σ² R_s⁻¹ R_s⁻ᵀ` with `σ² = ρ²/(n − q)`. Returns (θ, covariance, RSS, σ²).
-pub(crate) fn solve_reduced(
-    rs: &Mat<f64>,
-    q: usize,
-    n: u64,
-    known_sigma: Option<f64>,
-) -> (Vec<f64>, Vec<Vec<f64>>, f64, f64) {
-    let mut theta = vec![0.0; q];
-    for i in (0..q).rev() {
-        let mut acc = rs[(i, q)];
-        for j in i + 1..q {
-            acc -= rs[(i, j)] * theta[j];
-        }
-        theta[i] = acc / rs[(i, i)];
-    }
-    let rss = rs[(q, q)] * rs[(q, q)];
-    let sigma2 = rss / (n.saturating_sub(q as u64).max(1)) as f64;
-    let mut rinv = vec![vec![0.0; q]; q];
-    for col in 0..q {
-        for i in (0..=col).rev() {
-            let mut acc = if i == col { 1.0 } else { 0.0 };
-            for j in i + 1..=col {
-                acc -= rs[(i, j)] * rinv[j][col];
-            }
-            rinv[i][col] = acc / rs[(i, i)];
-        }
-    }
-    let mut cov = vec![vec![0.0; q]; q];
-    for i in 0..q {
-        for j in 0..q {
-            let mut acc = 0.0;
-            for k in i.max(j)..q {
-                acc += rinv[i][k] * rinv[j][k];
-            }
-            cov[i][j] = known_sigma.map_or(sigma2, |s| s * s) * acc;
-        }
-    }
-    (theta, cov, rss, sigma2)
 }

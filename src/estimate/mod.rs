@@ -25,6 +25,7 @@ mod channel;
 pub mod identify;
 mod linear;
 mod lm;
+mod memory;
 mod nonlinear;
 pub mod protocol;
 mod request;
@@ -103,6 +104,9 @@ pub enum EstimateError {
     /// No runs.
     #[error("no samples to fit")]
     NoData,
+    /// A user effect cannot be evaluated on these data (its expression is not finite).
+    #[error("user effect on these data")]
+    UserEffect(#[source] crate::model::user::UserEffectError),
     /// The design of a channel holds values too large (or not finite) to compute with.
     #[error("{sensor} channel {axis}: the design has values that are not finite (a declared rate, angle or a recorded value too large to compute with)")]
     NonFinite {

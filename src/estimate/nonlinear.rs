@@ -94,6 +94,14 @@ fn sensor_fit_at(
     runs: &[FitRun<'_>],
     opts: &FitOptions,
 ) -> Result<SensorFit, EstimateError> {
+    // A user effect's linear part at the parameters being tried (no-op for the catalogue's).
+    let bound;
+    let model = if model.has_bound_parameters() {
+        bound = model.at_nonlinear_values(values);
+        &bound
+    } else {
+        model
+    };
     match tracks_for(model, values, sensor, runs) {
         None => fit_sensor(model, sensor, runs, opts),
         Some(tracks) => {

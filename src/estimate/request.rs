@@ -2,7 +2,7 @@
 //! module chooses between the streamed, in-memory, stand-settings and protocol fits.
 
 use super::protocol::{self, ProtocolOptions, ProtocolReport};
-use super::{fit_runs, linear, stand, stream, tracks, EstimateError, Fit, FitOptions, FitRun};
+use super::{fit_runs, memory, stand, stream, tracks, EstimateError, Fit, FitOptions, FitRun};
 use crate::model::{Model, ModelSpec, Preset};
 use crate::motion::DerivativeConfig;
 use crate::session::{Manifest, RunUsed, Session};
@@ -203,7 +203,7 @@ fn fit_prepared(req: &FitRequest<'_>, runs: &[FitRun<'_>]) -> Result<FitOutcome,
         ));
     }
     let model = resolve(req, Preset::Default)?;
-    let fit = linear::fit_in_memory(&model, runs, &req.options)?;
+    let fit = memory::fit_in_memory(&model, runs, &req.options)?;
     check_strict(req, &fit)?;
     let notes = unidentifiable_notes(&fit);
     Ok(FitOutcome { fit, model, source: None, warnings: Vec::new(), notes, protocol: None, streamed: false })
@@ -277,7 +277,7 @@ fn fit_session(req: &FitRequest<'_>, full: &Session) -> Result<FitOutcome, Estim
     let fit = if req.stand {
         stand::fit_with_stand(&model, &session, &deriv, &req.options)?
     } else {
-        linear::fit_in_memory(&model, &fit_runs(&session, &tr), &req.options)?
+        memory::fit_in_memory(&model, &fit_runs(&session, &tr), &req.options)?
     };
     check_strict(req, &fit)?;
     let warnings = session.warnings();

@@ -1,7 +1,7 @@
 //! The robust linear fit: iteratively reweighted least squares with Huber weights, so that
 //! spikes and outliers lose weight.
 
-use super::linear::{reduce, solve_reduced, Columns};
+use super::channel::{reduce, solve_reduced, Columns};
 use super::{ChannelFit, CoefStatus, FitOptions, FitRun};
 use crate::stats::QrAccumulator;
 use crate::units::SensorKind;

@@ -101,3 +101,24 @@ pub fn fit_runs<'a>(session: &'a Session, tracks: &'a [Track]) -> Vec<FitRun<'a>
         })
         .collect()
 }
+
+/// Refuses a model whose user effects are not finite somewhere on the runs (at their start
+/// parameters, every coefficient 1): a clear error naming the effect, run and time instead
+/// of a design the solver cannot use.
+pub(crate) fn check_user_effects(model: &crate::model::Model, runs: &[FitRun<'_>]) -> Result<(), super::EstimateError> {
+    for def in model.user_definitions() {
+        let Ok(u) = crate::model::user::compile(&def) else { continue };
+        for r in runs {
+            let n = r.track.t_s.len();
+            if let Some(s) = u.first_non_finite((0..n).map(|k| r.state(k))) {
+                return Err(super::EstimateError::UserEffect(crate::model::user::UserEffectError::NonFinite {
+                    id: def.id.clone(),
+                    run: r.name.to_string(),
+                    t_s: s.t_session_s,
+                    state: format!("w = {:.4?} rad/s, a = {:.4?} m/s^2, T = {} C", s.w, s.a, s.temp_c),
+                }));
+            }
+        }
+    }
+    Ok(())
+}

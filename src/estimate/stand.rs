@@ -12,7 +12,7 @@
 //! channel's coefficient covariance gains G M⁻¹ Gᵀ with G = R₁₁⁻¹R₁₂ (the part of θ that
 //! moves with s), so the standard errors of C and K include the stand's uncertainty.
 
-use super::linear::fit_in_memory as fit;
+use super::memory::fit_in_memory as fit;
 use super::{CoefStatus, EstimateError, Fit, FitOptions, FitRun};
 use crate::model::Model;
 use crate::motion::{track_for, DerivativeConfig, Track};

@@ -34,6 +34,7 @@ mod temp_bias;
 mod temp_hysteresis;
 mod temp_scale;
 mod time_delay;
+pub mod user;
 
 pub use angular_accel::AngularAcceleration;
 pub use anisoelastic::Anisoelastic;
@@ -52,6 +53,7 @@ pub use temp_bias::TempBias;
 pub use temp_hysteresis::TempHysteresis;
 pub use temp_scale::TempScale;
 pub use time_delay::TimeDelay;
+pub use user::UserEffectDef;
 
 pub(crate) use crate::units::{SensorKind, AXES};
 use serde::{Deserialize, Serialize};
@@ -238,6 +240,15 @@ pub trait Effect: Send + Sync + fmt::Debug {
     /// Whether the regressors need a temperature (a `temp` column or `temperature_c`).
     fn needs_temperature(&self) -> bool {
         self.inputs().temperature
+    }
+    /// The effect with its regressors at nonlinear parameter values `p` (a user effect whose
+    /// expression also has parameters: see [`user`]); None for effects without parameters.
+    fn rebind(&self, _p: &[f64]) -> Option<Arc<dyn Effect>> {
+        None
+    }
+    /// The definition of a user effect (what a profile stores to stay self-contained).
+    fn user_definition(&self) -> Option<&user::UserEffectDef> {
+        None
     }
 }
 
@@ -433,16 +444,38 @@ fn nonlinear_catalog() -> Vec<Arc<dyn NonlinearEffect>> {
     vec![Arc::new(TimeDelay), Arc::new(DeadZone::new(SensorKind::Gyro)), Arc::new(DeadZone::new(SensorKind::Accel))]
 }
 
-/// Every effect crosscal knows, linear ones first, in catalogue order.
+/// Every effect crosscal knows, linear ones first, in catalogue order, then the user
+/// effects registered in this process.
 pub fn catalog() -> Vec<CatalogEffect> {
     linear_catalog()
         .into_iter()
         .map(CatalogEffect::Linear)
         .chain(nonlinear_catalog().into_iter().map(CatalogEffect::Nonlinear))
+        .chain(user_catalog())
         .collect()
 }
 
-/// Finds a catalogue effect by id.
+/// The user effects registered in this process ([`user::register`]), as catalogue
+/// entries: linear when they have coefficients on the output side, else nonlinear.
+fn user_catalog() -> Vec<CatalogEffect> {
+    user::registered()
+        .into_iter()
+        .map(|u| {
+            if u.has_linear() {
+                CatalogEffect::Linear(u)
+            } else {
+                CatalogEffect::Nonlinear(Arc::new(user::UserNonlinear(u)))
+            }
+        })
+        .collect()
+}
+
+/// Ids of the built-in effects (user effects may not take them).
+pub fn builtin_ids() -> Vec<&'static str> {
+    linear_catalog().iter().map(|e| e.id()).chain(nonlinear_catalog().iter().map(|e| e.id())).collect()
+}
+
+/// Finds a catalogue effect (built in, or a registered user effect) by id.
 pub fn find(id: &str) -> Option<CatalogEffect> {
     catalog().into_iter().find(|e| e.id() == id)
 }
@@ -501,6 +534,9 @@ pub enum ModelError {
     /// Unknown coefficient name.
     #[error("unknown coefficient '{0}' in this model")]
     UnknownCoefficient(String),
+    /// A stored user effect's definition does not compile.
+    #[error("user effect '{0}': {1}")]
+    UserEffect(String, String),
 }
 
 /// The named starting points of a model.
@@ -622,6 +658,23 @@ impl Model {
         Ok(m)
     }
 
+    /// As [`Model::named`], the user effects among `ids` built from their stored
+    /// definitions `users` (a profile's own, whatever is registered in the process).
+    pub fn named_with_users(name: &str, ids: &[String], users: &[user::UserEffectDef]) -> Result<Self, ModelError> {
+        let mut m = Self::from_effects(name, Vec::new());
+        for id in ids {
+            match users.iter().find(|d| d.id == *id) {
+                Some(d) => {
+                    let u = user::compile(d).map_err(|(_, msg)| ModelError::UserEffect(id.clone(), msg))?;
+                    m.add_user(Arc::new(u));
+                }
+                None => m.add_effect(id)?,
+            }
+        }
+        m.name = name.to_string();
+        Ok(m)
+    }
+
     /// The nonlinear effects.
     pub fn nonlinear(&self) -> &[NonlinearEntry] {
         &self.nonlinear
@@ -631,10 +684,71 @@ impl Model {
     pub fn fix_nonlinear(&mut self, id: &str, values: Vec<f64>) -> Result<(), ModelError> {
         self.add_effect(id)?;
         if let Some(e) = self.nonlinear.iter_mut().find(|e| e.effect.id() == id) {
-            e.values = values;
+            e.values.clone_from(&values);
             e.fitted = false;
         }
+        self.rebind(id, &values);
         Ok(())
+    }
+
+    /// Adds a user effect (no-op when one of its id is present): its linear part (output
+    /// side, coefficients fitted) and its nonlinear part (parameters at their start values).
+    pub fn add_user(&mut self, u: Arc<user::UserEffect>) {
+        if self.has(u.id()) {
+            return;
+        }
+        let id = u.id();
+        if u.has_linear() {
+            self.status.push(vec![TermStatus::Fitted; u.terms().len()]);
+            self.effects.push(Arc::clone(&u) as Arc<dyn Effect>);
+        }
+        if u.has_nonlinear() {
+            let effect: Arc<dyn NonlinearEffect> = Arc::new(user::UserNonlinear(u));
+            let values = effect.params().iter().map(|p| p.nominal).collect();
+            self.nonlinear.push(NonlinearEntry { effect, values, fitted: true });
+        }
+        self.name = format!("{}+{id}", self.name);
+    }
+
+    /// The linear part of effect `id` evaluated at nonlinear parameters `p` (user effects
+    /// whose expressions have parameters; others are left as they are).
+    fn rebind(&mut self, id: &str, p: &[f64]) {
+        for e in self.effects.iter_mut().filter(|e| e.id() == id) {
+            if let Some(b) = e.rebind(p) {
+                *e = b;
+            }
+        }
+    }
+
+    /// The model with its linear parts at the nonlinear parameter values `values` (one
+    /// vector per nonlinear entry): what the variable projection fits at each trial.
+    pub fn at_nonlinear_values(&self, values: &[Vec<f64>]) -> Model {
+        let mut m = self.clone();
+        for (e, v) in self.nonlinear.iter().zip(values) {
+            m.rebind(e.effect.id(), v);
+        }
+        m
+    }
+
+    /// Whether any linear part depends on nonlinear parameters (user effects with both).
+    pub fn has_bound_parameters(&self) -> bool {
+        self.nonlinear.iter().any(|n| self.effects.iter().any(|e| e.id() == n.effect.id()))
+    }
+
+    /// Definitions of the user effects in the model, in model order, each once.
+    pub fn user_definitions(&self) -> Vec<user::UserEffectDef> {
+        let mut out: Vec<user::UserEffectDef> = Vec::new();
+        let defs = self
+            .effects
+            .iter()
+            .filter_map(|e| e.user_definition().cloned())
+            .chain(self.nonlinear.iter().filter_map(|e| e.effect.user_definition().cloned()));
+        for d in defs {
+            if !out.iter().any(|o| o.id == d.id) {
+                out.push(d);
+            }
+        }
+        out
     }
 
     /// The default model: biases, full C_ω, full C_ε (gyro); bias, full K (accelerometer).
@@ -696,6 +810,10 @@ impl Model {
         if self.has(id) {
             return Ok(());
         }
+        if let Some(u) = user::find_registered(id) {
+            self.add_user(u);
+            return Ok(());
+        }
         match find(id).ok_or_else(|| ModelError::UnknownEffect(id.to_string(), all_effect_ids().join(", ")))? {
             CatalogEffect::Nonlinear(e) => {
                 let values = e.params().iter().map(|p| p.nominal).collect();
@@ -747,9 +865,16 @@ impl Model {
         self.effects.iter().any(|e| e.id() == id) || self.nonlinear.iter().any(|e| e.effect.id() == id)
     }
 
-    /// Ids of every effect in the model, linear ones first, in the order they were added.
+    /// Ids of every effect in the model, linear ones first, in the order they were added
+    /// (a user effect with both coefficients and parameters once).
     pub fn effect_ids(&self) -> Vec<&'static str> {
-        self.effects.iter().map(|e| e.id()).chain(self.nonlinear.iter().map(|e| e.effect.id())).collect()
+        let mut ids: Vec<&'static str> = self.effects.iter().map(|e| e.id()).collect();
+        for n in &self.nonlinear {
+            if !ids.contains(&n.effect.id()) {
+                ids.push(n.effect.id());
+            }
+        }
+        ids
     }
 
     /// The linear effects in the model.

@@ -53,6 +53,10 @@ pub trait NonlinearEffect: Send + Sync + fmt::Debug {
     fn lag_s(&self, _p: &[f64]) -> f64 {
         0.0
     }
+    /// The definition of a user effect (what a profile stores to stay self-contained).
+    fn user_definition(&self) -> Option<&super::UserEffectDef> {
+        None
+    }
 }
 
 pub use crate::motion::interpolate;

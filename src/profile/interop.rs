@@ -302,6 +302,7 @@ pub fn from_imucal(path: &Path, text: &str, serial: &str, g_m_s2: f64) -> Result
         )],
         noise: None,
         protocol: None,
+        user_effects: Vec::new(),
     })
 }
 

@@ -142,6 +142,10 @@ pub struct Profile {
     /// Parameters of nonlinear effects (time delay, dead zone).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub nonlinear: Vec<crate::estimate::NonlinearParam>,
+    /// Definitions of the user effects in `effects` (from an effects file): the profile
+    /// corrects without the file.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub user_effects: Vec<crate::model::user::UserEffectDef>,
     /// Estimated stand settings per conic run (`fit --stand`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub stand: Vec<crate::estimate::StandParams>,
@@ -294,15 +298,11 @@ impl Profile {
             g_m_s2: manifest.g_m_s2,
             conventions: Conventions::default(),
             model: model.name.clone(),
-            effects: model
-                .effects()
-                .iter()
-                .map(|e| e.id().to_string())
-                .chain(model.nonlinear().iter().map(|e| e.effect.id().to_string()))
-                .collect(),
+            effects: model.effect_ids().into_iter().map(String::from).collect(),
             gyro: fit.gyro,
             accel: fit.accel,
             nonlinear: fit.nonlinear,
+            user_effects: model.user_definitions(),
             stand: fit.stand,
             runs,
             correction: CorrectionSettings::default(),
@@ -337,6 +337,7 @@ impl Profile {
             gyro: empty(SensorKind::Gyro),
             accel: empty(SensorKind::Accel),
             nonlinear: Vec::new(),
+            user_effects: Vec::new(),
             stand: Vec::new(),
             runs: Vec::new(),
             correction: CorrectionSettings::default(),
@@ -384,7 +385,7 @@ impl Profile {
     }
 
     fn rebuild(&self, fix_all: bool) -> Result<Model, ModelError> {
-        let mut m = Model::named(&self.model, &self.effects)?;
+        let mut m = Model::named_with_users(&self.model, &self.effects, &self.user_effects)?;
         for c in self.gyro.coefficients.iter().chain(&self.accel.coefficients) {
             if fix_all || c.status == crate::estimate::CoefStatus::Fixed {
                 m.fix(&c.name, c.value)?;

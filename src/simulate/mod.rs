@@ -71,6 +71,15 @@ impl UnitTruth {
         Some(self.values.get(name).copied().unwrap_or(nominal))
     }
 
+    /// The true values of each nonlinear entry's parameters (nominal when not set).
+    pub fn nonlinear_values(&self) -> Vec<Vec<f64>> {
+        self.model
+            .nonlinear()
+            .iter()
+            .map(|e| e.effect.params().iter().map(|d| self.values.get(&d.name).copied().unwrap_or(d.nominal)).collect())
+            .collect()
+    }
+
     /// Value of every term of a sensor, in model order.
     pub fn term_values(&self, sensor: SensorKind) -> Vec<f64> {
         self.model
@@ -252,8 +261,10 @@ impl SimConfig {
         let gn = Normal::new(0.0, self.gyro_noise_deg_s.max(0.0)).ok();
         let an = Normal::new(0.0, self.accel_noise_g.max(0.0)).ok();
         let deriv = DerivativeConfig::default();
-        let gterms = self.truth.model.terms(SensorKind::Gyro);
-        let aterms = self.truth.model.terms(SensorKind::Accel);
+        // User effects whose linear part has parameters: at the true parameter values.
+        let truth_model = self.truth.model.at_nonlinear_values(&self.truth.nonlinear_values());
+        let gterms = truth_model.terms(SensorKind::Gyro);
+        let aterms = truth_model.terms(SensorKind::Accel);
         let gvals = self.truth.term_values(SensorKind::Gyro);
         let avals = self.truth.term_values(SensorKind::Accel);
         let to_deg = 180.0 / std::f64::consts::PI;

@@ -5,7 +5,7 @@ use super::{
     accel_kb, inflate_to_floor, median_dt, norm, pose_mean_noise, protocol_error, rms, state_track, GyroCal,
     PoseResidual, ProtocolOptions, ProtocolReport, TurnResidual,
 };
-use crate::estimate::linear::fit_in_memory as fit;
+use crate::estimate::memory::fit_in_memory as fit;
 use crate::estimate::{EstimateError, Fit, FitOptions, FitRun};
 use crate::frames::V3;
 use crate::model::{Model, TermRef};
