@@ -12,7 +12,7 @@
 //! |---|---|---|
 //! | ROS 1 bag 2.0 | [`ros1`] (records, chunks) | `bzip2`, `lz4_flex` for compressed chunks |
 //! | ROS 2 bag, sqlite3 | [`ros2`] | `rusqlite` (bundled SQLite) |
-//! | ROS 2 bag / file, MCAP | [`ros2`] | `mcap` |
+//! | ROS 2 bag / file, MCAP | [`ros2`], [`mcap`] (records, every length checked) | `zstd`, `lz4_flex` for chunks |
 //! | message payloads | [`rosmsg`] (ROS 1 and CDR, definitions compiled once) | — |
 //! | PX4 ULog | [`ulog`] | — |
 //! | ArduPilot DataFlash | [`dataflash`] | — |
@@ -29,12 +29,15 @@
 //! which convention the file used.
 
 pub mod dataflash;
+pub mod mcap;
 mod num;
 pub mod ros1;
 pub mod ros2;
 pub mod rosmsg;
 pub mod segment;
+pub mod stamps;
 pub mod ulog;
+mod window;
 pub mod write;
 
 use super::error::{Problem, SessionError};
@@ -114,11 +117,35 @@ pub struct Contents {
     pub notes: Vec<String>,
     /// What was tolerated (a truncated last record, skipped garbage, dropouts), with byte offsets.
     pub warnings: Vec<String>,
+    /// Messages or records refused as corrupt (each said in `warnings`, the first
+    /// [`MAX_REFUSAL_WARNINGS`] with their byte offsets, then a count).
+    pub refused: u64,
 }
+
+/// Corrupt messages described one by one in [`Contents::warnings`]; the rest are counted.
+pub const MAX_REFUSAL_WARNINGS: u64 = 20;
 
 impl Contents {
     fn new(format: LogFormat) -> Self {
-        Self { format, streams: Vec::new(), applied: Vec::new(), notes: Vec::new(), warnings: Vec::new() }
+        Self { format, streams: Vec::new(), applied: Vec::new(), notes: Vec::new(), warnings: Vec::new(), refused: 0 }
+    }
+
+    /// Records a corrupt message or record that was dropped (not read shifted or guessed).
+    pub fn refuse(&mut self, what: String) {
+        self.refused += 1;
+        if self.refused <= MAX_REFUSAL_WARNINGS {
+            self.warnings.push(what + ": dropped");
+        }
+    }
+
+    /// The closing count of refusals beyond those described.
+    fn close_refusals(&mut self) {
+        if self.refused > MAX_REFUSAL_WARNINGS {
+            self.warnings.push(format!(
+                "{} corrupt messages or records were dropped in all ({} described above)",
+                self.refused, MAX_REFUSAL_WARNINGS
+            ));
+        }
     }
 }
 
@@ -197,12 +224,28 @@ pub fn read(
     only: Option<usize>,
     sink: &mut Sink<'_>,
 ) -> Result<Contents, SessionError> {
-    match detect(path)? {
-        LogFormat::Ros1Bag => ros1::read(path, opts, only, sink),
-        LogFormat::Ros2Sqlite | LogFormat::Mcap => ros2::read(path, opts, only, sink),
-        LogFormat::ULog => ulog::read(path, only, sink),
-        LogFormat::DataFlash => dataflash::read(path, only, sink),
+    let format = detect(path)?;
+    let mut deglitch = stamps::Deglitch::default();
+    let mut contents = {
+        let mut filtered = |i: usize, s: &LogSample| deglitch.push(i, s, sink);
+        let filtered: &mut Sink<'_> = &mut filtered;
+        match format {
+            LogFormat::Ros1Bag => ros1::read(path, opts, only, filtered),
+            LogFormat::Ros2Sqlite | LogFormat::Mcap => ros2::read(path, opts, only, filtered),
+            LogFormat::ULog => ulog::read(path, only, filtered),
+            LogFormat::DataFlash => dataflash::read(path, only, filtered),
+        }
+    }?;
+    deglitch.finish(sink)?;
+    contents.close_refusals();
+    for (i, dropped, seen, first_ns) in deglitch.dropped() {
+        let name = contents.streams.get(i).map_or("?", |s| s.name.as_str());
+        contents.warnings.push(format!(
+            "{name}: {dropped} of {seen} samples had an isolated outlying time stamp (the first {:.3} s) and were dropped; the samples around them were kept",
+            first_ns as f64 * 1e-9
+        ));
     }
+    Ok(contents)
 }
 
 /// What `--list` shows of a stream.

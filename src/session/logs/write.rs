@@ -57,6 +57,8 @@ pub struct LogImported {
     pub summary: Summary,
     /// Samples dropped because their time stamp did not advance.
     pub dropped_time: u64,
+    /// The stream's statistics (samples, rate, span) before --from/--to.
+    pub stats: StreamStats,
     /// The calibration the log says was applied to this stream (as in the manifest).
     pub applied: Vec<(String, f64)>,
 }
@@ -200,6 +202,7 @@ pub fn import_log(
         kind: (kind, why),
         summary,
         dropped_time: dropped,
+        stats: st.clone(),
         applied: manifest.source.map(|s| s.applied).unwrap_or_default(),
     })
 }
