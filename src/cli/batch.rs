@@ -1,5 +1,6 @@
 //! `crosscal batch`: calibrate and accept a production lot.
 
+use crate::errln;
 use super::Outcome;
 use crate::outln;
 use anyhow::Context;
@@ -72,7 +73,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 }
                 b.inc(1);
             }
-            None => eprintln!("{line}"),
+            None => errln!("{line}"),
         }
     };
     let report = run_batch(&dirs, &opts, &log)?;

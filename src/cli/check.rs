@@ -1,5 +1,6 @@
 //! `crosscal check`.
 
+use crate::errln;
 use super::correct::ModeArg;
 use super::{format, Outcome};
 use crate::{out, outln};
@@ -71,7 +72,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             .context("checking a unit against another unit's profile (pass --allow-other-unit to do it anyway)")?;
     }
     if profile.input_units != session.manifest.units {
-        eprintln!(
+        errln!(
             "note: the session's units differ from those the profile was fitted on; values are converted on read"
         );
     }
