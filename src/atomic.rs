@@ -160,7 +160,11 @@ pub fn read_text(path: &Path) -> std::io::Result<String> {
     if m.len() > MAX_TEXT_BYTES {
         return Err(std::io::Error::new(
             std::io::ErrorKind::InvalidData,
-            format!("{} holds {} bytes: more than a text file crosscal reads ({MAX_TEXT_BYTES})", path.display(), m.len()),
+            format!(
+                "{} holds {} bytes: more than a text file crosscal reads ({MAX_TEXT_BYTES})",
+                path.display(),
+                m.len()
+            ),
         ));
     }
     let mut s = String::new();

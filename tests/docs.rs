@@ -156,7 +156,8 @@ fn tokens(l: &str) -> Vec<String> {
         let continues_num = in_num
             && (c.is_ascii_digit()
                 || c == '.'
-                || ((c == 'e' || c == 'E') && chars.get(i + 1).is_some_and(|n| n.is_ascii_digit() || *n == '-' || *n == '+'))
+                || ((c == 'e' || c == 'E')
+                    && chars.get(i + 1).is_some_and(|n| n.is_ascii_digit() || *n == '-' || *n == '+'))
                 || ((c == '-' || c == '+') && matches!(chars.get(i.wrapping_sub(1)), Some('e' | 'E'))));
         if c.is_whitespace() {
             if !cur.is_empty() {
@@ -195,7 +196,11 @@ fn shown_output_is_compared_within_the_tolerance() {
     assert!(same_output("white 2.4893e-3\n", "white 2.4942e-3\n").is_err());
     assert!(same_output("σ 2.500e-2\n", "σ 2.509e-2\n").is_err());
     assert!(same_output("x 1.23450\n", "x 1.23451\n").is_ok());
-    assert!(same_output("error: fitting …/s1/session.json: run 'a'\n", "error: fitting /tmp/x/s1/session.json: run 'a'\n").is_ok());
+    assert!(same_output(
+        "error: fitting …/s1/session.json: run 'a'\n",
+        "error: fitting /tmp/x/s1/session.json: run 'a'\n"
+    )
+    .is_ok());
     assert!(same_output("wrote 12 runs\n", "wrote 13 runs\n").is_err());
     assert!(same_output("text a\n", "text b\n").is_err());
     assert!(same_output("one\n", "one\ntwo\n").is_err());

@@ -8,7 +8,8 @@
 //!
 //! - **crash**: a panic (caught), or — not catchable — an abort, which fails the test;
 //! - **hang**: a mutant that takes longer than [`HANG_S`] (a watchdog aborts the process);
-//! - **silent loss**: read without error, fewer samples than the intact seed, and no warning.
+//! - **silent loss**: read without error, fewer samples than the intact seed, and no warning
+//!   beyond the intact seed's (the ULog seed has a logged dropout).
 //!
 //! All three must be 0. Decoding errors that stop the reader are fine: they say why.
 
@@ -54,8 +55,16 @@ fn ulog(n: usize) -> Vec<u8> {
     ulog_msg(&mut b, b'B', &[0u8; 40]);
     let fmt = "sensor_combined:uint64_t timestamp;float[3] gyro_rad;uint32_t gyro_integral_dt;int32_t accelerometer_timestamp_relative;float[3] accelerometer_m_s2;uint32_t accelerometer_integral_dt;uint8_t accelerometer_clipping;uint8_t[3] _padding0;";
     ulog_msg(&mut b, b'F', fmt.as_bytes());
-    ulog_msg(&mut b, b'F', b"sensor_gyro:uint64_t timestamp;uint64_t timestamp_sample;float x;float y;float z;float temperature;");
-    ulog_msg(&mut b, b'F', b"sensor_accel:uint64_t timestamp;uint64_t timestamp_sample;float x;float y;float z;float temperature;");
+    ulog_msg(
+        &mut b,
+        b'F',
+        b"sensor_gyro:uint64_t timestamp;uint64_t timestamp_sample;float x;float y;float z;float temperature;",
+    );
+    ulog_msg(
+        &mut b,
+        b'F',
+        b"sensor_accel:uint64_t timestamp;uint64_t timestamp_sample;float x;float y;float z;float temperature;",
+    );
     let mut p = b"\x05float CAL_ACC0_XOFF".to_vec();
     p[0] = (p.len() - 1) as u8;
     p.extend_from_slice(&0.25f32.to_le_bytes());
@@ -132,8 +141,11 @@ fn write_sqlite(path: &Path, n: usize) {
     .unwrap_or_else(|e| panic!("{e}"));
     for i in 0..n {
         let (t, _, _) = truth(i);
-        db.execute("INSERT INTO messages(topic_id, timestamp, data) VALUES (1, ?1, ?2)", rusqlite::params![t + 1000, cdr_imu(i)])
-            .unwrap_or_else(|e| panic!("{e}"));
+        db.execute(
+            "INSERT INTO messages(topic_id, timestamp, data) VALUES (1, ?1, ?2)",
+            rusqlite::params![t + 1000, cdr_imu(i)],
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
         if i % 10 == 0 {
             db.execute(
                 "INSERT INTO messages(topic_id, timestamp, data) VALUES (2, ?1, ?2)",
@@ -162,7 +174,12 @@ MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
         let ch = w.add_channel(schema, "/imu", "cdr", &Default::default()).unwrap_or_else(|e| panic!("{e}"));
         for i in 0..n {
             let (t, _, _) = truth(i);
-            let h = mcap::records::MessageHeader { channel_id: ch, sequence: i as u32, log_time: t as u64, publish_time: t as u64 };
+            let h = mcap::records::MessageHeader {
+                channel_id: ch,
+                sequence: i as u32,
+                log_time: t as u64,
+                publish_time: t as u64,
+            };
             w.write_to_known_channel(&h, &cdr_imu(i)).unwrap_or_else(|e| panic!("{e}"));
         }
         w.finish().unwrap_or_else(|e| panic!("{e}"));
@@ -283,7 +300,7 @@ fn mutated_logs_never_crash_hang_or_lose_samples_silently() {
         let intact = tmp.path().join(format!("intact.{ext}"));
         std::fs::write(&intact, &seed).unwrap_or_else(|e| panic!("{e}"));
         let (n0, w0) = read_all(&intact).unwrap_or_else(|e| panic!("{name}: {e}"));
-        assert!(n0 > 0 && w0 == 0, "{name}: the intact seed reads {n0} samples with {w0} warnings");
+        assert!(n0 > 0, "{name}: the intact seed reads no sample");
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(38);
         let mut t = Tally::default();
         for k in 0..MUTANTS {
@@ -299,10 +316,10 @@ fn mutated_logs_never_crash_hang_or_lose_samples_silently() {
             match got {
                 Err(_) => t.crashes.push(format!("{name} mutant {k} ({what}): panic")),
                 Ok(Err(_)) => t.errors += 1,
-                Ok(Ok((n, w))) if n < n0 && w == 0 => {
-                    t.silent.push(format!("{name} mutant {k} ({what}): {n} of {n0} samples, no warning"))
+                Ok(Ok((n, w))) if n < n0 && w <= w0 => {
+                    t.silent.push(format!("{name} mutant {k} ({what}): {n} of {n0} samples, no new warning"))
                 }
-                Ok(Ok((_, w))) => t.warned += usize::from(w > 0),
+                Ok(Ok((_, w))) => t.warned += usize::from(w > w0),
             }
             let _ = std::fs::remove_file(&path);
         }
@@ -314,7 +331,13 @@ fn mutated_logs_never_crash_hang_or_lose_samples_silently() {
             t.warned,
             t.slowest_s
         ));
-        assert!(t.crashes.is_empty() && t.silent.is_empty(), "{}\n{:#?}\n{:#?}", report.join("\n"), t.crashes, t.silent);
+        assert!(
+            t.crashes.is_empty() && t.silent.is_empty(),
+            "{}\n{:#?}\n{:#?}",
+            report.join("\n"),
+            t.crashes,
+            t.silent
+        );
     }
     stop.store(true, Ordering::Relaxed);
     let _ = watchdog.join();

@@ -102,8 +102,11 @@ fn a_corrupt_cdr_string_length_refuses_the_message() {
         if i == 9 {
             put_u32(&mut m, 12, 17);
         }
-        conn.execute("INSERT INTO messages(topic_id, timestamp, data) VALUES (1, ?1, ?2)", rusqlite::params![truth(i).0, m])
-            .unwrap_or_else(|e| panic!("{e}"));
+        conn.execute(
+            "INSERT INTO messages(topic_id, timestamp, data) VALUES (1, ?1, ?2)",
+            rusqlite::params![truth(i).0, m],
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
     }
     drop(conn);
     let (got, c) = samples(&db);
@@ -124,7 +127,8 @@ fn a_corrupt_cdr_string_length_refuses_the_message() {
 fn one_bad_stamp_costs_one_sample_not_the_stream() {
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let bag = ros1_bag_n(&["none"], 200);
-    for (k, delta) in [(0u32, 100_000i64), (1, 100_000), (100, 100_000), (100, -100_000), (199, 100_000), (0, -100_000)] {
+    for (k, delta) in [(0u32, 100_000i64), (1, 100_000), (100, 100_000), (100, -100_000), (199, 100_000), (0, -100_000)]
+    {
         let at = ros1_imu_offset(&bag, k);
         let p = mutated(dir.path(), "m.bag", &bag, |b| {
             let sec = u32::from_le_bytes([b[at + 4], b[at + 5], b[at + 6], b[at + 7]]);
@@ -155,8 +159,14 @@ fn one_bad_stamp_costs_one_sample_not_the_stream() {
         for e in std::fs::read_dir(&src).unwrap_or_else(|e| panic!("{e}")).flatten() {
             std::fs::copy(e.path(), copy.join(e.file_name())).unwrap_or_else(|e| panic!("{e}"));
         }
-        let (before, _) = list(&copy, &ReadOptions::default()).map(|(c, s)| (s[0].samples, c)).unwrap_or_else(|e| panic!("{e}"));
-        let db = std::fs::read_dir(&copy).unwrap_or_else(|e| panic!("{e}")).flatten().map(|e| e.path()).find(|p| p.extension().is_some_and(|x| x == "db3")).unwrap_or_else(|| panic!("no db3"));
+        let (before, _) =
+            list(&copy, &ReadOptions::default()).map(|(c, s)| (s[0].samples, c)).unwrap_or_else(|e| panic!("{e}"));
+        let db = std::fs::read_dir(&copy)
+            .unwrap_or_else(|e| panic!("{e}"))
+            .flatten()
+            .map(|e| e.path())
+            .find(|p| p.extension().is_some_and(|x| x == "db3"))
+            .unwrap_or_else(|| panic!("no db3"));
         let conn = rusqlite::Connection::open(&db).unwrap_or_else(|e| panic!("{e}"));
         conn.execute("UPDATE messages SET timestamp = timestamp - 86400000000000 WHERE id = (SELECT id FROM messages ORDER BY id LIMIT 1 OFFSET 100)", [])
             .unwrap_or_else(|e| panic!("{e}"));
@@ -184,7 +194,11 @@ fn ulog_corruption_is_said_with_offsets_and_counted() {
         let n: u64 = s.iter().map(|s| s.samples).sum();
         assert!(!c.streams.is_empty(), "u16 {value} at {at}: no stream left");
         assert!(n + 10 >= n0, "u16 {value} at {at}: {n} of {n0} samples");
-        assert!(c.warnings.iter().any(|w| w.contains(&format!("byte {at}")) && w.contains("lost")), "u16 {value} at {at}: {:?}", c.warnings);
+        assert!(
+            c.warnings.iter().any(|w| w.contains(&format!("byte {at}")) && w.contains("lost")),
+            "u16 {value} at {at}: {:?}",
+            c.warnings
+        );
     }
 }
 
@@ -210,8 +224,11 @@ fn mcap_corruption_is_said_and_counted_and_huge_lengths_are_safe() {
     assert!(c.warnings.iter().any(|w| w.contains(&format!("byte {chunk}"))), "{:?}", c.warnings);
     assert!(c.warnings.iter().any(|w| w.contains(&format!("{lost} messages lost"))), "{lost}: {:?}", c.warnings);
     for (off, value) in [(1usize, i64::MAX as u64), (1, u64::MAX), (1, 1 << 40), (25, 1 << 40), (25, u64::MAX)] {
-        let p = mutated(dir.path(), "h.mcap", &bytes, |b| b[chunk + off..chunk + off + 8].copy_from_slice(&value.to_le_bytes()));
-        let r = std::panic::catch_unwind(|| list(&p, &ReadOptions::default()).map(|(c, s)| (c.warnings.len(), s.len())));
+        let p = mutated(dir.path(), "h.mcap", &bytes, |b| {
+            b[chunk + off..chunk + off + 8].copy_from_slice(&value.to_le_bytes())
+        });
+        let r =
+            std::panic::catch_unwind(|| list(&p, &ReadOptions::default()).map(|(c, s)| (c.warnings.len(), s.len())));
         match r {
             Ok(Ok((w, _))) => assert!(w > 0, "length {value:#x} at {off}: no warning"),
             Ok(Err(_)) => {}

@@ -33,7 +33,11 @@ fn unknown_manifest_fields_are_refused_with_the_closest_known_one() {
     }
     // The user's own metadata: an `extra` object and `x-` keys anywhere.
     let with_meta = good
-        .replacen("\"serial\"", "\"extra\": {\"operator\": \"AB\", \"n\": [1, 2]}, \"x-site\": \"lab 2\", \"serial\"", 1)
+        .replacen(
+            "\"serial\"",
+            "\"extra\": {\"operator\": \"AB\", \"n\": [1, 2]}, \"x-site\": \"lab 2\", \"serial\"",
+            1,
+        )
         .replacen("\"mount\"", "\"x-take\": 3, \"extra\": {\"note\": 1}, \"mount\"", 1);
     std::fs::write(&p, with_meta).unwrap();
     let (code, out, err) = run_timed(d.path(), &["fit", "s/session.json", "--out", "store"], 60);
@@ -61,9 +65,9 @@ fn hand_edited_correction_settings_are_refused_naming_the_field() {
     ] {
         let mut bad = v.clone();
         if field == "channel" {
-            bad["gyro"]["coefficients"][channel_of]["channel"] = value;
+            bad["gyro"]["coefficients"][channel_of]["channel"] = value.clone();
         } else {
-            bad["correction"][field] = value;
+            bad["correction"][field] = value.clone();
         }
         let p = d.path().join("edited.json");
         std::fs::write(&p, serde_json::to_string_pretty(&bad).unwrap()).unwrap();
@@ -77,7 +81,8 @@ fn hand_edited_correction_settings_are_refused_naming_the_field() {
     // The profile as written still corrects.
     v["correction"]["streaming_window"] = serde_json::json!(11);
     std::fs::write(d.path().join("edited.json"), serde_json::to_string_pretty(&v).unwrap()).unwrap();
-    let (code, out, err) = run_timed(d.path(), &["correct", "--profile", "edited.json", "s/cone+10.csv", "-o", "out.csv"], 60);
+    let (code, out, err) =
+        run_timed(d.path(), &["correct", "--profile", "edited.json", "s/cone+10.csv", "-o", "out.csv"], 60);
     assert_eq!(code, 0, "{out}{err}");
 }
 
@@ -95,7 +100,8 @@ fn fifos_and_devices_are_skipped_or_refused_naming_them() {
     small_session(d.path(), true);
     let unit = std::fs::read_dir(d.path().join("store")).unwrap().flatten().next().unwrap().path();
     let unit_name = unit.file_name().unwrap().to_string_lossy().to_string();
-    let (c, o, e) = sh_timed(d.path(), &format!("mkfifo store/{unit_name}/x.json && ln -s /dev/zero store/{unit_name}/z.json"));
+    let (c, o, e) =
+        sh_timed(d.path(), &format!("mkfifo store/{unit_name}/x.json && ln -s /dev/zero store/{unit_name}/z.json"));
     assert_eq!(c, 0, "{o}{e}");
     let (c, o, e) = sh_timed(d.path(), "\"$CROSSCAL\" profile list --store store");
     assert_eq!(c, 0, "profile list with a FIFO in the store (124 = hung): {o}{e}");

@@ -437,7 +437,12 @@ impl Streaming {
                 PyReadwriteArray2<f64>,
                 PyReadwriteArray2<f64>,
                 PyReadwriteArray1<u8>,
-            ) = (writable(py, &out.0, "t")?, writable(py, &out.1, "gyro")?, writable(py, &out.2, "accel")?, writable(py, &out.3, "flags")?);
+            ) = (
+                writable(py, &out.0, "t")?,
+                writable(py, &out.1, "gyro")?,
+                writable(py, &out.2, "accel")?,
+                writable(py, &out.3, "flags")?,
+            );
             let bad = |what: &str| usage(py, format!("out: the {what} array is not C-contiguous"));
             let o = BlockOut {
                 t: ot.as_slice_mut().map_err(|_| bad("t"))?,
@@ -718,7 +723,13 @@ fn simulate(py: Python<'_>, options: Bound<'_, pyo3::types::PyDict>) -> PyResult
 /// (as `crosscal check`): the check report as JSON text.
 #[pyfunction]
 #[pyo3(signature = (session, profile_json, mode, allow_other_unit = false))]
-fn check(py: Python<'_>, session: &Session, profile_json: &str, mode: &str, allow_other_unit: bool) -> PyResult<String> {
+fn check(
+    py: Python<'_>,
+    session: &Session,
+    profile_json: &str,
+    mode: &str,
+    allow_other_unit: bool,
+) -> PyResult<String> {
     let p = profile_of(py, profile_json, "<profile>")?;
     if !allow_other_unit {
         // As `crosscal check` (exit 16): one unit's profile says nothing about another unit.

@@ -197,7 +197,17 @@ impl BlockCorrector {
         let zero = [[0.0; 3]; BLOCK];
         let buf = Box::new(Buffers { t: [0.0; BLOCK], g: zero, a: zero, w_out: zero, a_out: zero });
         let lag_s = cal.lag_s();
-        Self { s: Streaming::new(cal), io, si, nonlinear, needs_temp, buf, samples: 0, lag_s, last_t: f64::NEG_INFINITY }
+        Self {
+            s: Streaming::new(cal),
+            io,
+            si,
+            nonlinear,
+            needs_temp,
+            buf,
+            samples: 0,
+            lag_s,
+            last_t: f64::NEG_INFINITY,
+        }
     }
 
     /// Samples after a reset before the derivative window is full.

@@ -1,7 +1,7 @@
 //! `crosscal batch`: calibrate and accept a production lot.
 
-use crate::errln;
 use super::Outcome;
+use crate::errln;
 use crate::outln;
 use anyhow::Context;
 use crosscal::app::batch::{run as run_batch, to_csv, to_html, unit_dirs, BatchOptions, UnitResult, Verdict};

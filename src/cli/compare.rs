@@ -1,7 +1,7 @@
 //! `crosscal compare`: the model ladder.
 
-use crate::errln;
 use super::Outcome;
+use crate::errln;
 use crate::outln;
 use anyhow::Context;
 use crosscal::diagnose::compare;

@@ -1,7 +1,7 @@
 //! `crosscal correct`.
 
-use crate::errln;
 use super::Outcome;
+use crate::errln;
 use anyhow::Context;
 use crosscal::app::arrays::IoUnits;
 use crosscal::app::validate::{correct_run, Mode};

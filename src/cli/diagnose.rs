@@ -1,7 +1,7 @@
 //! `crosscal diagnose`.
 
-use crate::errln;
 use super::{format, ModelArgs, Outcome};
+use crate::errln;
 use crate::{out, outln};
 use anyhow::Context;
 use crosscal::app::diagnose::{diagnose_session, start_model, Diagnosed};

@@ -1,7 +1,7 @@
 //! `crosscal fit`.
 
-use crate::errln;
 use super::{format, ModelArgs, Outcome};
+use crate::errln;
 use anyhow::Context;
 use crosscal::app::fit::{fit_profile, store, Fitted};
 use crosscal::estimate::protocol::ProtocolOptions;

@@ -1,7 +1,7 @@
 //! `crosscal noise`: Allan deviation and noise terms of a static recording.
 
-use crate::errln;
 use super::Outcome;
+use crate::errln;
 use crate::{out, outln};
 use anyhow::Context;
 use crosscal::noise::deviations::Deviation;

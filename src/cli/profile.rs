@@ -1,7 +1,7 @@
 //! `crosscal profile list|show|diff`: the per-unit profile store.
 
-use crate::errln;
 use super::{format, Outcome};
+use crate::errln;
 use crate::{out, outln};
 use crosscal::profile::{diff, history, latest, serials, Profile};
 use std::path::{Path, PathBuf};
@@ -120,7 +120,7 @@ fn list(store: &Path, serial: Option<&str>) -> anyhow::Result<()> {
                     path.display(),
                     if p.noise.is_some() { "  (noise)" } else { "" }
                 ),
-                Err(e) => outln!("  unreadable: {e}"),
+                Err(e) => outln!("  skipped: {}", crosscal::app::chain(&e)),
             }
         }
     }

@@ -287,7 +287,7 @@ fn residual_pass(
         }
     })?;
     for a in &mut acov {
-        a.finish();
+        a.close();
     }
     Ok((acov, max))
 }

@@ -74,7 +74,10 @@ fn correction(c: &super::CorrectionSettings) -> Result<(), String> {
     }
     let (wl, wh) = STREAMING_WINDOW;
     if !(wl..=wh).contains(&c.streaming_window) {
-        return Err(format!("correction.streaming_window is {}: expected {wl} to {wh} samples (default 11)", c.streaming_window));
+        return Err(format!(
+            "correction.streaming_window is {}: expected {wl} to {wh} samples (default 11)",
+            c.streaming_window
+        ));
     }
     if !(1..=MAX_DEGREE.min(c.streaming_window - 1)).contains(&c.streaming_degree) {
         return Err(format!(

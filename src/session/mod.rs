@@ -494,7 +494,8 @@ fn within(name: &str, key: &str, x: f64, lo: f64, hi: f64, unit: &str) -> Result
 
 /// Reads and validates a manifest (without reading the recordings).
 pub fn read_manifest(path: &Path) -> Result<Manifest, SessionError> {
-    let text = crate::atomic::read_text(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
+    let text =
+        crate::atomic::read_text(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
     parse_manifest(path, &text)
 }
 

@@ -142,9 +142,7 @@ impl<'a> Fields<'a> {
 fn event(op: u8, b: &[u8]) -> Option<Option<Event<'_>>> {
     let mut f = Fields { b, p: 0 };
     Some(Some(match op {
-        OP_SCHEMA => {
-            Event::Schema { id: f.u16()?, name: f.string()?, encoding: f.string()?, data: f.bytes32()? }
-        }
+        OP_SCHEMA => Event::Schema { id: f.u16()?, name: f.string()?, encoding: f.string()?, data: f.bytes32()? },
         OP_CHANNEL => Event::Channel { id: f.u16()?, schema_id: f.u16()?, topic: f.string()?, encoding: f.string()? },
         OP_MESSAGE => {
             let channel_id = f.u16()?;
@@ -166,6 +164,7 @@ pub fn walk(path: &Path, on: &mut OnEvent<'_>) -> Result<Damage, SessionError> {
         return Err(SessionError::log(Problem::Format, path, 0, "not an MCAP file: expected its 8-byte magic"));
     }
     let mut dmg = Damage::default();
+    summary_first(&mut win, size, on).map_err(io)??;
     let mut chunk = Vec::new();
     // Messages handed on per channel from the last chunk (checked against its message index).
     let mut from_chunk: Option<(u64, bool, HashMap<u16, u64>)> = None;
@@ -231,16 +230,62 @@ pub fn walk(path: &Path, on: &mut OnEvent<'_>) -> Result<Damage, SessionError> {
                 if let Some(Some(ev)) = event(op, content) {
                     on(ev, pos)?;
                 } else if event(op, content).is_none() {
-                    dmg.warnings.push(format!("byte {pos}: a record (opcode 0x{op:02x}) whose fields do not fit its length: skipped"));
+                    dmg.warnings.push(format!(
+                        "byte {pos}: a record (opcode 0x{op:02x}) whose fields do not fit its length: skipped"
+                    ));
                 }
             }
         }
         pos = next;
     }
     if !footer && pos >= size {
-        dmg.warnings.push("the file has no footer: it was cut (recording stopped?); every record before the end was read".into());
+        dmg.warnings.push(
+            "the file has no footer: it was cut (recording stopped?); every record before the end was read".into(),
+        );
     }
     Ok(dmg)
+}
+
+/// The schemas and channels of the summary section, handed on before the data are read
+/// (so that a chunk lost to corruption does not take its channel with it): from the footer's
+/// `summary_start`, when the file ends in a footer and the magic. Anything that does not
+/// fit is left to the data section.
+fn summary_first<R: Read + std::io::Seek>(
+    win: &mut Window<R>,
+    size: u64,
+    on: &mut OnEvent<'_>,
+) -> std::io::Result<Result<(), SessionError>> {
+    let Some(footer_at) = size.checked_sub(8 + 9 + 20) else { return Ok(Ok(())) };
+    let tail = win.get(footer_at, 9 + 20 + 8)?.to_vec();
+    if tail.len() < 37 || tail[0] != OP_FOOTER || &tail[29..37] != MAGIC {
+        return Ok(Ok(()));
+    }
+    let start = u64::from_le_bytes(tail[9..17].try_into().unwrap_or([0; 8]));
+    if start < 8 || start >= footer_at {
+        return Ok(Ok(()));
+    }
+    let mut pos = start;
+    while pos < footer_at {
+        let h = win.get(pos, 9)?;
+        if h.len() < 9 {
+            break;
+        }
+        let (op, len) = (h[0], u64::from_le_bytes(h[1..9].try_into().unwrap_or([0; 8])));
+        let Some(next) = (pos + 9).checked_add(len).filter(|&n| n <= footer_at && len <= MAX_CHUNK) else { break };
+        if !plausible(op, len) {
+            break;
+        }
+        if op == OP_SCHEMA || op == OP_CHANNEL {
+            let content = win.get(pos + 9, len as usize)?;
+            if let Some(Some(ev)) = event(op, content) {
+                if let Err(e) = on(ev, pos) {
+                    return Ok(Err(e));
+                }
+            }
+        }
+        pos = next;
+    }
+    Ok(Ok(()))
 }
 
 /// Whether a record of `op` may be `len` bytes long.
@@ -320,7 +365,8 @@ fn unpack(content: &[u8], out: &mut Vec<u8>) -> Result<(), String> {
     };
     match got {
         Ok(k) if k as u64 == usize_ => {}
-        Ok(k) => return Err(format!("unpacks to {}{k} bytes, its header says {usize_}", if k as u64 > usize_ { "more than " } else { "" })),
+        Ok(k) if k as u64 > usize_ => return Err(format!("unpacks to more than the {usize_} bytes its header says")),
+        Ok(k) => return Err(format!("unpacks to {k} bytes, its header says {usize_}")),
         Err(e) => return Err(format!("does not decompress ({compression}): {e}")),
     }
     if crc != 0 && crc32fast::hash(out) != crc {

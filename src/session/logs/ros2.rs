@@ -159,7 +159,7 @@ fn recognise(first: &[u8]) -> Option<(Program, &'static str)> {
     ];
     for (name, text, what) in candidates {
         defs.add_text(name, text).ok()?;
-        let p = defs.compile(name).ok()?;
+        let p = defs.compile(name).ok()?.prefix();
         if let Ok(f) = p.decode(first) {
             let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
             let ok = f.gyro_rad_s.iter().chain(&f.accel_m_s2).all(|x| x.is_finite())
@@ -282,9 +282,7 @@ fn emit(
 ) -> Result<Result<(), String>, SessionError> {
     let f = match program.decode(data) {
         Ok(f) => f,
-        Err(e) => {
-            return Ok(Err(format!("a message received at {recv_ns} ns, offset {} in it: {}", e.offset, e.msg)))
-        }
+        Err(e) => return Ok(Err(format!("a message received at {recv_ns} ns, offset {} in it: {}", e.offset, e.msg))),
     };
     let mut t_ns = f.stamp.0.saturating_mul(1_000_000_000).saturating_add(i64::from(f.stamp.1));
     if t_ns == 0 {
@@ -311,8 +309,9 @@ fn mcap_file(path: &Path, st: &mut Streams<'_>, only: Option<usize>, sink: &mut 
             }
             Event::Message { channel_id, log_time, data } => {
                 let Some(topic) = channels.get(&channel_id) else {
-                    st.contents(LogFormat::Mcap)
-                        .refuse(format!("byte {at}: a message on channel {channel_id}, which no channel record declares"));
+                    st.contents(LogFormat::Mcap).refuse(format!(
+                        "byte {at}: a message on channel {channel_id}, which no channel record declares"
+                    ));
                     return Ok(());
                 };
                 let Some(Some((idx, program))) = st.topics.get(topic) else { return Ok(()) };
@@ -330,7 +329,9 @@ fn mcap_file(path: &Path, st: &mut Streams<'_>, only: Option<usize>, sink: &mut 
     c.warnings.extend(dmg.warnings);
     for (ch, n) in dmg.lost {
         if let Some(topic) = channels.get(&ch).filter(|t| st.topics.get(*t).is_some_and(Option::is_some)) {
-            st.contents(LogFormat::Mcap).warnings.push(format!("{topic}: {n} messages lost in chunks that could not be read"));
+            st.contents(LogFormat::Mcap)
+                .warnings
+                .push(format!("{topic}: {n} messages lost in chunks that could not be read"));
         }
     }
     Ok(())

@@ -162,7 +162,7 @@ impl Definitions {
         if !found {
             return Err(DefError { ty: top, msg: "holds no sensor_msgs/Imu".into() });
         }
-        Ok(Program { ops, wire: self.wire })
+        Ok(Program { ops, wire: self.wire, whole: true })
     }
 
     fn emit(&self, ty: &Ty, ops: &mut Vec<Op>, target: Target, found: &mut bool, depth: usize) -> Result<(), DefError> {
@@ -322,6 +322,9 @@ enum Op {
 pub struct Program {
     ops: Vec<Op>,
     wire: Wire,
+    /// The definition covers the whole message (it must fill its record); false for a
+    /// definition guessed for its first fields only.
+    whole: bool,
 }
 
 /// The IMU sample of one message (SI, as `sensor_msgs/Imu` defines it).
@@ -405,6 +408,13 @@ impl Cursor<'_> {
 const MAX_ELEMENTS: usize = 1 << 24;
 
 impl Program {
+    /// The same decoder for a definition of the message's first fields only (a wrapper
+    /// recognised from its bytes): what follows them is not checked.
+    pub fn prefix(mut self) -> Self {
+        self.whole = false;
+        self
+    }
+
     /// Decodes one serialised message (for CDR, starting with its encapsulation header).
     pub fn decode(&self, msg: &[u8]) -> Result<ImuFields, DecodeError> {
         let (origin, big) = match self.wire {
@@ -436,7 +446,7 @@ impl Program {
         // rather than read shifted. CDR may end in up to 3 bytes of padding (to 4).
         let left = msg.len() - cur.pos.min(msg.len());
         let padding_ok = self.wire == Wire::Cdr && left < 4 && msg[cur.pos..].iter().all(|&b| b == 0);
-        if left != 0 && !padding_ok {
+        if self.whole && left != 0 && !padding_ok {
             return Err(DecodeError {
                 offset: cur.pos,
                 msg: format!(
@@ -638,7 +648,7 @@ mod tests {
         m.extend_from_slice(&9u32.to_le_bytes());
         m.extend_from_slice(&3u32.to_le_bytes());
         m.extend_from_slice(b"imu");
-        let vals: Vec<f64> = (0..40).map(f64::from).collect();
+        let vals: Vec<f64> = (0..37).map(f64::from).collect();
         for v in &vals {
             m.extend_from_slice(&v.to_le_bytes());
         }

@@ -115,9 +115,7 @@ impl Lane {
                 }
             }
         }
-        let far = |gap: i64, spacing: i64| {
-            spacing > 0 && gap > END_GAP_MIN_NS && gap / spacing.max(1) > END_GAP_FACTOR
-        };
+        let far = |gap: i64, spacing: i64| spacing > 0 && gap > END_GAP_MIN_NS && gap / spacing.max(1) > END_GAP_FACTOR;
         // The first sample: far before the ones that follow (which are close together).
         if self.last_kept.is_none() && self.dropped == 0 && ahead.len() >= 2 {
             return far(ahead[0].saturating_sub(t), ahead[1].saturating_sub(ahead[0]));

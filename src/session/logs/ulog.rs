@@ -231,7 +231,9 @@ pub fn read(path: &Path, only: Option<usize>, sink: &mut Sink<'_>) -> Result<Con
         // A length is trusted only when the header after the message is a header too.
         let sub = subscribed_id(ty, win.get(pos + 3, 3).map_err(io)?);
         let ok_next = next == end || (next < end && st.plausible_after(win.get(next, 5).map_err(io)?, false, sub));
-        if !(ok_here && ok_next) {
+        // A data message whose size is its format's is trusted even when the header after it
+        // is not (that header is the corrupt one, and is met next).
+        if !(ok_here && (ok_next || ty == b'D')) {
             pos = st.resync(&mut win, pos, end).map_err(io)?;
             continue;
         }
@@ -525,7 +527,9 @@ impl State<'_, '_> {
                 // An IMU data message's header inside the skipped bytes: a sample lost.
                 let next = q + 3 + size;
                 let imu = h[2] == b'D'
-                    && imu_ids.iter().any(|(id, (lo, hi))| id.to_le_bytes() == h[3..5] && (*lo..=*hi).contains(&(size as usize)));
+                    && imu_ids
+                        .iter()
+                        .any(|(id, (lo, hi))| id.to_le_bytes() == h[3..5] && (*lo..=*hi).contains(&(size as usize)));
                 let ty = h[2];
                 let sub = subscribed_id(ty, win.get(q + 3, 3)?);
                 let ok = next == end || (next < end && self.plausible_after(win.get(next, 5)?, false, sub));
