@@ -294,6 +294,7 @@ fn mutated_logs_never_crash_hang_or_lose_samples_silently() {
         })
     };
     let mut report = Vec::new();
+    let mut failures: Vec<String> = Vec::new();
     for name in ["seed.ulg", "seed.bin", "seed.bag", "seed.db3", "seed.mcap"] {
         let seed = std::fs::read(dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e} (run write_corpus)"));
         let ext = name.rsplit('.').next().unwrap_or("x");
@@ -331,15 +332,10 @@ fn mutated_logs_never_crash_hang_or_lose_samples_silently() {
             t.warned,
             t.slowest_s
         ));
-        assert!(
-            t.crashes.is_empty() && t.silent.is_empty(),
-            "{}\n{:#?}\n{:#?}",
-            report.join("\n"),
-            t.crashes,
-            t.silent
-        );
+        failures.extend(t.crashes.iter().chain(&t.silent).take(10).cloned());
     }
     stop.store(true, Ordering::Relaxed);
     let _ = watchdog.join();
     eprintln!("log fuzz:\n{}", report.join("\n"));
+    assert!(failures.is_empty(), "{}\n{failures:#?}", report.join("\n"));
 }

@@ -279,7 +279,7 @@ impl StreamStats {
 
     /// Span from the first to the last sample, s.
     pub fn span_s(&self) -> f64 {
-        (self.last_ns - self.first_ns) as f64 * 1e-9
+        self.last_ns.saturating_sub(self.first_ns) as f64 * 1e-9
     }
 }
 
@@ -317,7 +317,7 @@ impl StatsAcc {
         if self.first.is_none() {
             self.first = Some(*s);
         } else {
-            let dt = (s.t_ns - self.last_ns) as f64 * 1e-9;
+            let dt = s.t_ns.saturating_sub(self.last_ns) as f64 * 1e-9;
             if self.dts.len() < MEDIAN_WINDOW {
                 self.dts.push(dt);
             }
@@ -383,7 +383,7 @@ impl Pairer {
     /// Adds an accelerometer sample (time ns, m/s², °C).
     pub fn accel(&mut self, t_ns: i64, a: [f64; 3], temp: Option<f64>, out: &mut impl FnMut(LogSample)) {
         if let Some(last) = self.accel.back() {
-            self.accel_dt = t_ns - last.0;
+            self.accel_dt = t_ns.saturating_sub(last.0);
         }
         self.accel_seen += 1;
         self.accel.push_back((t_ns, a, temp));
@@ -409,10 +409,14 @@ impl Pairer {
             while self.accel.len() >= 2 && self.accel[1].0 <= t {
                 self.accel.pop_front();
             }
-            let near = |a: i64| (a - t).abs().saturating_mul(2) <= self.accel_dt.max(0);
+            let near = |a: i64| a.saturating_sub(t).saturating_abs().saturating_mul(2) <= self.accel_dt.max(0);
             let paired = match (self.accel.front(), self.accel.get(1)) {
                 (Some(a0), Some(a1)) if a0.0 <= t => {
-                    let w = if a1.0 > a0.0 { (t - a0.0) as f64 / (a1.0 - a0.0) as f64 } else { 0.0 };
+                    let w = if a1.0 > a0.0 {
+                        t.saturating_sub(a0.0) as f64 / a1.0.saturating_sub(a0.0) as f64
+                    } else {
+                        0.0
+                    };
                     Some((std::array::from_fn(|k| a0.1[k] + w * (a1.1[k] - a0.1[k])), a0.2))
                 }
                 (Some(a0), _) if t == a0.0 => Some((a0.1, a0.2)),

@@ -93,7 +93,7 @@ impl Lane {
         }
         if let Some(p) = self.last_kept {
             if s.t_ns > p {
-                self.spacing = s.t_ns - p;
+                self.spacing = s.t_ns.saturating_sub(p);
             }
         }
         self.last_kept = Some(self.last_kept.map_or(s.t_ns, |p| p.max(s.t_ns)));

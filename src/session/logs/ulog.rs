@@ -426,7 +426,7 @@ impl State<'_, '_> {
                     return;
                 }
                 let (Some(t), Some(g), Some(a)) = (get(*t), three(gyro, &get), three(accel, &get)) else { return };
-                let s = LogSample { t_ns: t as i64 * 1000, gyro_rad_s: g, accel_m_s2: a, temp_c: None };
+                let s = LogSample { t_ns: (t as i64).saturating_mul(1000), gyro_rad_s: g, accel_m_s2: a, temp_c: None };
                 if let Err(e) = (self.sink)(*stream, &s) {
                     self.err.get_or_insert(e);
                 }
@@ -447,8 +447,8 @@ impl State<'_, '_> {
                     }
                 };
                 if *accel {
-                    pairer.accel(t as i64 * 1000, v, temp, &mut emit);
-                } else if !pairer.gyro(t as i64 * 1000, v, temp, &mut emit) {
+                    pairer.accel((t as i64).saturating_mul(1000), v, temp, &mut emit);
+                } else if !pairer.gyro((t as i64).saturating_mul(1000), v, temp, &mut emit) {
                     err.get_or_insert(SessionError::log(
                         Problem::Malformed,
                         self.path,

@@ -231,7 +231,7 @@ fn write_recording(
             if i != idx {
                 return Ok(());
             }
-            let t = (s.t_ns - st.first_ns) as f64 * 1e-9;
+            let t = s.t_ns.saturating_sub(st.first_ns) as f64 * 1e-9;
             if t < from || t > to {
                 return Ok(());
             }
