@@ -97,14 +97,114 @@ pub fn clean_stale(dir: &Path) -> Vec<PathBuf> {
     removed
 }
 
+/// The output path that means standard output (`-o -`).
+pub const STDOUT: &str = "-";
+
+/// What a file that is not a regular file is, in words (a FIFO, a device, a folder …).
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    let t = meta.file_type();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_dir() {
+        "a folder"
+    } else if t.is_file() {
+        "a regular file"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Refuses an output path that exists and is not a regular file (a device, a FIFO, a
+/// folder; a symbolic link is judged by what it points to): crosscal writes regular files
+/// only, and `--force` never replaces anything else (as root, `-o /dev/null --force` would
+/// otherwise replace /dev/null). `-` is standard output.
+pub fn check_target(path: &Path) -> std::io::Result<()> {
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() => Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!(
+                "{} is {}, not a regular file: crosscal writes regular files only (use -o - for standard output)",
+                path.display(),
+                file_kind(&m)
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// The largest text file (manifest, profile, rules, message definition) read whole.
+pub const MAX_TEXT_BYTES: u64 = 1 << 30;
+
+/// Reads a text file that must be a regular file: a FIFO, a device or a link to one is
+/// refused before it is opened (opening a FIFO blocks; `/dev/zero` never ends), and a file
+/// over [`MAX_TEXT_BYTES`] is refused.
+pub fn read_text(path: &Path) -> std::io::Result<String> {
+    let m = std::fs::metadata(path)?;
+    if !m.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{} is {}, not a regular file: skipped", path.display(), file_kind(&m)),
+        ));
+    }
+    if m.len() > MAX_TEXT_BYTES {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "{} holds {} bytes: more than a text file crosscal reads ({MAX_TEXT_BYTES})",
+                path.display(),
+                m.len()
+            ),
+        ));
+    }
+    let mut s = String::new();
+    std::io::Read::read_to_string(&mut std::io::Read::take(File::open(path)?, MAX_TEXT_BYTES), &mut s)?;
+    Ok(s)
+}
+
+/// Writes `fill`'s output to standard output (for `-o -`).
+fn write_stdout<F>(fill: F) -> std::io::Result<()>
+where
+    F: FnOnce(&mut BufWriter<&File>) -> std::io::Result<()>,
+{
+    #[cfg(unix)]
+    {
+        use std::os::fd::AsFd;
+        let f = File::from(std::io::stdout().as_fd().try_clone_to_owned()?);
+        let mut w = BufWriter::with_capacity(1 << 16, &f);
+        fill(&mut w)?;
+        w.flush()
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = fill;
+        Err(std::io::Error::new(std::io::ErrorKind::Unsupported, "-o - (standard output) needs a Unix system"))
+    }
+}
+
 /// Writes a file atomically: the content goes to a temporary file in the same folder, is
 /// flushed and fsynced, then renamed into place. With `replace = false` the rename is a
 /// no-clobber link and fails with `AlreadyExists` if the target exists. On any failure no
-/// target file is created or changed (the temporary file is removed).
+/// target file is created or changed (the temporary file is removed). A target that is not
+/// a regular file is refused ([`check_target`]); the path `-` is standard output.
 pub fn write_atomic<F>(path: &Path, replace: bool, fill: F) -> std::io::Result<()>
 where
     F: FnOnce(&mut BufWriter<&File>) -> std::io::Result<()>,
 {
+    if path.as_os_str() == STDOUT {
+        return write_stdout(fill);
+    }
+    check_target(path)?;
     let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !replace && path.exists() {
         return Err(std::io::Error::new(

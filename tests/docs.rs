@@ -17,32 +17,193 @@ fn shared() -> PathBuf {
     root().join("../shared")
 }
 
-/// A fenced block of shell commands and the line it starts on (1-based).
+/// A fenced block of shell commands and the line it starts on (1-based), with the
+/// ```` ```text ```` block right after it (only blank lines between), which shows what the
+/// commands print.
 struct Block {
     line: usize,
     text: String,
+    shown: Option<(usize, String)>,
 }
 
-/// The ```sh blocks of a Markdown page, in order.
+/// The ```sh blocks of a Markdown page, in order, each with the output it shows.
 fn sh_blocks(md: &str) -> Vec<Block> {
-    let mut out = Vec::new();
+    let mut out: Vec<Block> = Vec::new();
     let mut current: Option<Block> = None;
+    // (line of the text block, its text), while inside a ```text block right after a sh block.
+    let mut shown: Option<(usize, String)> = None;
+    let mut after_sh = false;
     for (i, l) in md.lines().enumerate() {
         let t = l.trim_start();
+        if let Some((_, text)) = &mut shown {
+            if t.starts_with("```") {
+                if let Some(b) = out.last_mut() {
+                    b.shown = shown.take();
+                }
+            } else {
+                text.push_str(l);
+                text.push('\n');
+            }
+            continue;
+        }
         match &mut current {
             None if t.starts_with("```sh") && t[5..].trim().is_empty() => {
-                current = Some(Block { line: i + 1, text: String::new() });
+                current = Some(Block { line: i + 1, text: String::new(), shown: None });
             }
-            None => {}
-            Some(_) if t.starts_with("```") => out.extend(current.take()),
+            None if after_sh && t.starts_with("```text") && t[7..].trim().is_empty() => {
+                shown = Some((i + 1, String::new()));
+            }
+            None => after_sh = after_sh && t.is_empty(),
+            Some(_) if t.starts_with("```") => {
+                out.extend(current.take());
+                after_sh = true;
+                continue;
+            }
             Some(b) => {
                 b.text.push_str(l);
                 b.text.push('\n');
             }
         }
+        if current.is_none() && !t.is_empty() {
+            after_sh = false;
+        }
     }
-    assert!(current.is_none(), "an unclosed ```sh block");
+    assert!(current.is_none() && shown.is_none(), "an unclosed ```sh or ```text block");
     out
+}
+
+/// Relative tolerance of the numbers a page shows against those printed: 2e-4, so the last
+/// of five significant digits may differ by one or two (rounding across machines), while a
+/// drift (2.4893e-3 shown, 2.4942e-3 printed: 2e-3) fails.
+const DOC_NUMBER_RTOL: f64 = 2e-4;
+
+/// Whether `printed` is what a page `shown`: line by line; a line `…` stands for any number
+/// of lines, `…` inside a line for any text; numbers agree within [`DOC_NUMBER_RTOL`];
+/// everything else exactly (spacing aside).
+fn same_output(shown: &str, printed: &str) -> Result<(), String> {
+    let want: Vec<&str> = shown.lines().map(str::trim_end).collect();
+    let got: Vec<&str> = printed.lines().map(str::trim_end).collect();
+    fn lines(w: &[&str], g: &[&str]) -> Result<(), String> {
+        match w.split_first() {
+            None if g.is_empty() => Ok(()),
+            None => Err(format!("printed more lines than the page shows, from: {}", g[0])),
+            Some((&"…", rest)) => {
+                if rest.is_empty() {
+                    return Ok(());
+                }
+                let mut last = Err(String::new());
+                for k in 0..=g.len() {
+                    last = lines(rest, &g[k..]);
+                    if last.is_ok() {
+                        return last;
+                    }
+                }
+                last
+            }
+            Some((l, rest)) => match g.split_first() {
+                None => Err(format!("the page shows more lines than printed, from: {l}")),
+                Some((p, grest)) => {
+                    same_line(l, p).map_err(|e| format!("shown:   {l}\nprinted: {p}\n({e})"))?;
+                    lines(rest, grest)
+                }
+            },
+        }
+    }
+    lines(&want, &got)
+}
+
+/// One line: `…` matches any text; numbers within the tolerance; the rest exactly.
+fn same_line(shown: &str, printed: &str) -> Result<(), String> {
+    if let Some((head, tail)) = shown.split_once('…') {
+        let (hp, _) = printed.split_at(printed.len().min(head.len()));
+        same_line(head, hp)?;
+        // The rest must match a suffix of what is left.
+        let rest = &printed[hp.len()..];
+        return (0..=rest.len())
+            .filter(|&k| rest.is_char_boundary(k))
+            .find(|&k| same_line(tail, &rest[k..]).is_ok())
+            .map(|_| ())
+            .ok_or_else(|| format!("no match for '…{tail}'"));
+    }
+    let (a, b) = (tokens(shown), tokens(printed));
+    if a.len() != b.len() {
+        return Err(format!("{} pieces shown, {} printed", a.len(), b.len()));
+    }
+    for (x, y) in a.iter().zip(&b) {
+        match (num(x), num(y)) {
+            (Some(u), Some(v)) => {
+                let tol = DOC_NUMBER_RTOL * u.abs().max(v.abs());
+                if (u - v).abs() > tol && !(u == 0.0 && v == 0.0) {
+                    return Err(format!("{x} shown, {y} printed"));
+                }
+            }
+            _ if x == y => {}
+            _ => return Err(format!("'{x}' shown, '{y}' printed")),
+        }
+    }
+    Ok(())
+}
+
+/// A line in pieces: runs of number characters apart from the rest, spaces dropped.
+fn tokens(l: &str) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    let mut cur = String::new();
+    let mut in_num = false;
+    let chars: Vec<char> = l.chars().collect();
+    for (i, &c) in chars.iter().enumerate() {
+        let starts_num = c.is_ascii_digit()
+            || ((c == '-' || c == '+' || c == '.') && chars.get(i + 1).is_some_and(|n| n.is_ascii_digit()));
+        let continues_num = in_num
+            && (c.is_ascii_digit()
+                || c == '.'
+                || ((c == 'e' || c == 'E')
+                    && chars.get(i + 1).is_some_and(|n| n.is_ascii_digit() || *n == '-' || *n == '+'))
+                || ((c == '-' || c == '+') && matches!(chars.get(i.wrapping_sub(1)), Some('e' | 'E'))));
+        if c.is_whitespace() {
+            if !cur.is_empty() {
+                out.push(std::mem::take(&mut cur));
+            }
+            in_num = false;
+        } else if continues_num {
+            cur.push(c);
+        } else if starts_num && !(cur.chars().last().is_some_and(|p| p.is_ascii_alphabetic() || p == '_')) {
+            if !cur.is_empty() {
+                out.push(std::mem::take(&mut cur));
+            }
+            cur.push(c);
+            in_num = true;
+        } else {
+            if in_num && !cur.is_empty() {
+                out.push(std::mem::take(&mut cur));
+            }
+            cur.push(c);
+            in_num = false;
+        }
+    }
+    if !cur.is_empty() {
+        out.push(cur);
+    }
+    out
+}
+
+fn num(s: &str) -> Option<f64> {
+    s.parse::<f64>().ok().filter(|x| x.is_finite())
+}
+
+#[test]
+fn shown_output_is_compared_within_the_tolerance() {
+    assert!(same_output("a 2.4893e-3 b\n…\n", "a 2.4893e-3 b\nmore\nlines\n").is_ok());
+    assert!(same_output("white 2.4893e-3\n", "white 2.4942e-3\n").is_err());
+    assert!(same_output("σ 2.500e-2\n", "σ 2.509e-2\n").is_err());
+    assert!(same_output("x 1.23450\n", "x 1.23451\n").is_ok());
+    assert!(same_output(
+        "error: fitting …/s1/session.json: run 'a'\n",
+        "error: fitting /tmp/x/s1/session.json: run 'a'\n"
+    )
+    .is_ok());
+    assert!(same_output("wrote 12 runs\n", "wrote 13 runs\n").is_err());
+    assert!(same_output("text a\n", "text b\n").is_err());
+    assert!(same_output("one\n", "one\ntwo\n").is_err());
 }
 
 /// The file names of the pictures a page shows from `images/`.
@@ -118,8 +279,10 @@ fn run_page(page: &str) {
     let bin_dir = Path::new(env!("CARGO_BIN_EXE_crosscal")).parent().unwrap().to_path_buf();
     let path_var = format!("{}:{}", bin_dir.display(), std::env::var("PATH").unwrap_or_default());
     for b in sh_blocks(&md) {
+        // Standard error with standard output, in order, as a terminal shows them.
+        let merged = format!("{{\n{}\n}} 2>&1", script(&b, &bin_dir));
         let out = Command::new("timeout")
-            .args(["600", "bash", "-eo", "pipefail", "-c", &script(&b, &bin_dir)])
+            .args(["600", "bash", "-eo", "pipefail", "-c", &merged])
             .current_dir(&work)
             .env("PATH", &path_var)
             .env("NO_COLOR", "1")
@@ -134,6 +297,12 @@ fn run_page(page: &str) {
             String::from_utf8_lossy(&out.stdout),
             String::from_utf8_lossy(&out.stderr)
         );
+        if let Some((line, shown)) = &b.shown {
+            let printed = String::from_utf8_lossy(&out.stdout);
+            if let Err(e) = same_output(shown, &printed) {
+                panic!("{page}:{line}: the output the page shows is not what the block above prints:\n{e}\n--- printed\n{printed}");
+            }
+        }
     }
     let update = std::env::var_os("CROSSCAL_DOCS_UPDATE").is_some();
     for img in images(&md) {

@@ -8,7 +8,7 @@ use crosscal::session::logs::{list, read, ReadOptions};
 use std::path::Path;
 
 /// The sample written at index `i` (deterministic, all different): time ns, gyro, accel.
-fn truth(i: usize) -> (i64, [f64; 3], [f64; 3]) {
+pub(crate) fn truth(i: usize) -> (i64, [f64; 3], [f64; 3]) {
     let t = 1_700_000_000_000_000_000 + i as i64 * 5_000_000;
     let x = i as f64;
     (t, [0.01 * (x * 0.1).sin(), -0.02 + 1e-5 * x, 0.003 * (x * 0.07).cos()], [0.1 + 1e-4 * x, -0.2, 9.81 - 1e-5 * x])
@@ -35,7 +35,7 @@ fn check_all(path: &Path, opts: &ReadOptions, n: usize) {
 
 /// The part of a `sensor_msgs/Imu` after its header, little-endian f64s (packed in ROS 1; in
 /// CDR the caller has aligned to 8 already): orientation (identity), covariances 0.
-fn imu_body(out: &mut Vec<u8>, gyro: [f64; 3], accel: [f64; 3]) {
+pub(crate) fn imu_body(out: &mut Vec<u8>, gyro: [f64; 3], accel: [f64; 3]) {
     let mut f = vec![0.0, 0.0, 0.0, 1.0];
     f.extend([0.0; 9]);
     f.extend(gyro);
@@ -47,20 +47,20 @@ fn imu_body(out: &mut Vec<u8>, gyro: [f64; 3], accel: [f64; 3]) {
     }
 }
 
-fn le32(b: &mut Vec<u8>, v: u32) {
+pub(crate) fn le32(b: &mut Vec<u8>, v: u32) {
     b.extend_from_slice(&v.to_le_bytes());
 }
 
 // ---------------------------------------------------------------- ROS 1
 
-const IMU_DEF_ROS1: &str = "Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n\
+pub(crate) const IMU_DEF_ROS1: &str = "Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n\
 geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n\
 geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n\
 ================================================================================\nMSG: std_msgs/Header\nuint32 seq\ntime stamp\nstring frame_id\n\
 ================================================================================\nMSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n\
 ================================================================================\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n";
 
-fn fields(pairs: &[(&str, &[u8])]) -> Vec<u8> {
+pub(crate) fn fields(pairs: &[(&str, &[u8])]) -> Vec<u8> {
     let mut b = Vec::new();
     for (k, v) in pairs {
         le32(&mut b, (k.len() + 1 + v.len()) as u32);
@@ -71,14 +71,14 @@ fn fields(pairs: &[(&str, &[u8])]) -> Vec<u8> {
     b
 }
 
-fn record(out: &mut Vec<u8>, header: &[u8], data: &[u8]) {
+pub(crate) fn record(out: &mut Vec<u8>, header: &[u8], data: &[u8]) {
     le32(out, header.len() as u32);
     out.extend_from_slice(header);
     le32(out, data.len() as u32);
     out.extend_from_slice(data);
 }
 
-fn ros1_imu(i: usize) -> Vec<u8> {
+pub(crate) fn ros1_imu(i: usize) -> Vec<u8> {
     let (t, g, a) = truth(i);
     let mut m = Vec::new();
     le32(&mut m, i as u32);
@@ -91,6 +91,11 @@ fn ros1_imu(i: usize) -> Vec<u8> {
 }
 
 fn ros1_bag(compressions: &[&str]) -> Vec<u8> {
+    ros1_bag_n(compressions, N)
+}
+
+/// A ROS 1 bag of `n` samples (`truth`) on `/imu`, one chunk per compression.
+pub(crate) fn ros1_bag_n(compressions: &[&str], n: usize) -> Vec<u8> {
     let mut out = b"#ROSBAG V2.0\n".to_vec();
     record(
         &mut out,
@@ -102,7 +107,7 @@ fn ros1_bag(compressions: &[&str]) -> Vec<u8> {
         ]),
         &[],
     );
-    let per = N.div_ceil(compressions.len());
+    let per = n.div_ceil(compressions.len());
     for (c, comp) in compressions.iter().enumerate() {
         let mut inner = Vec::new();
         let conn = fields(&[("op", &[7]), ("conn", &0u32.to_le_bytes()), ("topic", b"/imu")]);
@@ -113,7 +118,7 @@ fn ros1_bag(compressions: &[&str]) -> Vec<u8> {
             ("message_definition", IMU_DEF_ROS1.as_bytes()),
         ]);
         record(&mut inner, &conn, &info);
-        for i in c * per..((c + 1) * per).min(N) {
+        for i in c * per..((c + 1) * per).min(n) {
             let mut time = Vec::new();
             le32(&mut time, 1);
             le32(&mut time, 2);
@@ -122,6 +127,11 @@ fn ros1_bag(compressions: &[&str]) -> Vec<u8> {
         let packed = match *comp {
             "lz4" => {
                 let mut enc = lz4_flex::frame::FrameEncoder::new(Vec::new());
+                std::io::Write::write_all(&mut enc, &inner).unwrap_or_else(|e| panic!("{e}"));
+                enc.finish().unwrap_or_else(|e| panic!("{e}"))
+            }
+            "bz2" => {
+                let mut enc = bzip2::write::BzEncoder::new(Vec::new(), bzip2::Compression::default());
                 std::io::Write::write_all(&mut enc, &inner).unwrap_or_else(|e| panic!("{e}"));
                 enc.finish().unwrap_or_else(|e| panic!("{e}"))
             }
@@ -153,7 +163,7 @@ fn a_ros1_bag_with_lz4_and_plain_chunks_reads_back_bit_for_bit() {
 
 // ---------------------------------------------------------------- CDR (ROS 2)
 
-fn cdr_imu(i: usize) -> Vec<u8> {
+pub(crate) fn cdr_imu(i: usize) -> Vec<u8> {
     let (t, g, a) = truth(i);
     let mut b = vec![0, 1, 0, 0];
     le32(&mut b, (t / 1_000_000_000) as u32);
@@ -238,14 +248,14 @@ MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
 
 // ---------------------------------------------------------------- PX4 ULog
 
-fn ulog_msg(out: &mut Vec<u8>, ty: u8, payload: &[u8]) {
+pub(crate) fn ulog_msg(out: &mut Vec<u8>, ty: u8, payload: &[u8]) {
     out.extend_from_slice(&(payload.len() as u16).to_le_bytes());
     out.push(ty);
     out.extend_from_slice(payload);
 }
 
 /// `sensor_combined` as PX4 ≥ 1.11 logs it (trailing padding not logged), sample `i`.
-fn ulog_data(i: usize) -> Vec<u8> {
+pub(crate) fn ulog_data(i: usize) -> Vec<u8> {
     let (t, g, a) = truth(i);
     let mut d = 0u16.to_le_bytes().to_vec();
     d.extend_from_slice(&((t / 1000) as u64).to_le_bytes());
@@ -318,7 +328,7 @@ fn a_ulog_with_appended_data_and_a_cut_message_reads_every_whole_sample() {
 
 // ---------------------------------------------------------------- DataFlash
 
-fn df_fmt(out: &mut Vec<u8>, ty: u8, len: u8, name: &str, format: &str, cols: &str) {
+pub(crate) fn df_fmt(out: &mut Vec<u8>, ty: u8, len: u8, name: &str, format: &str, cols: &str) {
     out.extend_from_slice(&[0xA3, 0x95, 128, ty, len]);
     let pad = |s: &str, n: usize| {
         let mut v = s.as_bytes().to_vec();

@@ -457,12 +457,15 @@ class CheckResult:
         return pd.json_normalize(rows)
 
 
-def check(profile: Union[Profile, PathLike], session: SessionLike, mode: str = "offline") -> CheckResult:
+def check(profile: Union[Profile, PathLike], session: SessionLike, mode: str = "offline", *,
+          allow_other_unit: bool = False) -> CheckResult:
     """Correct every run of ``session`` with ``profile`` and compare with the reference
     motion (``crosscal check``): errors before and after, and the paper's reduction
-    factors (gyro 30×, accelerometer 40 000×) as pass criteria."""
+    factors (gyro 30×, accelerometer 40 000×) as pass criteria. A profile of another unit
+    (serials differ) raises :class:`crosscal.errors.WrongUnitError`, as the command exits
+    16, unless ``allow_other_unit`` (``--allow-other-unit``)."""
     s = _session(session)
-    return CheckResult(_crosscal.check(s._native, _profile_json(profile), mode))
+    return CheckResult(_crosscal.check(s._native, _profile_json(profile), mode, allow_other_unit))
 
 
 def paper_table(profile: Union[Profile, PathLike], session: SessionLike, run: str = "cone+10") -> "Any":

@@ -404,6 +404,45 @@ struct Streaming {
 type BlockResult<'py> =
     (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u8>>);
 
+/// The `out` argument as given: four objects, checked by [`out_arrays`].
+type OutArg<'py> = (Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>, Bound<'py, PyAny>);
+
+/// `out`'s four arrays, each of the dtype and shape a block of `n` samples needs; anything
+/// else is a usage error naming `out` (never a TypeError from the argument parser).
+fn out_arrays<'py>(py: Python<'py>, o: OutArg<'py>, n: usize) -> PyResult<BlockResult<'py>> {
+    let wrong = |what: &str, want: &str| {
+        usage(py, format!("out: the {what} array must be a numpy {want} array (a block of {n} samples)"))
+    };
+    let t = o.0.cast_into::<PyArray1<f64>>().map_err(|_| wrong("t", "float64 (n,)"))?;
+    let g = o.1.cast_into::<PyArray2<f64>>().map_err(|_| wrong("gyro", "float64 (n, 3)"))?;
+    let a = o.2.cast_into::<PyArray2<f64>>().map_err(|_| wrong("accel", "float64 (n, 3)"))?;
+    let f = o.3.cast_into::<PyArray1<u8>>().map_err(|_| wrong("flags", "uint8 (n,)"))?;
+    for (what, shape, want) in [
+        ("t", t.shape().to_vec(), vec![n]),
+        ("gyro", g.shape().to_vec(), vec![n, 3]),
+        ("accel", a.shape().to_vec(), vec![n, 3]),
+        ("flags", f.shape().to_vec(), vec![n]),
+    ] {
+        if shape != want {
+            return Err(usage(py, format!("out: the {what} array has shape {shape:?}, the block needs {want:?}")));
+        }
+    }
+    Ok((t, g, a, f))
+}
+
+/// A writable view of an `out` array: a read-only array, or one that shares memory with an
+/// input or another `out` array, is a usage error naming it (numpy's borrow checker would
+/// otherwise raise a PanicException that `except Exception` does not catch).
+fn writable<'py, T: numpy::Element, D: numpy::ndarray::Dimension>(
+    py: Python<'py>,
+    a: &Bound<'py, numpy::PyArray<T, D>>,
+    what: &str,
+) -> PyResult<numpy::PyReadwriteArray<'py, T, D>> {
+    a.try_readwrite().map_err(|e| {
+        usage(py, format!("out: the {what} array cannot be written ({e}): pass a writable array that shares no memory with the inputs or the other out arrays"))
+    })
+}
+
 #[pymethods]
 impl Streaming {
     #[new]
@@ -432,11 +471,11 @@ impl Streaming {
         gyro: PyReadonlyArray2<'py, f64>,
         accel: PyReadonlyArray2<'py, f64>,
         temp: Option<PyReadonlyArray1<'py, f64>>,
-        out: Option<BlockResult<'py>>,
+        out: Option<OutArg<'py>>,
     ) -> PyResult<BlockResult<'py>> {
         let n = t.len();
         let out = match out {
-            Some(o) => o,
+            Some(o) => out_arrays(py, o, n)?,
             None => (
                 PyArray1::zeros(py, n, false),
                 PyArray2::zeros(py, [n, 3], false),
@@ -451,7 +490,12 @@ impl Streaming {
                 PyReadwriteArray2<f64>,
                 PyReadwriteArray2<f64>,
                 PyReadwriteArray1<u8>,
-            ) = (out.0.readwrite(), out.1.readwrite(), out.2.readwrite(), out.3.readwrite());
+            ) = (
+                writable(py, &out.0, "t")?,
+                writable(py, &out.1, "gyro")?,
+                writable(py, &out.2, "accel")?,
+                writable(py, &out.3, "flags")?,
+            );
             let bad = |what: &str| usage(py, format!("out: the {what} array is not C-contiguous"));
             let o = BlockOut {
                 t: ot.as_slice_mut().map_err(|_| bad("t"))?,
@@ -731,8 +775,19 @@ fn simulate(py: Python<'_>, options: Bound<'_, pyo3::types::PyDict>) -> PyResult
 /// Corrects every run of a session with a profile and compares with the reference motion
 /// (as `crosscal check`): the check report as JSON text.
 #[pyfunction]
-fn check(py: Python<'_>, session: &Session, profile_json: &str, mode: &str) -> PyResult<String> {
+#[pyo3(signature = (session, profile_json, mode, allow_other_unit = false))]
+fn check(
+    py: Python<'_>,
+    session: &Session,
+    profile_json: &str,
+    mode: &str,
+    allow_other_unit: bool,
+) -> PyResult<String> {
     let p = profile_of(py, profile_json, "<profile>")?;
+    if !allow_other_unit {
+        // As `crosscal check` (exit 16): one unit's profile says nothing about another unit.
+        p.ensure_unit(Path::new("<profile>"), &session.inner.manifest.serial).map_err(|e| err(py, e))?;
+    }
     let cal = crosscal::correct::Calibration::from_profile(&p).map_err(|e| err(py, e))?;
     let mode = mode_of(py, mode)?;
     let s = &session.inner;

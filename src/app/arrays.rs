@@ -158,6 +158,8 @@ pub struct BlockCorrector {
     buf: Box<Buffers>,
     samples: u64,
     lag_s: f64,
+    /// The last time stamp corrected (input unit), so the next block must start after it.
+    last_t: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -195,7 +197,17 @@ impl BlockCorrector {
         let zero = [[0.0; 3]; BLOCK];
         let buf = Box::new(Buffers { t: [0.0; BLOCK], g: zero, a: zero, w_out: zero, a_out: zero });
         let lag_s = cal.lag_s();
-        Self { s: Streaming::new(cal), io, si, nonlinear, needs_temp, buf, samples: 0, lag_s }
+        Self {
+            s: Streaming::new(cal),
+            io,
+            si,
+            nonlinear,
+            needs_temp,
+            buf,
+            samples: 0,
+            lag_s,
+            last_t: f64::NEG_INFINITY,
+        }
     }
 
     /// Samples after a reset before the derivative window is full.
@@ -222,6 +234,7 @@ impl BlockCorrector {
     pub fn reset(&mut self) {
         self.s.reset();
         self.samples = 0;
+        self.last_t = f64::NEG_INFINITY;
     }
 
     /// Corrects one block (inputs in the input units; `temp_c` per sample when the record
@@ -236,6 +249,19 @@ impl BlockCorrector {
         }
         if let (None, Some(id)) = (c.temp_c, self.needs_temp) {
             return Err(CorrectError::MissingTemperature(id.to_string()));
+        }
+        // Time increases strictly within the block and from the last block (as the
+        // offline and streaming corrections of a whole record require): checked before
+        // anything is corrected, so a refused block changes nothing.
+        let mut previous = self.last_t;
+        for (k, &t) in c.t.iter().enumerate() {
+            if !t.is_finite() || t <= previous {
+                return Err(CorrectError::TimeNotIncreasing { sample: self.samples + k as u64 + 1, t, previous });
+            }
+            previous = t;
+        }
+        if let Some(&t) = c.t.last() {
+            self.last_t = t;
         }
         let per_sample = self.nonlinear || c.temp_c.is_some();
         let [kt, kg, ka] = self.io.si_factors();

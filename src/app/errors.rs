@@ -106,6 +106,7 @@ pub fn code_of(cause: &(dyn std::error::Error + 'static)) -> Option<u8> {
     if let Some(c) = cause.downcast_ref::<CorrectError>() {
         return Some(match c {
             CorrectError::Model(_) | CorrectError::Singular(_) => 21,
+            CorrectError::TimeNotIncreasing { .. } => session_code(Problem::Time),
             CorrectError::NonFinite { .. }
             | CorrectError::MissingTemperature(_)
             | CorrectError::OutOfRange(_)
@@ -127,8 +128,10 @@ pub fn code_of(cause: &(dyn std::error::Error + 'static)) -> Option<u8> {
             _ => 8,
         });
     }
-    if let Some(crate::simulate::SimulateError::Exists(_)) = cause.downcast_ref::<crate::simulate::SimulateError>() {
-        return Some(24);
+    match cause.downcast_ref::<crate::simulate::SimulateError>() {
+        Some(crate::simulate::SimulateError::Exists(_)) => return Some(24),
+        Some(crate::simulate::SimulateError::FileOutside { .. }) => return Some(EXIT_INPUT),
+        _ => {}
     }
     if let Some(io) = cause.downcast_ref::<std::io::Error>() {
         return Some(if io.kind() == std::io::ErrorKind::AlreadyExists { 24 } else { 3 });

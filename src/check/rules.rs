@@ -233,7 +233,7 @@ impl Rules {
     /// Reads and validates a rules file.
     pub fn read(path: &Path) -> Result<Self, RulesError> {
         let text =
-            std::fs::read_to_string(path).map_err(|source| RulesError::Io { path: path.to_path_buf(), source })?;
+            crate::atomic::read_text(path).map_err(|source| RulesError::Io { path: path.to_path_buf(), source })?;
         Self::parse(path, &text)
     }
 

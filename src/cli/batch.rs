@@ -1,6 +1,7 @@
 //! `crosscal batch`: calibrate and accept a production lot.
 
 use super::Outcome;
+use crate::errln;
 use crate::outln;
 use anyhow::Context;
 use crosscal::app::batch::{run as run_batch, to_csv, to_html, unit_dirs, BatchOptions, UnitResult, Verdict};
@@ -76,7 +77,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 }
                 b.inc(1);
             }
-            None => eprintln!("{line}"),
+            None => errln!("{line}"),
         }
     };
     let report = run_batch(&dirs, &opts, &log)?;

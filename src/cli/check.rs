@@ -2,6 +2,7 @@
 
 use super::correct::ModeArg;
 use super::{format, Outcome};
+use crate::errln;
 use crate::{out, outln};
 use anyhow::Context;
 use crosscal::app::validate::{check_session, cross_validate, holdout_check};
@@ -71,9 +72,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             .context("checking a unit against another unit's profile (pass --allow-other-unit to do it anyway)")?;
     }
     if profile.input_units != session.manifest.units {
-        eprintln!(
-            "note: the session's units differ from those the profile was fitted on; values are converted on read"
-        );
+        errln!("note: the session's units differ from those the profile was fitted on; values are converted on read");
     }
     let cal = Calibration::from_profile(&profile)?;
     let report = check_session(&session, &cal, a.mode.into(), thresholds)?;

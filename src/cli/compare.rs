@@ -1,6 +1,7 @@
 //! `crosscal compare`: the model ladder.
 
 use super::Outcome;
+use crate::errln;
 use crate::outln;
 use anyhow::Context;
 use crosscal::diagnose::compare;
@@ -26,6 +27,9 @@ pub struct Args {
     /// repeatable.
     #[arg(long = "with")]
     with: Vec<String>,
+    /// Replace output files that already exist (never a device, FIFO or folder).
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
@@ -138,9 +142,8 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             &labels,
             &series,
         );
-        crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, svg.as_bytes()))
-            .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("plot written to {}", path.display());
+        super::write_output(path, a.force, svg.as_bytes())?;
+        errln!("plot written to {}", path.display());
     }
     Ok(Outcome::Ok)
 }

@@ -1,6 +1,7 @@
 //! `crosscal correct`.
 
 use super::Outcome;
+use crate::errln;
 use anyhow::Context;
 use crosscal::app::arrays::IoUnits;
 use crosscal::app::validate::{correct_run, Mode};
@@ -71,7 +72,7 @@ pub struct Args {
 pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let profile = super::read_profile(&a.profile)?;
     if let Some(age) = profile.age_days(jiff::Timestamp::now()).filter(|d| *d > a.max_age_days) {
-        eprintln!(
+        errln!(
             "warning: profile {} is {age:.0} days old (limit {} days): the unit may have drifted; recalibrate or check it with `crosscal profile diff`",
             a.profile.display(),
             a.max_age_days
@@ -100,7 +101,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let rec =
         read_recording(&a.input, &units, profile.g_m_s2, ReadOptions { strict: a.strict, ..ReadOptions::default() })?;
     for w in &rec.warnings {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}");
     }
     let run = Run {
         spec: RunSpec::new(a.input.display().to_string(), a.input.display().to_string(), MotionSpec::Reference, None),
@@ -127,18 +128,18 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     })
     .with_context(|| format!("writing {}", a.output.display()))?;
     if let Some(w) = corrected.temp_outside.warning() {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}");
     }
     if has_flags {
         let n = corrected.flags.iter().filter(|f| **f != 0).count();
-        eprintln!("note: {n} samples could not be inverted (inside a dead band or past the record's ends after a delay shift): their 'flags' column is non-zero (bits 0-2 gyro x,y,z; 3-5 accel x,y,z) and their values are 0, not estimates");
+        errln!("note: {n} samples could not be inverted (inside a dead band or past the record's ends after a delay shift): their 'flags' column is non-zero (bits 0-2 gyro x,y,z; 3-5 accel x,y,z) and their values are 0, not estimates");
     }
     if offset != 0.0 {
-        eprintln!(
+        errln!(
             "note: the profile has a time delay: the t column is shifted by -{offset} s to the time each sample describes (--resample puts it back on the input stamps)"
         );
     }
-    eprintln!(
+    errln!(
         "corrected {} samples ({} mode{}) with profile of unit {} -> {} (gyro {}, accel {})",
         run.rec.len(),
         match a.mode {
@@ -193,18 +194,18 @@ fn run_streaming(
     }
     let s = done.ok_or_else(|| anyhow::anyhow!("writing {}: nothing was corrected", a.output.display()))?;
     for w in s.warnings.iter().cloned().chain(s.temp_outside.warning()) {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}");
     }
     if s.flagged > 0 {
-        eprintln!("note: {} samples could not be inverted (inside a dead band): their 'flags' column is non-zero (bits 0-2 gyro x,y,z; 3-5 accel x,y,z) and their values are 0, not estimates", s.flagged);
+        errln!("note: {} samples could not be inverted (inside a dead band): their 'flags' column is non-zero (bits 0-2 gyro x,y,z; 3-5 accel x,y,z) and their values are 0, not estimates", s.flagged);
     }
     if s.time_offset_s != 0.0 {
-        eprintln!(
+        errln!(
             "note: the profile has a time delay: the t column is shifted by -{} s to the time each sample describes",
             s.time_offset_s
         );
     }
-    eprintln!(
+    errln!(
         "corrected {} samples (streaming mode, read and written as a stream{}) with profile of unit {} -> {} (gyro {}, accel {})",
         s.samples,
         if s.warmup > 0 { format!(", first {} samples are derivative warm-up", s.warmup) } else { String::new() },

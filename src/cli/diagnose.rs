@@ -1,6 +1,7 @@
 //! `crosscal diagnose`.
 
 use super::{format, ModelArgs, Outcome};
+use crate::errln;
 use crate::{out, outln};
 use anyhow::Context;
 use crosscal::app::diagnose::{diagnose_session, start_model, Diagnosed};
@@ -37,6 +38,9 @@ pub struct Args {
     /// part (as `fit --trim-rest`).
     #[arg(long)]
     trim_rest: bool,
+    /// Replace output files that already exist (never a device, FIFO or folder).
+    #[arg(long)]
+    force: bool,
 }
 
 fn channel_table(c: &[ChannelReport]) -> String {
@@ -80,12 +84,11 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     if a.report.is_some() || a.figures.is_some() {
         let (html, figures) = crosscal::app::diagnose::report(&session, &model, &d)?;
         if let Some(path) = &a.report {
-            crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, html.as_bytes()))
-                .with_context(|| format!("writing {}", path.display()))?;
-            eprintln!("report written to {}", path.display());
+            super::write_output(path, a.force, html.as_bytes())?;
+            errln!("report written to {}", path.display());
         }
         if let Some(dir) = &a.figures {
-            super::write_figures(dir, &figures)?;
+            super::write_figures(dir, &figures, a.force)?;
         }
     }
     if a.json {

@@ -1,6 +1,7 @@
 //! `crosscal fit`.
 
 use super::{format, ModelArgs, Outcome};
+use crate::errln;
 use anyhow::Context;
 use crosscal::app::fit::{fit_profile, store, Fitted};
 use crosscal::estimate::protocol::ProtocolOptions;
@@ -79,7 +80,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     print_fit(&a, &fitted)?;
     if let Some(path) = saved {
         if a.json {
-            eprintln!("profile written to {}", path.display());
+            errln!("profile written to {}", path.display());
         } else {
             super::out(format_args!("profile written to {}\n", path.display()))?;
         }
@@ -114,7 +115,7 @@ fn print_fit(a: &Args, f: &Fitted) -> anyhow::Result<()> {
 
 /// A noise report written by `crosscal noise --save`.
 pub fn read_noise(path: &std::path::Path) -> anyhow::Result<crosscal::noise::NoiseReport> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = crosscal::atomic::read_text(path).with_context(|| format!("reading {}", path.display()))?;
     serde_json::from_str(&text)
         .with_context(|| format!("{}: not a noise report (write one with `crosscal noise --save`)", path.display()))
 }

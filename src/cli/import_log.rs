@@ -70,8 +70,23 @@ pub fn run(file: &Option<PathBuf>, out: &Path, serial: &str, g: Option<f64>, a: 
     }
     outln!("  {}", done.kind.1);
     let m = done.imported.manifest_path.display();
-    let next = if done.kind.0 == SessionKind::Static { "noise" } else { "fit" };
-    outln!("wrote {m} ({} samples); next: crosscal {next} {m}", done.imported.samples);
+    let n = done.imported.samples;
+    let min = crosscal::noise::MIN_SAMPLES;
+    if done.kind.0 == SessionKind::Static && n < min {
+        // Suggest only what will work: say why the stream is short and what to do instead.
+        let st = &done.stats;
+        outln!(
+            "wrote {m} ({n} samples): too few for crosscal noise, which needs at least {min} (hours of rest for useful numbers); {} holds {} samples at {:.3} Hz over {:.2} s. Import a longer or faster stream (crosscal import --list {} shows each stream's rate and span) or record longer",
+            done.stream.name,
+            st.samples,
+            st.rate_hz(),
+            st.span_s(),
+            file.display()
+        );
+    } else {
+        let next = if done.kind.0 == SessionKind::Static { "noise" } else { "fit" };
+        outln!("wrote {m} ({n} samples); next: crosscal {next} {m}");
+    }
     Ok(Outcome::Ok)
 }
 

@@ -164,16 +164,44 @@ fn help(topic: Option<&str>) -> anyhow::Result<Outcome> {
 #[error("stdout was closed")]
 pub struct StdoutClosed;
 
-/// Writes to stdout, surfacing errors instead of panicking as `print!` does: a closed pipe
-/// becomes [`StdoutClosed`], any other failure (a full disk) an error naming stdout.
+/// Set once stdout's reader has gone: later output is dropped, the command carries on.
+static STDOUT_GONE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Writes to stdout, surfacing errors instead of panicking as `print!` does. A closed pipe
+/// (`crosscal … | head -3`) is not a failure and does not stop the command: whatever it
+/// still has to save (reports, figures, profiles) is saved, the rest of its printing is
+/// dropped, and it exits 0 ([`StdoutClosed`] is kept for callers that stop on it). Any
+/// other failure (a full disk) is an error naming stdout.
 pub fn out(args: std::fmt::Arguments<'_>) -> anyhow::Result<()> {
     use std::io::Write;
+    use std::sync::atomic::Ordering;
+    if STDOUT_GONE.load(Ordering::Relaxed) {
+        return Ok(());
+    }
     let mut o = std::io::stdout().lock();
     match o.write_fmt(args).and_then(|()| o.flush()) {
         Ok(()) => Ok(()),
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(StdoutClosed.into()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+            STDOUT_GONE.store(true, Ordering::Relaxed);
+            Ok(())
+        }
         Err(e) => Err(anyhow::Error::new(e).context("writing to stdout")),
     }
+}
+
+/// Writes a line to stderr, never panicking as `eprintln!` does when stderr is closed
+/// (`2>&1 | head -3`): a message that cannot be shown must not cost an output.
+pub fn err_line(args: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let mut e = std::io::stderr().lock();
+    let _ = e.write_fmt(args).and_then(|()| e.write_all(b"\n"));
+}
+
+/// `eprintln!` that never panics (see [`err_line`]).
+#[macro_export]
+macro_rules! errln {
+    () => { $crate::cli::err_line(format_args!("")) };
+    ($($t:tt)*) => { $crate::cli::err_line(format_args!($($t)*)) };
 }
 
 /// `print!` that returns the write's error (see [`out`]).
@@ -230,22 +258,41 @@ fn parse_preset(s: &str) -> Result<crosscal::model::Preset, String> {
 pub fn read_profile(path: &std::path::Path) -> anyhow::Result<crosscal::profile::Profile> {
     let (used, p) = crosscal::profile::Profile::read_or_latest(path)?;
     if used != path {
-        eprintln!("profile: {} (the newest of unit {})", used.display(), p.serial);
+        errln!("profile: {} (the newest of unit {})", used.display(), p.serial);
     }
     Ok(p)
 }
 
-/// Writes a report's plots as `DIR/<stem>.svg` (the folder is created; plots are reports,
-/// so an earlier plot of the same name is replaced).
-pub fn write_figures(dir: &std::path::Path, figs: &[crosscal::html::Figure]) -> anyhow::Result<()> {
+/// Writes one output file by the one rule every output follows: atomically, never over an
+/// existing file unless `force` (and never over a device, FIFO or folder, even then), `-`
+/// being standard output.
+pub fn write_output(path: &std::path::Path, force: bool, bytes: &[u8]) -> anyhow::Result<()> {
+    match crosscal::atomic::write_atomic(path, force, |w| std::io::Write::write_all(w, bytes)) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(anyhow::Error::new(std::io::Error::new(
+            std::io::ErrorKind::AlreadyExists,
+            format!("{} already exists: choose another name or pass --force to replace it", path.display()),
+        ))),
+        Err(e) => Err(anyhow::Error::new(e).context(format!("writing {}", path.display()))),
+    }
+}
+
+/// Writes a report's plots as `DIR/<stem>.svg` (the folder is created; an existing plot is
+/// replaced only with `force`, as every output).
+pub fn write_figures(dir: &std::path::Path, figs: &[crosscal::html::Figure], force: bool) -> anyhow::Result<()> {
     use anyhow::Context;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    for f in figs.iter().filter(|f| !f.svg.is_empty()) {
-        let path = dir.join(format!("{}.svg", f.stem));
-        crosscal::atomic::write_atomic(&path, true, |w| std::io::Write::write_all(w, f.svg.as_bytes()))
-            .with_context(|| format!("writing {}", path.display()))?;
+    let figs: Vec<_> = figs.iter().filter(|f| !f.svg.is_empty()).collect();
+    // Refused before any is written, so a refusal leaves the folder as it was.
+    if !force {
+        if let Some(p) = figs.iter().map(|f| dir.join(format!("{}.svg", f.stem))).find(|p| p.exists()) {
+            return write_output(&p, false, b"");
+        }
     }
-    eprintln!("{} plots written to {}", figs.iter().filter(|f| !f.svg.is_empty()).count(), dir.display());
+    for f in &figs {
+        write_output(&dir.join(format!("{}.svg", f.stem)), force, f.svg.as_bytes())?;
+    }
+    errln!("{} plots written to {}", figs.len(), dir.display());
     Ok(())
 }
 
@@ -316,7 +363,7 @@ pub fn main() -> ExitCode {
         Ok(Outcome::CheckFailed) => ExitCode::from(EXIT_CHECK_FAILED),
         Err(e) if e.chain().any(|c| c.is::<StdoutClosed>()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            errln!("error: {e:#}");
             ExitCode::from(exit_code(&e))
         }
     }

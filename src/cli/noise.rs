@@ -1,6 +1,7 @@
 //! `crosscal noise`: Allan deviation and noise terms of a static recording.
 
 use super::Outcome;
+use crate::errln;
 use crate::{out, outln};
 use anyhow::Context;
 use crosscal::noise::deviations::Deviation;
@@ -60,6 +61,10 @@ pub struct Args {
     /// noise parameters an estimator reads.
     #[arg(long)]
     save: Option<PathBuf>,
+    /// Replace output files (--report, --figures, --save) that already exist (never a
+    /// device, FIFO or folder).
+    #[arg(long)]
+    force: bool,
     /// Format of --save: crosscal (JSON), kalibr (imu.yaml), openvins (kalibr_imu_chain.yaml),
     /// vins-fusion or orb-slam3; continuous-time SI densities, worst axis.
     #[arg(long, default_value = "crosscal", requires = "save")]
@@ -121,7 +126,7 @@ pub(super) fn analyse_one(a: &Args, chans: &[usize]) -> anyhow::Result<(NoiseRep
     let Some(path) = &a.profile else {
         let data = read_channels(&csv, &units, g, chans, span).with_context(|| format!("reading {}", csv.display()))?;
         for w in &data.warnings {
-            eprintln!("warning: {w}");
+            errln!("warning: {w}");
         }
         return Ok((analyse(&label, data, a.options())?, g, serial));
     };
@@ -132,7 +137,7 @@ pub(super) fn analyse_one(a: &Args, chans: &[usize]) -> anyhow::Result<(NoiseRep
     let mut data = read_channels(&csv, &units, g, &[0, 1, 2, 3, 4, 5], span)
         .with_context(|| format!("reading {}", csv.display()))?;
     for w in &data.warnings {
-        eprintln!("warning: {w}");
+        errln!("warning: {w}");
     }
     let col = |c: usize| &data.columns[c].1;
     let triad =
@@ -226,12 +231,11 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     }
     if let Some(path) = &a.report {
         let html = report::html(&r, g);
-        crosscal::atomic::write_atomic(path, true, |w| std::io::Write::write_all(w, html.as_bytes()))
-            .with_context(|| format!("writing {}", path.display()))?;
-        eprintln!("report: {}", path.display());
+        super::write_output(path, a.force, html.as_bytes())?;
+        errln!("report: {}", path.display());
     }
     if let Some(dir) = &a.figures {
-        super::write_figures(dir, &report::figures(&r))?;
+        super::write_figures(dir, &report::figures(&r), a.force)?;
     }
     if let Some(path) = &a.save {
         let (text, lost) = if a.to == "crosscal" {
@@ -245,11 +249,10 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 other => anyhow::bail!("--to {other}: expected crosscal, kalibr, openvins, vins-fusion or orb-slam3"),
             }
         };
-        crosscal::atomic::write_new(path, text.as_bytes())
-            .with_context(|| format!("writing {} (never overwritten)", path.display()))?;
-        eprintln!("saved: {} ({})", path.display(), a.to);
+        super::write_output(path, a.force, text.as_bytes())?;
+        errln!("saved: {} ({})", path.display(), a.to);
         for l in lost {
-            eprintln!("not represented: {l}");
+            errln!("not represented: {l}");
         }
     }
     if let Some(root) = &a.store {
@@ -258,7 +261,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         let mut next = p.revised(format!("noise from {label} added to {}", from.display()));
         next.noise = Some(r);
         let path = save(&next, root)?;
-        eprintln!("profile: {} (previous revision kept: {})", path.display(), from.display());
+        errln!("profile: {} (previous revision kept: {})", path.display(), from.display());
     }
     Ok(Outcome::Ok)
 }

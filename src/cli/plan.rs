@@ -89,7 +89,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         } else {
             path
         };
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let text = crosscal::atomic::read_text(path).with_context(|| format!("reading {}", path.display()))?;
         let report: NoiseReport = match serde_json::from_str::<crosscal::profile::Profile>(&text) {
             Ok(p) => p.noise.ok_or_else(|| {
                 anyhow::anyhow!(

@@ -1,6 +1,7 @@
 //! `crosscal profile list|show|diff`: the per-unit profile store.
 
 use super::{format, Outcome};
+use crate::errln;
 use crate::{out, outln};
 use crosscal::profile::{diff, history, latest, serials, Profile};
 use std::path::{Path, PathBuf};
@@ -119,7 +120,7 @@ fn list(store: &Path, serial: Option<&str>) -> anyhow::Result<()> {
                     path.display(),
                     if p.noise.is_some() { "  (noise)" } else { "" }
                 ),
-                Err(e) => outln!("  unreadable: {e}"),
+                Err(e) => outln!("  skipped: {}", crosscal::app::chain(&e)),
             }
         }
     }
@@ -175,7 +176,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         }
         Sub::ImportImucal { file, serial, g, store } => {
             let text =
-                std::fs::read_to_string(&file).map_err(|e| anyhow::anyhow!("reading {}: {e}", file.display()))?;
+                crosscal::atomic::read_text(&file).map_err(|e| anyhow::anyhow!("reading {}: {e}", file.display()))?;
             let p = crosscal::profile::interop::from_imucal(&file, &text, &serial, g)?;
             let path = crosscal::profile::save(&p, &store)?;
             outln!("imported {} as {}", file.display(), path.display());
@@ -198,7 +199,7 @@ fn export(profile: &Path, to: &str, output: &Path, t: Target<'_>) -> anyhow::Res
         .map_err(|e| anyhow::anyhow!("writing {} (never overwritten): {e}", output.display()))?;
     outln!("exported {} to {} ({to})", profile.display(), output.display());
     for l in lost {
-        eprintln!("not represented: {l}");
+        errln!("not represented: {l}");
     }
     Ok(())
 }

@@ -90,6 +90,16 @@ pub enum CorrectError {
         /// Largest change of the last pass relative to the signal's largest value.
         change: f64,
     },
+    /// A time stamp that does not increase (within a block or from the block before).
+    #[error("sample {sample}: t = {t} does not increase (the previous sample is at {previous}): time must increase strictly, block after block (reset() starts a new record)")]
+    TimeNotIncreasing {
+        /// 1-based sample since the start or the last reset.
+        sample: u64,
+        /// Its time stamp, input unit.
+        t: f64,
+        /// The previous one.
+        previous: f64,
+    },
     /// Input arrays disagree in length.
     #[error("input lengths differ: t has {t}, gyro {g}, accel {a}")]
     Length {

@@ -185,7 +185,7 @@ fn residual_pass(
         }
     })?;
     for a in &mut acov {
-        a.finish();
+        a.close();
     }
     Ok((acov, max))
 }
@@ -209,14 +209,22 @@ fn fit_core(
             SensorDesign { sensor, terms, cols }
         })
         .collect();
-    let parts: Vec<(Vec<QrAccumulator>, usize)> =
-        sources.par_iter().map(|src| accumulate(&designs, *src, opts.chunk)).collect::<Result<_, _>>()?;
-    let counts: Vec<usize> = parts.iter().map(|p| p.1).collect();
+    // Sources in groups of a few per thread: each group's accumulators (a chunk of rows
+    // each, hundreds of kB) are merged, in source order, before the next group is read, so
+    // memory follows the threads, not the number of runs (10 000 short runs used to hold
+    // 10 000 accumulators at once).
+    let group = rayon::current_num_threads().max(1) * 4;
+    let mut counts: Vec<usize> = Vec::with_capacity(sources.len());
     let mut merged: Vec<QrAccumulator> =
         designs.iter().map(|d| QrAccumulator::new(d.cols.len() + 3, opts.chunk)).collect();
-    for (mut accs, _) in parts {
-        for (m, a) in merged.iter_mut().zip(accs.iter_mut()) {
-            m.merge(a);
+    for batch in sources.chunks(group) {
+        let parts: Vec<(Vec<QrAccumulator>, usize)> =
+            batch.par_iter().map(|src| accumulate(&designs, *src, opts.chunk)).collect::<Result<_, _>>()?;
+        for (mut accs, n) in parts {
+            counts.push(n);
+            for (m, a) in merged.iter_mut().zip(accs.iter_mut()) {
+                m.merge(a);
+            }
         }
     }
     let mut solved = Vec::with_capacity(designs.len());

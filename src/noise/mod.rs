@@ -168,6 +168,10 @@ pub struct NoiseReport {
     pub channels: Vec<ChannelNoise>,
 }
 
+/// The fewest samples an Allan deviation is computed from (two cluster times); a useful
+/// one needs hours of a static recording.
+pub const MIN_SAMPLES: usize = 7;
+
 /// Noise analysis errors.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]

@@ -464,7 +464,7 @@ impl Profile {
     /// Reads a profile file.
     pub fn read(path: &Path) -> Result<Self, ProfileError> {
         let text =
-            std::fs::read_to_string(path).map_err(|source| ProfileError::Io { path: path.to_path_buf(), source })?;
+            crate::atomic::read_text(path).map_err(|source| ProfileError::Io { path: path.to_path_buf(), source })?;
         Self::from_json(path, &text)
     }
 

@@ -21,6 +21,7 @@ pub fn validate(p: &Profile, model: &Model) -> Result<(), String> {
     if !(p.g_m_s2.is_finite() && (lo..=hi).contains(&p.g_m_s2)) {
         return Err(format!("g_m_s2 is {}: expected local gravity in m/s^2 between {lo} and {hi}", p.g_m_s2));
     }
+    correction(&p.correction)?;
     for sensor in SensorKind::BOTH {
         coefficients(p, model, sensor)?;
         condition(p, model, sensor)?;
@@ -45,6 +46,50 @@ pub fn validate(p: &Profile, model: &Model) -> Result<(), String> {
     Ok(())
 }
 
+/// Bounds of the correction settings (a hand-edited profile must not change the output or
+/// exhaust memory): the offline derivative's half-window and degree, the streaming window
+/// and degree. A local polynomial of degree d needs more than d points (Savitzky–Golay),
+/// and a degree above [`MAX_DEGREE`] turns rounding into noise.
+pub const HALF_WINDOW: (usize, usize) = (1, 1000);
+/// Streaming window length, samples.
+pub const STREAMING_WINDOW: (usize, usize) = (2, 10_000);
+/// Highest polynomial degree of either derivative.
+pub const MAX_DEGREE: usize = 6;
+
+fn correction(c: &super::CorrectionSettings) -> Result<(), String> {
+    let (hl, hh) = HALF_WINDOW;
+    if !(hl..=hh).contains(&c.derivative_half_window) {
+        return Err(format!(
+            "correction.derivative_half_window is {}: expected {hl} to {hh} samples (default 5)",
+            c.derivative_half_window
+        ));
+    }
+    if !(1..=MAX_DEGREE.min(2 * c.derivative_half_window)).contains(&c.derivative_degree) {
+        return Err(format!(
+            "correction.derivative_degree is {}: expected 1 to {} (at most {MAX_DEGREE}, below the window's {} samples; default 3)",
+            c.derivative_degree,
+            MAX_DEGREE.min(2 * c.derivative_half_window),
+            2 * c.derivative_half_window + 1
+        ));
+    }
+    let (wl, wh) = STREAMING_WINDOW;
+    if !(wl..=wh).contains(&c.streaming_window) {
+        return Err(format!(
+            "correction.streaming_window is {}: expected {wl} to {wh} samples (default 11)",
+            c.streaming_window
+        ));
+    }
+    if !(1..=MAX_DEGREE.min(c.streaming_window - 1)).contains(&c.streaming_degree) {
+        return Err(format!(
+            "correction.streaming_degree is {}: expected 1 to {} (at most {MAX_DEGREE}, below the window's {} samples; default 2)",
+            c.streaming_degree,
+            MAX_DEGREE.min(c.streaming_window - 1),
+            c.streaming_window
+        ));
+    }
+    Ok(())
+}
+
 /// Every coefficient of the model for `sensor` exactly once, finite, nothing else.
 fn coefficients(p: &Profile, model: &Model, sensor: SensorKind) -> Result<(), String> {
     let listed = &p.sensor(sensor).coefficients;
@@ -59,9 +104,18 @@ fn coefficients(p: &Profile, model: &Model, sensor: SensorKind) -> Result<(), St
             ));
         }
     }
+    let terms = model.terms(sensor);
     for c in listed {
         if model.nominal(&c.name).is_none() {
             return Err(format!("coefficient {} is not part of the profile's model '{}'", c.name, p.model));
+        }
+        if let Some(t) = terms.iter().find(|t| t.term.name == c.name) {
+            if c.channel != t.term.channel {
+                return Err(format!(
+                    "coefficient {}: channel is {}, expected {} (the output axis its effect acts on, 0..2)",
+                    c.name, c.channel, t.term.channel
+                ));
+            }
         }
         if !c.value.is_finite() || c.std_error.is_some_and(|s| !s.is_finite() || s < 0.0) {
             return Err(format!(

@@ -417,7 +417,17 @@ fn map_columns(names: &[String], opts: ReadOptions, path: &Path, header_line: u6
     for (k, name) in REQUIRED.iter().enumerate() {
         idx[k] = find(name).ok_or_else(|| {
                 let first_is_number = names.first().is_some_and(|n| n.parse::<f64>().is_ok());
-                let why = if first_is_number {
+                let one = (names.len() == 1).then(|| names[0].as_str());
+                let other = [(';', "semicolons (';')"), ('\t', "tabs"), ('|', "vertical bars ('|')"), (' ', "spaces")]
+                    .into_iter()
+                    .find(|(c, _)| one.is_some_and(|n| n.contains(*c)));
+                let why = if let Some((_, seen)) = other {
+                    format!(
+                        "required column '{name}' is absent: the header [{}] is separated by {seen}, not commas; crosscal recordings are comma-separated: `crosscal import text {} --out DIR` reads this file (delimiter detected) and writes a session",
+                        names.join(","),
+                        path.display()
+                    )
+                } else if first_is_number {
                     format!("the header line is missing (line {header_line} starts with a number); expected a first line 't,gx,gy,gz,ax,ay,az[,temp]'")
                 } else {
                     format!(

@@ -60,7 +60,7 @@ pub(super) fn csv_err(path: &Path, line: usize, column: &str, problem: Problem, 
 }
 
 fn read(path: &Path) -> Result<String, SessionError> {
-    std::fs::read_to_string(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })
+    crate::atomic::read_text(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })
 }
 
 /// Parses field `i` of a split line as a finite number.

@@ -128,7 +128,8 @@ fn positions(names: &[String]) -> (Option<usize>, Option<[usize; 6]>) {
 
 /// Reads a delimited text recording and writes it as a session (see the module docs).
 pub fn text(path: &Path, out_dir: &Path, opts: &ImportOptions, layout: &TextLayout) -> Result<Imported, SessionError> {
-    let body = std::fs::read_to_string(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
+    let body =
+        crate::atomic::read_text(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
     let lines: Vec<(usize, &str)> = body
         .lines()
         .enumerate()

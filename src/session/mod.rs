@@ -14,6 +14,7 @@ pub mod logs;
 pub mod memory;
 mod open;
 pub mod sanity;
+mod shape;
 mod source;
 
 use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
@@ -395,7 +396,7 @@ impl Session {
 /// the manifest's `rows` line).
 pub fn rows_past_end(manifest_path: &Path, spec: &RunSpec, len: usize) -> SessionError {
     let (start, end) = spec.rows.unwrap_or((0, len));
-    let (line, column) = locate(&std::fs::read_to_string(manifest_path).unwrap_or_default(), "rows");
+    let (line, column) = locate(&crate::atomic::read_text(manifest_path).unwrap_or_default(), "rows");
     SessionError::Manifest {
         problem: Problem::Invalid,
         path: manifest_path.to_path_buf(),
@@ -412,7 +413,7 @@ pub fn run_path(manifest_path: &Path, spec: &RunSpec) -> Result<PathBuf, Session
     let dir = manifest_path.parent().unwrap_or(Path::new("."));
     let path = dir.join(&spec.file);
     let refuse = |what: String| {
-        let (line, column) = locate(&std::fs::read_to_string(manifest_path).unwrap_or_default(), &spec.file);
+        let (line, column) = locate(&crate::atomic::read_text(manifest_path).unwrap_or_default(), &spec.file);
         SessionError::Manifest {
             problem: Problem::MissingFile,
             path: manifest_path.to_path_buf(),
@@ -493,7 +494,8 @@ fn within(name: &str, key: &str, x: f64, lo: f64, hi: f64, unit: &str) -> Result
 
 /// Reads and validates a manifest (without reading the recordings).
 pub fn read_manifest(path: &Path) -> Result<Manifest, SessionError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
+    let text =
+        crate::atomic::read_text(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
     parse_manifest(path, &text)
 }
 
@@ -522,6 +524,9 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SessionError>
         }
         _ => return Err(bad("format", format!("missing \"format\": expected \"format\": \"{SESSION_FORMAT}\""))),
     };
+    if let Some(u) = shape::unknown_key(&json) {
+        return Err(bad(&u.key, u.message()));
+    }
     let serial = match obj.get("serial") {
         Some(Value::String(s)) if valid_serial(s) => s.clone(),
         Some(Value::String(s)) => {

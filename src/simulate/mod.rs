@@ -384,6 +384,14 @@ pub enum SimulateError {
     /// The output folder already holds a session.
     #[error("{0}: already exists; choose another output folder or remove it (crosscal never overwrites data)")]
     Exists(PathBuf),
+    /// A run's file name would be written outside the session's folder.
+    #[error("run '{run}': file '{file}' is not a plain file name (no folder, '..' or absolute path): a saved session's files stay in its folder")]
+    FileOutside {
+        /// Run name.
+        run: String,
+        /// Its file as named.
+        file: String,
+    },
 }
 
 /// Writes a session (deg/s, g, s) as `session.json` plus one CSV per run into `dir`.
@@ -393,6 +401,14 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
         let path = path.to_path_buf();
         move |source| SimulateError::Io { path, source }
     };
+    for r in &session.runs {
+        let mut parts = Path::new(&r.spec.file).components();
+        let plain = matches!((parts.next(), parts.next()), (Some(std::path::Component::Normal(_)), None))
+            && !r.spec.file.contains(['/', '\\']);
+        if !plain {
+            return Err(SimulateError::FileOutside { run: r.spec.name.clone(), file: r.spec.file.clone() });
+        }
+    }
     std::fs::create_dir_all(dir).map_err(io(dir))?;
     let manifest_path = dir.join("session.json");
     let mut targets = vec![manifest_path.clone()];

@@ -30,6 +30,10 @@ impl AutoCov {
 
     /// Appends values in order, summing each block as it fills.
     pub fn extend(&mut self, mut vals: &[f64]) {
+        // Closed: nothing more is summed.
+        if self.buf.is_empty() {
+            return;
+        }
         while !vals.is_empty() {
             let take = (self.buf.len() - self.fill).min(vals.len());
             self.buf[self.fill..self.fill + take].copy_from_slice(&vals[..take]);
@@ -40,6 +44,16 @@ impl AutoCov {
                 self.finish();
             }
         }
+    }
+
+    /// Sums the last, partial block and gives back the block buffer (16 kB): the sums stay
+    /// readable, no value may be added after. For statistics kept per run until all runs
+    /// are read (10 000 short runs held 1 GB of buffers).
+    pub fn close(&mut self) {
+        self.finish();
+        self.buf = Vec::new();
+        self.fill = 0;
+        self.hist = 0;
     }
 
     /// Sums the values gathered since the last block; keeps the last L + 1 as history.

@@ -273,11 +273,11 @@ fn detect_poses(session: &Session, r: &Recording<'_>, opts: &ProtocolOptions) ->
     }
     let given = r.poses.is_some();
     let Some((multiplier, poses, acc)) = best else {
-        let found: Vec<String> = tried.iter().map(|(m, n, _)| format!("×{m}: {n}")).collect();
+        let found: Vec<String> = tried.iter().map(|(m, n, _)| format!("{n} at ×{m}")).collect();
+        let found = if found.is_empty() { "none".to_string() } else { found.join(", ") };
         return Err(protocol_error(format!(
-            "run '{}': too few static poses of at least {min_pose_samples} samples for the 9 accelerometer parameters (found {}); hold more poses longer, or lower min_pose_samples",
-            run.spec.name,
-            found.join(", ")
+            "run '{}': too few static poses for the 9 accelerometer parameters: at least 9 poses held still for {min_pose_samples} samples or more are needed. Poses found at each detection threshold tried (×m = m times the initial rest's variance): {found}. Hold 9 or more different orientations still for longer, lower \"min_pose_samples\" in the manifest, or give the poses as sample ranges (\"poses\")",
+            run.spec.name
         )));
     };
     let detection = Detection {

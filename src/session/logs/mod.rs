@@ -12,7 +12,7 @@
 //! |---|---|---|
 //! | ROS 1 bag 2.0 | [`ros1`] (records, chunks) | `bzip2`, `lz4_flex` for compressed chunks |
 //! | ROS 2 bag, sqlite3 | [`ros2`] | `rusqlite` (bundled SQLite) |
-//! | ROS 2 bag / file, MCAP | [`ros2`] | `mcap` |
+//! | ROS 2 bag / file, MCAP | [`ros2`], [`mcap`] (records, every length checked) | `zstd`, `lz4_flex` for chunks |
 //! | message payloads | [`rosmsg`] (ROS 1 and CDR, definitions compiled once) | — |
 //! | PX4 ULog | [`ulog`] | — |
 //! | ArduPilot DataFlash | [`dataflash`] | — |
@@ -29,12 +29,15 @@
 //! which convention the file used.
 
 pub mod dataflash;
+pub mod mcap;
 mod num;
 pub mod ros1;
 pub mod ros2;
 pub mod rosmsg;
 pub mod segment;
+pub mod stamps;
 pub mod ulog;
+mod window;
 pub mod write;
 
 use super::error::{Problem, SessionError};
@@ -114,11 +117,35 @@ pub struct Contents {
     pub notes: Vec<String>,
     /// What was tolerated (a truncated last record, skipped garbage, dropouts), with byte offsets.
     pub warnings: Vec<String>,
+    /// Messages or records refused as corrupt (each said in `warnings`, the first
+    /// [`MAX_REFUSAL_WARNINGS`] with their byte offsets, then a count).
+    pub refused: u64,
 }
+
+/// Corrupt messages described one by one in [`Contents::warnings`]; the rest are counted.
+pub const MAX_REFUSAL_WARNINGS: u64 = 20;
 
 impl Contents {
     fn new(format: LogFormat) -> Self {
-        Self { format, streams: Vec::new(), applied: Vec::new(), notes: Vec::new(), warnings: Vec::new() }
+        Self { format, streams: Vec::new(), applied: Vec::new(), notes: Vec::new(), warnings: Vec::new(), refused: 0 }
+    }
+
+    /// Records a corrupt message or record that was dropped (not read shifted or guessed).
+    pub fn refuse(&mut self, what: String) {
+        self.refused += 1;
+        if self.refused <= MAX_REFUSAL_WARNINGS {
+            self.warnings.push(what + ": dropped");
+        }
+    }
+
+    /// The closing count of refusals beyond those described.
+    fn close_refusals(&mut self) {
+        if self.refused > MAX_REFUSAL_WARNINGS {
+            self.warnings.push(format!(
+                "{} corrupt messages or records were dropped in all ({} described above)",
+                self.refused, MAX_REFUSAL_WARNINGS
+            ));
+        }
     }
 }
 
@@ -197,12 +224,28 @@ pub fn read(
     only: Option<usize>,
     sink: &mut Sink<'_>,
 ) -> Result<Contents, SessionError> {
-    match detect(path)? {
-        LogFormat::Ros1Bag => ros1::read(path, opts, only, sink),
-        LogFormat::Ros2Sqlite | LogFormat::Mcap => ros2::read(path, opts, only, sink),
-        LogFormat::ULog => ulog::read(path, only, sink),
-        LogFormat::DataFlash => dataflash::read(path, only, sink),
+    let format = detect(path)?;
+    let mut deglitch = stamps::Deglitch::default();
+    let mut contents = {
+        let mut filtered = |i: usize, s: &LogSample| deglitch.push(i, s, sink);
+        let filtered: &mut Sink<'_> = &mut filtered;
+        match format {
+            LogFormat::Ros1Bag => ros1::read(path, opts, only, filtered),
+            LogFormat::Ros2Sqlite | LogFormat::Mcap => ros2::read(path, opts, only, filtered),
+            LogFormat::ULog => ulog::read(path, only, filtered),
+            LogFormat::DataFlash => dataflash::read(path, only, filtered),
+        }
+    }?;
+    deglitch.finish(sink)?;
+    contents.close_refusals();
+    for (i, dropped, seen, first_ns) in deglitch.dropped() {
+        let name = contents.streams.get(i).map_or("?", |s| s.name.as_str());
+        contents.warnings.push(format!(
+            "{name}: {dropped} of {seen} samples had an isolated outlying time stamp (the first {:.3} s) and were dropped; the samples around them were kept",
+            first_ns as f64 * 1e-9
+        ));
     }
+    Ok(contents)
 }
 
 /// What `--list` shows of a stream.
@@ -236,7 +279,7 @@ impl StreamStats {
 
     /// Span from the first to the last sample, s.
     pub fn span_s(&self) -> f64 {
-        (self.last_ns - self.first_ns) as f64 * 1e-9
+        self.last_ns.saturating_sub(self.first_ns) as f64 * 1e-9
     }
 }
 
@@ -274,7 +317,7 @@ impl StatsAcc {
         if self.first.is_none() {
             self.first = Some(*s);
         } else {
-            let dt = (s.t_ns - self.last_ns) as f64 * 1e-9;
+            let dt = s.t_ns.saturating_sub(self.last_ns) as f64 * 1e-9;
             if self.dts.len() < MEDIAN_WINDOW {
                 self.dts.push(dt);
             }
@@ -340,7 +383,7 @@ impl Pairer {
     /// Adds an accelerometer sample (time ns, m/s², °C).
     pub fn accel(&mut self, t_ns: i64, a: [f64; 3], temp: Option<f64>, out: &mut impl FnMut(LogSample)) {
         if let Some(last) = self.accel.back() {
-            self.accel_dt = t_ns - last.0;
+            self.accel_dt = t_ns.saturating_sub(last.0);
         }
         self.accel_seen += 1;
         self.accel.push_back((t_ns, a, temp));
@@ -366,10 +409,14 @@ impl Pairer {
             while self.accel.len() >= 2 && self.accel[1].0 <= t {
                 self.accel.pop_front();
             }
-            let near = |a: i64| (a - t).abs().saturating_mul(2) <= self.accel_dt.max(0);
+            let near = |a: i64| a.saturating_sub(t).saturating_abs().saturating_mul(2) <= self.accel_dt.max(0);
             let paired = match (self.accel.front(), self.accel.get(1)) {
                 (Some(a0), Some(a1)) if a0.0 <= t => {
-                    let w = if a1.0 > a0.0 { (t - a0.0) as f64 / (a1.0 - a0.0) as f64 } else { 0.0 };
+                    let w = if a1.0 > a0.0 {
+                        t.saturating_sub(a0.0) as f64 / a1.0.saturating_sub(a0.0) as f64
+                    } else {
+                        0.0
+                    };
                     Some((std::array::from_fn(|k| a0.1[k] + w * (a1.1[k] - a0.1[k])), a0.2))
                 }
                 (Some(a0), _) if t == a0.0 => Some((a0.1, a0.2)),

@@ -129,8 +129,9 @@ pub fn read(
                 st.records(inner, at)?;
             }
             Some(OP_CONN) => st.connection(&fields, &data, at)?,
-            Some(OP_MSG) => st.message(&fields, &data, at)?,
-            Some(_) => {}
+            Some(OP_MSG) => st.message(&fields, &data, at, None)?,
+            Some(0x03 | 0x04 | 0x06) => {}
+            Some(op) => st.out.refuse(format!("byte {at}: a record of unknown op 0x{op:02x}")),
             None => return Err(SessionError::log(Problem::Malformed, path, at, "a record without an 'op' field")),
         }
     }
@@ -224,7 +225,10 @@ impl State<'_, '_> {
             let fields = Fields::parse(h).ok_or_else(|| bad(p, "a record header that is not name=value fields"))?;
             match fields.get("op").and_then(|v| v.first().copied()) {
                 Some(OP_CONN) => self.connection(&fields, d, chunk_at)?,
-                Some(OP_MSG) => self.message(&fields, d, chunk_at)?,
+                Some(OP_MSG) => self.message(&fields, d, chunk_at, Some(p))?,
+                Some(op) if op != 0x03 && op != 0x04 && op != 0x06 && op != OP_CHUNK => self.out.refuse(format!(
+                    "byte {chunk_at} (chunk), record at offset {p} of the chunk: a record of unknown op 0x{op:02x}"
+                )),
                 _ => {}
             }
             p = q + 4 + dl;
@@ -280,20 +284,32 @@ impl State<'_, '_> {
         Ok(())
     }
 
-    fn message(&mut self, fields: &Fields<'_>, data: &[u8], at: u64) -> Result<(), SessionError> {
-        let Some(id) = fields.u32("conn") else { return Ok(()) };
-        let Some(Conn { stream: Some((idx, program)) }) = self.conns.get(&id) else { return Ok(()) };
+    /// A message record (at byte `at`, or at offset `inner` of the chunk at byte `at`).
+    fn message(&mut self, fields: &Fields<'_>, data: &[u8], at: u64, inner: Option<usize>) -> Result<(), SessionError> {
+        let place = || match inner {
+            Some(p) => format!("byte {at} (chunk), record at offset {p} of the chunk"),
+            None => format!("byte {at}"),
+        };
+        let Some(id) = fields.u32("conn") else {
+            self.out.refuse(format!("{}: a message record without its 'conn' field", place()));
+            return Ok(());
+        };
+        let Some(conn) = self.conns.get(&id) else {
+            self.out.refuse(format!("{}: a message on connection {id}, which no connection record declares", place()));
+            return Ok(());
+        };
+        let Conn { stream: Some((idx, program)) } = conn else { return Ok(()) };
         if self.only.is_some_and(|o| o != *idx) {
             return Ok(());
         }
-        let f = program.decode(data).map_err(|e| {
-            SessionError::log(
-                Problem::Malformed,
-                self.path,
-                at,
-                format!("a message on connection {id} (chunk or record at byte {at}), offset {}: {}", e.offset, e.msg),
-            )
-        })?;
+        let f = match program.decode(data) {
+            Ok(f) => f,
+            Err(e) => {
+                let msg = format!("{}: a message on connection {id}, offset {} in it: {}", place(), e.offset, e.msg);
+                self.out.refuse(msg);
+                return Ok(());
+            }
+        };
         let mut t_ns = f.stamp.0 * 1_000_000_000 + i64::from(f.stamp.1);
         if t_ns == 0 {
             self.zero_stamps += 1;
@@ -321,7 +337,7 @@ pub(crate) fn user_program(opts: &ReadOptions, ty: &str, wire: Wire) -> Result<O
     else {
         return Ok(None);
     };
-    let text = std::fs::read_to_string(file)
+    let text = crate::atomic::read_text(file)
         .map_err(|e| format!("{}: cannot read the definition of {ty}: {e}", file.display()))?;
     let mut defs = Definitions::new(wire);
     defs.add_text(ty, &text).map_err(|e| format!("{}: {e}", file.display()))?;

@@ -1,14 +1,14 @@
 //! ROS 2 bags (rosbag2): a folder with `metadata.yaml` and its storage files, sqlite3
 //! (`.db3`: tables `topics` and `messages`, CDR payloads) or MCAP (`.mcap`: schemas,
-//! channels and chunked messages); a lone `.db3` or `.mcap` file reads the same.
+//! channels and chunked messages, read by [`super::mcap`]); a lone `.db3` or `.mcap` file reads the same.
 //!
 //! sqlite3 bags before ROS 2 Iron store no message definitions. The standard
 //! `sensor_msgs/msg/Imu` is built in; a custom type is decoded from the definition the
 //! user gives (`--msg-def TYPE=FILE.msg`), from the bag's `message_definitions` table when
 //! it has one, or, failing both, recognised from the bytes as a wrapper whose first fields
 //! are a `std_msgs/Header` and a `sensor_msgs/Imu` (checked on the first message, and said).
-//! MCAP files carry their definitions (`ros2msg` schemas), chunks are decompressed by the
-//! `mcap` crate (zstd, lz4) one at a time.
+//! MCAP files carry their definitions (`ros2msg` schemas); chunks are decompressed one at
+//! a time (zstd, lz4) with every length checked first ([`super::mcap`]).
 
 use super::ros1::{user_program, FRAME_ROS};
 use super::rosmsg::{Definitions, Program, Wire};
@@ -33,7 +33,7 @@ fn bag_files(dir: &Path) -> Result<(Vec<PathBuf>, Option<String>), SessionError>
     let meta_path = dir.join("metadata.yaml");
     let mut files = Vec::new();
     let mut compression = None;
-    if let Ok(text) = std::fs::read_to_string(&meta_path) {
+    if let Ok(text) = crate::atomic::read_text(&meta_path) {
         let mut in_paths = false;
         for line in text.lines() {
             let t = line.trim();
@@ -159,7 +159,7 @@ fn recognise(first: &[u8]) -> Option<(Program, &'static str)> {
     ];
     for (name, text, what) in candidates {
         defs.add_text(name, text).ok()?;
-        let p = defs.compile(name).ok()?;
+        let p = defs.compile(name).ok()?.prefix();
         if let Ok(f) = p.decode(first) {
             let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
             let ok = f.gyro_rad_s.iter().chain(&f.accel_m_s2).all(|x| x.is_finite())
@@ -190,7 +190,16 @@ fn sqlite(path: &Path, st: &mut Streams<'_>, only: Option<usize>, sink: &mut Sin
             stored.insert(r.0, r.1);
         }
     }
+    // A damaged file (pages, indexes) is said; what can be read is read.
+    if let Ok(check) = db.query_row("PRAGMA quick_check(5)", [], |r| r.get::<_, String>(0)) {
+        if check != "ok" {
+            st.contents(LogFormat::Ros2Sqlite)
+                .warnings
+                .push(format!("the sqlite file is damaged (quick_check: {check}): messages may be missing"));
+        }
+    }
     let mut topics: HashMap<i64, (String, String)> = HashMap::new();
+    let mut all_topics = std::collections::HashSet::new();
     {
         let mut q = db.prepare("SELECT id, name, type, serialization_format FROM topics").map_err(bad)?;
         let rows = q
@@ -200,6 +209,7 @@ fn sqlite(path: &Path, st: &mut Streams<'_>, only: Option<usize>, sink: &mut Sin
             .map_err(bad)?;
         for r in rows {
             let (id, name, ty, ser) = r.map_err(bad)?;
+            all_topics.insert(id);
             if ser == "cdr" {
                 topics.insert(id, (name, ty));
             }
@@ -223,11 +233,20 @@ fn sqlite(path: &Path, st: &mut Streams<'_>, only: Option<usize>, sink: &mut Sin
         }
     }
     st.contents(LogFormat::Ros2Sqlite);
-    let mut q = db.prepare("SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id").map_err(bad)?;
+    // In the order written (rosbag2 inserts as it receives): one row with a corrupt bag time
+    // is then one outlying stamp, not a row moved to the other end of the recording.
+    let mut q = db.prepare("SELECT topic_id, timestamp, data, id FROM messages ORDER BY id").map_err(bad)?;
     let mut rows = q.query([]).map_err(bad)?;
     while let Some(row) = rows.next().map_err(bad)? {
         let id: i64 = row.get(0).map_err(bad)?;
-        let Some((name, ty)) = topics.get(&id) else { continue };
+        let Some((name, ty)) = topics.get(&id) else {
+            if !all_topics.contains(&id) {
+                let row_id: i64 = row.get(3).map_err(bad)?;
+                st.contents(LogFormat::Ros2Sqlite)
+                    .refuse(format!("message id {row_id}: topic id {id}, which the topics table does not list"));
+            }
+            continue;
+        };
         let data =
             row.get_ref(2).map_err(bad)?.as_blob().map_err(|e| {
                 bad(rusqlite::Error::FromSqlConversionFailure(2, rusqlite::types::Type::Blob, Box::new(e)))
@@ -244,89 +263,75 @@ fn sqlite(path: &Path, st: &mut Streams<'_>, only: Option<usize>, sink: &mut Sin
             continue;
         }
         let stamp_ns: i64 = row.get(1).map_err(bad)?;
-        emit(path, program, *idx, data, stamp_ns, sink)?;
+        if let Err(what) = emit(program, *idx, data, stamp_ns, sink)? {
+            let row_id: i64 = row.get(3).map_err(bad)?;
+            st.contents(LogFormat::Ros2Sqlite).refuse(format!("message id {row_id}: {what}"));
+        }
     }
     Ok(())
 }
 
-/// Decodes one message and hands it on (the bag's receive time when the stamp is zero).
+/// Decodes one message and hands it on (the bag's receive time when the stamp is zero);
+/// `Ok(Err(what))` for a message that does not decode (to be refused by the caller).
 fn emit(
-    path: &Path,
     program: &Program,
     idx: usize,
     data: &[u8],
     recv_ns: i64,
     sink: &mut Sink<'_>,
-) -> Result<(), SessionError> {
-    let f = program.decode(data).map_err(|e| {
-        SessionError::log(
-            Problem::Malformed,
-            path,
-            0,
-            format!("a message received at {recv_ns} ns, offset {} in it: {}", e.offset, e.msg),
-        )
-    })?;
+) -> Result<Result<(), String>, SessionError> {
+    let f = match program.decode(data) {
+        Ok(f) => f,
+        Err(e) => return Ok(Err(format!("a message received at {recv_ns} ns, offset {} in it: {}", e.offset, e.msg))),
+    };
     let mut t_ns = f.stamp.0.saturating_mul(1_000_000_000).saturating_add(i64::from(f.stamp.1));
     if t_ns == 0 {
         t_ns = recv_ns;
     }
-    sink(idx, &LogSample { t_ns, gyro_rad_s: f.gyro_rad_s, accel_m_s2: f.accel_m_s2, temp_c: f.temp_c })
+    sink(idx, &LogSample { t_ns, gyro_rad_s: f.gyro_rad_s, accel_m_s2: f.accel_m_s2, temp_c: f.temp_c }).map(Ok)
 }
 
 fn mcap_file(path: &Path, st: &mut Streams<'_>, only: Option<usize>, sink: &mut Sink<'_>) -> Result<(), SessionError> {
-    use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader};
-    use std::io::Read;
-    let (mut file, _) = crate::session::open::open_regular(path)?;
-    let mut reader = LinearReader::new();
+    use super::mcap::Event;
     let mut schemas: HashMap<u16, (String, String, Vec<u8>)> = HashMap::new();
     let mut channels: HashMap<u16, String> = HashMap::new();
-    let mut read_so_far = 0u64;
     st.contents(LogFormat::Mcap);
-    while let Some(event) = reader.next_event() {
-        let event = match event {
-            Ok(e) => e,
-            Err(e) => {
-                let c = st.contents(LogFormat::Mcap);
-                c.warnings.push(format!("near byte {read_so_far}: {e}; the messages before it were read"));
-                break;
+    let dmg = super::mcap::walk(path, &mut |ev, at| {
+        match ev {
+            Event::Schema { id, name, encoding, data } => {
+                schemas.insert(id, (name, encoding, data.to_vec()));
             }
-        };
-        match event {
-            LinearReadEvent::ReadRequest(need) => {
-                let n = file
-                    .read(reader.insert(need))
-                    .map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
-                read_so_far += n as u64;
-                reader.notify_read(n);
-            }
-            LinearReadEvent::Record { opcode, data } => {
-                let rec = mcap::parse_record(opcode, data).map_err(|e| {
-                    SessionError::log(
-                        Problem::Malformed,
-                        path,
-                        read_so_far,
-                        format!("an MCAP record (opcode {opcode}): {e}"),
-                    )
-                })?;
-                match rec {
-                    mcap::records::Record::Schema { header, data } => {
-                        schemas.insert(header.id, (header.name, header.encoding, data.into_owned()));
-                    }
-                    mcap::records::Record::Channel(ch) => {
-                        mcap_channel(path, st, &schemas, &ch)?;
-                        channels.insert(ch.id, ch.topic);
-                    }
-                    mcap::records::Record::Message { header, data } => {
-                        let Some(topic) = channels.get(&header.channel_id) else { continue };
-                        let Some(Some((idx, program))) = st.topics.get(topic) else { continue };
-                        if only.is_some_and(|o| o != *idx) {
-                            continue;
-                        }
-                        emit(path, program, *idx, &data, header.log_time as i64, sink)?;
-                    }
-                    _ => {}
+            Event::Channel { id, schema_id, topic, encoding } => {
+                if !channels.contains_key(&id) {
+                    mcap_channel(path, st, &schemas, schema_id, &topic, &encoding)?;
+                    channels.insert(id, topic);
                 }
             }
+            Event::Message { channel_id, log_time, data } => {
+                let Some(topic) = channels.get(&channel_id) else {
+                    st.contents(LogFormat::Mcap).refuse(format!(
+                        "byte {at}: a message on channel {channel_id}, which no channel record declares"
+                    ));
+                    return Ok(());
+                };
+                let Some(Some((idx, program))) = st.topics.get(topic) else { return Ok(()) };
+                if only.is_some_and(|o| o != *idx) {
+                    return Ok(());
+                }
+                if let Err(what) = emit(program, *idx, data, i64::try_from(log_time).unwrap_or(i64::MAX), sink)? {
+                    st.contents(LogFormat::Mcap).refuse(format!("byte {at}: {what}"));
+                }
+            }
+        }
+        Ok(())
+    })?;
+    let c = st.contents(LogFormat::Mcap);
+    c.warnings.extend(dmg.warnings);
+    for (ch, n) in dmg.lost {
+        if let Some(topic) = channels.get(&ch).filter(|t| st.topics.get(*t).is_some_and(Option::is_some)) {
+            st.contents(LogFormat::Mcap)
+                .warnings
+                .push(format!("{topic}: {n} messages lost in chunks that could not be read"));
         }
     }
     Ok(())
@@ -336,19 +341,21 @@ fn mcap_channel(
     path: &Path,
     st: &mut Streams<'_>,
     schemas: &HashMap<u16, (String, String, Vec<u8>)>,
-    ch: &mcap::records::Channel,
+    schema_id: u16,
+    topic: &str,
+    message_encoding: &str,
 ) -> Result<(), SessionError> {
-    let wire = match ch.message_encoding.as_str() {
+    let wire = match message_encoding {
         "cdr" => Wire::Cdr,
         "ros1" => Wire::Ros1,
         _ => return Ok(()),
     };
-    let Some((ty, encoding, def)) = schemas.get(&ch.schema_id) else { return Ok(()) };
+    let Some((ty, encoding, def)) = schemas.get(&schema_id) else { return Ok(()) };
     let mut defs = Definitions::new(wire);
     let from_file = (encoding == "ros2msg" || encoding == "ros1msg")
         .then(|| defs.add_text(ty, &String::from_utf8_lossy(def)).ok().and_then(|()| defs.compile(ty).ok()))
         .flatten();
     let user = user_program(st.opts, ty, wire).map_err(|m| SessionError::log(Problem::Invalid, path, 0, m))?;
-    st.topic(LogFormat::Mcap, &ch.topic, ty, user.or(from_file), None);
+    st.topic(LogFormat::Mcap, topic, ty, user.or(from_file), None);
     Ok(())
 }

@@ -162,7 +162,7 @@ impl Definitions {
         if !found {
             return Err(DefError { ty: top, msg: "holds no sensor_msgs/Imu".into() });
         }
-        Ok(Program { ops, wire: self.wire })
+        Ok(Program { ops, wire: self.wire, whole: true })
     }
 
     fn emit(&self, ty: &Ty, ops: &mut Vec<Op>, target: Target, found: &mut bool, depth: usize) -> Result<(), DefError> {
@@ -322,6 +322,9 @@ enum Op {
 pub struct Program {
     ops: Vec<Op>,
     wire: Wire,
+    /// The definition covers the whole message (it must fill its record); false for a
+    /// definition guessed for its first fields only.
+    whole: bool,
 }
 
 /// The IMU sample of one message (SI, as `sensor_msgs/Imu` defines it).
@@ -405,6 +408,13 @@ impl Cursor<'_> {
 const MAX_ELEMENTS: usize = 1 << 24;
 
 impl Program {
+    /// The same decoder for a definition of the message's first fields only (a wrapper
+    /// recognised from its bytes): what follows them is not checked.
+    pub fn prefix(mut self) -> Self {
+        self.whole = false;
+        self
+    }
+
     /// Decodes one serialised message (for CDR, starting with its encapsulation header).
     pub fn decode(&self, msg: &[u8]) -> Result<ImuFields, DecodeError> {
         let (origin, big) = match self.wire {
@@ -431,6 +441,21 @@ impl Program {
         let mut cur = Cursor { buf: msg, pos: origin, origin, align: self.wire == Wire::Cdr, big };
         let mut slots = [f64::NAN; 9];
         run(&self.ops, &mut cur, &mut slots, true)?;
+        // The decoded message must fill its record: a corrupt length prefix (a string's, an
+        // array's) shifts every later field, so a message that ends elsewhere is refused
+        // rather than read shifted. CDR may end in up to 3 bytes of padding (to 4).
+        let left = msg.len() - cur.pos.min(msg.len());
+        let padding_ok = self.wire == Wire::Cdr && left < 4 && msg[cur.pos..].iter().all(|&b| b == 0);
+        if self.whole && left != 0 && !padding_ok {
+            return Err(DecodeError {
+                offset: cur.pos,
+                msg: format!(
+                    "the message decodes to {} bytes but its record holds {} (a corrupt length field?): refused, not read shifted",
+                    cur.pos,
+                    msg.len()
+                ),
+            });
+        }
         Ok(ImuFields {
             stamp: (slots[SLOT_SEC] as i64, slots[SLOT_NSEC] as u32),
             gyro_rad_s: [slots[SLOT_GYRO], slots[SLOT_GYRO + 1], slots[SLOT_GYRO + 2]],
@@ -438,6 +463,11 @@ impl Program {
             temp_c: (!slots[SLOT_TEMP].is_nan()).then_some(slots[SLOT_TEMP]),
         })
     }
+}
+
+/// Whether the cursor reads CDR (aligned fields, NUL-terminated strings).
+fn self_is_cdr(cur: &Cursor<'_>) -> bool {
+    cur.align
 }
 
 /// Runs `ops`; `store` is false inside arrays (nothing there is wanted).
@@ -460,6 +490,14 @@ fn run(ops: &[Op], cur: &mut Cursor<'_>, slots: &mut [f64; 9], store: bool) -> R
                     });
                 }
                 cur.skip_raw(n, "string")?;
+                // A CDR string counts its terminating NUL: a length that does not end on one
+                // is corrupt.
+                if self_is_cdr(cur) && n > 0 && cur.buf[cur.pos - 1] != 0 {
+                    return Err(DecodeError {
+                        offset: at,
+                        msg: format!("a CDR string of {n} bytes does not end in its NUL (a corrupt length?)"),
+                    });
+                }
             }
             Op::Array { len, body } => {
                 let at = cur.pos;
@@ -559,6 +597,18 @@ mod tests {
             assert_eq!(f.accel_m_s2.map(f64::to_bits), [1.0, 2.0, -9.8].map(f64::to_bits));
             let cut = p.decode(&w.0[..w.0.len() - 1]).err().map(|e| e.offset);
             assert!(cut.is_some_and(|o| o > 4), "a cut message must be refused with its offset");
+            // Padding to 4 is accepted; a corrupt frame_id length is refused (not shifted)
+            // unless the alignment after it absorbs the change (then nothing moved).
+            let mut padded = w.0.clone();
+            padded.extend_from_slice(&[0, 0, 0]);
+            assert!(p.decode(&padded).is_ok());
+            for len in [0u32, 1, 9, 17, 200] {
+                let mut bad = w.0.clone();
+                bad[12..16].copy_from_slice(&len.to_le_bytes());
+                if let Ok(g) = p.decode(&bad) {
+                    assert_eq!((g.gyro_rad_s, g.accel_m_s2), (f.gyro_rad_s, f.accel_m_s2), "{frame:?} {len}");
+                }
+            }
         }
     }
 
@@ -598,12 +648,19 @@ mod tests {
         m.extend_from_slice(&9u32.to_le_bytes());
         m.extend_from_slice(&3u32.to_le_bytes());
         m.extend_from_slice(b"imu");
-        let vals: Vec<f64> = (0..40).map(f64::from).collect();
+        let vals: Vec<f64> = (0..37).map(f64::from).collect();
         for v in &vals {
             m.extend_from_slice(&v.to_le_bytes());
         }
         let f = p.decode(&m).unwrap_or_else(|e| panic!("{e:?}"));
         assert_eq!(f.stamp, (100, 9));
+        // A corrupt frame_id length shifts every later field: refused, never read shifted.
+        for len in [0u32, 1, 2, 4, 11] {
+            let mut bad = m.clone();
+            bad[12..16].copy_from_slice(&len.to_le_bytes());
+            let e = p.decode(&bad).err().unwrap_or_else(|| panic!("length {len} was read shifted"));
+            assert!(e.msg.contains("refused") || e.msg.contains("ends"), "{e:?}");
+        }
         assert_eq!(f.gyro_rad_s.map(f64::to_bits), [13.0, 14.0, 15.0].map(f64::to_bits));
         assert_eq!(f.accel_m_s2.map(f64::to_bits), [25.0, 26.0, 27.0].map(f64::to_bits));
     }

@@ -16,7 +16,6 @@ use super::num::Num as Basic;
 use super::{Contents, LogFormat, LogSample, Pairer, Sink, StreamDesc};
 use crate::session::error::{Problem, SessionError};
 use std::collections::HashMap;
-use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
 const FRAME_PX4: &str = "PX4 FRD (x forward, y right, z down), rad/s and m/s^2";
@@ -99,6 +98,32 @@ fn flatten(
     Ok(off)
 }
 
+/// The byte size of format `name` and of its trailing `_padding` field (which a data
+/// message may leave out), without expanding its arrays; `None` when a type is unknown.
+fn format_size(formats: &HashMap<String, Format>, name: &str, depth: usize) -> Option<(usize, usize)> {
+    if depth > 8 {
+        return None;
+    }
+    let f = formats.get(name)?;
+    let (mut total, mut pad) = (0usize, 0usize);
+    for item in f.text.split(';').filter(|s| !s.trim().is_empty()) {
+        let mut w = item.split_whitespace();
+        let (ty, field) = (w.next()?, w.next()?);
+        let (base_ty, count) = match ty.find('[') {
+            Some(i) => (&ty[..i], ty[i + 1..].trim_end_matches(']').parse::<usize>().ok()?),
+            None => (ty, 1),
+        };
+        let one = match basic(base_ty) {
+            Some((_, size)) => size,
+            None => format_size(formats, base_ty, depth + 1)?.0,
+        };
+        let bytes = one.checked_mul(count)?;
+        total = total.checked_add(bytes)?;
+        pad = if field.starts_with("_padding") { bytes } else { 0 };
+    }
+    (total <= 65_535).then_some((total, pad))
+}
+
 /// How to read the IMU fields of a subscribed topic.
 #[derive(Debug, Clone)]
 enum Reader {
@@ -133,6 +158,11 @@ struct State<'s, 'k> {
     dropouts: (u64, f64),
     params: Vec<(String, f64)>,
     err: Option<SessionError>,
+    /// Size range of each subscribed message id's data message (payload bytes, with the
+    /// 2-byte id; a trailing `_padding` may be left out); `None` when its format is unknown.
+    sizes: HashMap<u16, Option<(usize, usize)>>,
+    /// IMU samples lost in corrupt stretches (estimated from the headers found in them).
+    lost: u64,
 }
 
 /// Reads a ULog (see the module docs).
@@ -160,10 +190,12 @@ pub fn read(path: &Path, only: Option<usize>, sink: &mut Sink<'_>) -> Result<Con
         dropouts: (0, 0.0),
         params: Vec::new(),
         err: None,
+        sizes: HashMap::new(),
+        lost: 0,
     };
+    let mut win = super::window::Window::new(input.into_inner());
     let mut appended: Vec<u64> = Vec::new();
     let mut pos = 16u64;
-    let mut buf = Vec::new();
     let mut end = size;
     let mut segment = 0usize;
     loop {
@@ -173,15 +205,16 @@ pub fn read(path: &Path, only: Option<usize>, sink: &mut Sink<'_>) -> Result<Con
                 pos = appended[segment];
                 end = appended.get(segment + 1).copied().unwrap_or(size);
                 segment += 1;
-                input.seek(SeekFrom::Start(pos)).map_err(io)?;
                 continue;
             }
             break;
         }
-        let mut h = [0u8; 3];
-        let n = super::read_up_to(&mut input, &mut h).map_err(io)?;
-        let msg_size = usize::from(u16::from_le_bytes([h[0], h[1]]));
-        if n < 3 || pos + 3 + msg_size as u64 > end {
+        let h = win.get(pos, 5).map_err(io)?;
+        let msg_size = h.get(..2).map_or(0, |s| usize::from(u16::from_le_bytes([s[0], s[1]])));
+        let next = pos + 3 + msg_size as u64;
+        let ok_here = st.plausible(h, pos == 16);
+        let (have, ty) = (h.len(), h.get(2).copied().unwrap_or(0));
+        if have >= 3 && ok_here && next > end && end - pos < 3 + 65_535 {
             let what =
                 if segment < appended.len() { "the data before the appended segment end" } else { "the file ends" };
             st.out
@@ -190,22 +223,40 @@ pub fn read(path: &Path, only: Option<usize>, sink: &mut Sink<'_>) -> Result<Con
             pos = end;
             continue;
         }
-        buf.resize(msg_size, 0);
-        input.read_exact(&mut buf).map_err(io)?;
-        if h[2] == b'B' && pos == 16 {
-            appended = flag_bits(path, &buf, size)?;
+        if have < 3 {
+            st.out.warnings.push(format!("byte {pos}: the file ends inside a message header (cut off)"));
+            pos = end;
+            continue;
+        }
+        // A length is trusted only when the header after the message is a header too.
+        let sub = subscribed_id(ty, win.get(pos + 3, 3).map_err(io)?);
+        let ok_next = next == end || (next < end && st.plausible_after(win.get(next, 5).map_err(io)?, false, sub));
+        // A data message whose size is its format's is trusted even when the header after it
+        // is not (that header is the corrupt one, and is met next).
+        if !(ok_here && (ok_next || ty == b'D')) {
+            pos = st.resync(&mut win, pos, end).map_err(io)?;
+            continue;
+        }
+        let buf = win.get(pos + 3, msg_size).map_err(io)?;
+        if ty == b'B' && pos == 16 {
+            appended = flag_bits(path, buf, size)?;
             if let Some(&first) = appended.first() {
                 end = first;
             }
         } else {
-            st.message(h[2], &buf, pos)?;
+            st.message(ty, buf, pos)?;
         }
         if let Some(e) = st.err.take() {
             return Err(e);
         }
-        pos += 3 + msg_size as u64;
+        pos = next;
     }
     st.finish()
+}
+
+/// The message id an `A` (subscription) message with payload start `p` subscribes.
+fn subscribed_id(ty: u8, p: &[u8]) -> Option<u16> {
+    (ty == b'A').then(|| p.get(1..3).map(|s| u16::from_le_bytes([s[0], s[1]]))).flatten()
 }
 
 /// The appended-data offsets of a flag-bits message (refusing unknown incompatible bits).
@@ -301,12 +352,20 @@ impl State<'_, '_> {
             ));
         };
         let name = String::from_utf8_lossy(&b[3..]).to_string();
+        let size = format_size(&self.formats, &name, 0).map(|(total, pad)| (2 + total - pad, 2 + total));
+        self.sizes.insert(id, size);
         let mut fields = HashMap::new();
         let reader = match name.as_str() {
             "sensor_combined" | "sensor_accel" | "sensor_gyro" => {
                 flatten(&self.formats, &name, "", 0, &mut fields, 0)
                     .map_err(|m| SessionError::log(Problem::Malformed, self.path, pos, m))?;
-                self.reader(&name, multi, &fields)
+                let r = self.reader(&name, multi, &fields);
+                if r.is_none() {
+                    self.out.warnings.push(format!(
+                        "byte {pos}: {name} (multi_id {multi}) lacks the fields crosscal reads (timestamp, x/y/z or gyro_rad/accelerometer_m_s2): its samples are not read"
+                    ));
+                }
+                r
             }
             _ => None,
         };
@@ -367,7 +426,7 @@ impl State<'_, '_> {
                     return;
                 }
                 let (Some(t), Some(g), Some(a)) = (get(*t), three(gyro, &get), three(accel, &get)) else { return };
-                let s = LogSample { t_ns: t as i64 * 1000, gyro_rad_s: g, accel_m_s2: a, temp_c: None };
+                let s = LogSample { t_ns: (t as i64).saturating_mul(1000), gyro_rad_s: g, accel_m_s2: a, temp_c: None };
                 if let Err(e) = (self.sink)(*stream, &s) {
                     self.err.get_or_insert(e);
                 }
@@ -388,8 +447,8 @@ impl State<'_, '_> {
                     }
                 };
                 if *accel {
-                    pairer.accel(t as i64 * 1000, v, temp, &mut emit);
-                } else if !pairer.gyro(t as i64 * 1000, v, temp, &mut emit) {
+                    pairer.accel((t as i64).saturating_mul(1000), v, temp, &mut emit);
+                } else if !pairer.gyro((t as i64).saturating_mul(1000), v, temp, &mut emit) {
                     err.get_or_insert(SessionError::log(
                         Problem::Malformed,
                         self.path,
@@ -399,6 +458,94 @@ impl State<'_, '_> {
                 }
             }
         }
+    }
+
+    /// Whether `h` (at least 3 bytes: size, type, then a data message's id) can start a
+    /// message here: a known type with a size its kind allows; a data message of a
+    /// subscribed id, of its format's size.
+    fn plausible(&self, h: &[u8], first: bool) -> bool {
+        self.plausible_after(h, first, None)
+    }
+
+    /// [`Self::plausible`], with `sub` a message id the message before subscribes (its data
+    /// may follow at once).
+    fn plausible_after(&self, h: &[u8], first: bool, sub: Option<u16>) -> bool {
+        let (Some(s), Some(&ty)) = (h.get(..2), h.get(2)) else { return false };
+        let size = usize::from(u16::from_le_bytes([s[0], s[1]]));
+        match ty {
+            b'B' => first && size >= 40,
+            b'F' | b'I' | b'M' | b'P' | b'Q' => size >= 2,
+            b'A' => size >= 4,
+            b'L' => size >= 9,
+            b'C' => size >= 11,
+            b'R' | b'O' => size == 2,
+            b'S' => size == 8,
+            b'D' => {
+                let Some(id) = h.get(3..5).map(|s| u16::from_le_bytes([s[0], s[1]])) else { return false };
+                if sub == Some(id) {
+                    return size >= 2;
+                }
+                match self.sizes.get(&id) {
+                    Some(Some((lo, hi))) => (*lo..=*hi).contains(&size),
+                    Some(None) => size >= 2,
+                    None => false,
+                }
+            }
+            _ => false,
+        }
+    }
+
+    /// After a corrupt message at `pos`: the next offset where two messages in a row are
+    /// plausible, with a warning giving both offsets and the IMU samples lost between.
+    fn resync<R: std::io::Read + std::io::Seek>(
+        &mut self,
+        win: &mut super::window::Window<R>,
+        pos: u64,
+        end: u64,
+    ) -> std::io::Result<u64> {
+        let imu_ids: Vec<(u16, (usize, usize))> = self
+            .subs
+            .iter()
+            .filter(|(_, r)| r.is_some())
+            .filter_map(|(id, _)| self.sizes.get(id).copied().flatten().map(|range| (*id, range)))
+            .collect();
+        let mut q = pos + 1;
+        let mut lost = 0u64;
+        // The corrupt message itself, when its header still names an IMU topic.
+        let h0 = win.get(pos, 5)?;
+        if h0.get(2) == Some(&b'D') && h0.len() == 5 && imu_ids.iter().any(|(id, _)| id.to_le_bytes() == h0[3..5]) {
+            lost += 1;
+        }
+        while q < end {
+            let h = win.get(q, 5)?;
+            if h.len() < 3 {
+                q = end;
+                break;
+            }
+            let size = u64::from(u16::from_le_bytes([h[0], h[1]]));
+            if self.plausible(h, false) {
+                // An IMU data message's header inside the skipped bytes: a sample lost.
+                let next = q + 3 + size;
+                let imu = h[2] == b'D'
+                    && imu_ids
+                        .iter()
+                        .any(|(id, (lo, hi))| id.to_le_bytes() == h[3..5] && (*lo..=*hi).contains(&(size as usize)));
+                let ty = h[2];
+                let sub = subscribed_id(ty, win.get(q + 3, 3)?);
+                let ok = next == end || (next < end && self.plausible_after(win.get(next, 5)?, false, sub));
+                if ok {
+                    break;
+                }
+                lost += u64::from(imu);
+            }
+            q += 1;
+        }
+        self.lost += lost;
+        self.out.refuse(format!(
+            "byte {pos}: a corrupt message header (not a message of a known type and size, or not followed by one); {} bytes skipped to the next good message at byte {q}, {lost} IMU sample(s) lost there",
+            q - pos
+        ));
+        Ok(q)
     }
 
     fn finish(mut self) -> Result<Contents, SessionError> {
@@ -421,6 +568,9 @@ impl State<'_, '_> {
                 "{} logging dropouts, {:.3} s in all (samples lost there)",
                 self.dropouts.0, self.dropouts.1
             ));
+        }
+        if self.lost > 0 {
+            self.out.warnings.push(format!("{} IMU samples lost in corrupt stretches of the log in all", self.lost));
         }
         self.out.applied = self.params;
         Ok(self.out)

@@ -57,6 +57,8 @@ pub struct LogImported {
     pub summary: Summary,
     /// Samples dropped because their time stamp did not advance.
     pub dropped_time: u64,
+    /// The stream's statistics (samples, rate, span) before --from/--to.
+    pub stats: StreamStats,
     /// The calibration the log says was applied to this stream (as in the manifest).
     pub applied: Vec<(String, f64)>,
 }
@@ -200,6 +202,7 @@ pub fn import_log(
         kind: (kind, why),
         summary,
         dropped_time: dropped,
+        stats: st.clone(),
         applied: manifest.source.map(|s| s.applied).unwrap_or_default(),
     })
 }
@@ -228,7 +231,7 @@ fn write_recording(
             if i != idx {
                 return Ok(());
             }
-            let t = (s.t_ns - st.first_ns) as f64 * 1e-9;
+            let t = s.t_ns.saturating_sub(st.first_ns) as f64 * 1e-9;
             if t < from || t > to {
                 return Ok(());
             }
