@@ -8,6 +8,7 @@ mod cli;
 mod common;
 mod diagnose;
 mod diagnose_hard;
+mod diagnose_stand;
 mod docs;
 mod exit_codes;
 mod exports;

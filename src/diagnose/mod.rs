@@ -21,12 +21,15 @@
 pub mod algebra;
 mod disagreement;
 pub mod lines;
+mod mount;
 pub mod picture;
 pub mod protocol;
 pub mod report;
 pub mod select;
 pub mod separate;
 pub mod space;
+pub mod stand;
+mod stand_words;
 mod temperature;
 
 pub use disagreement::{per_run_disagreements, Disagreement, DISAGREEMENT_Z};
@@ -34,6 +37,7 @@ pub use lines::Line;
 pub use picture::{channel_reports, residuals, RunMotions, RunResiduals};
 pub use select::{Estimate, Evidence, BIC_EVIDENCE};
 pub use space::HARMONICS;
+pub use stand::{StandFinding, StandValue};
 pub use temperature::{DegreeChoice, DegreeScore};
 
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
@@ -201,6 +205,10 @@ pub struct Diagnosis {
     /// Coefficients whose single-run estimates disagree with the all-run fit (a sign that
     /// something depends on rate, direction, cone angle or mount).
     pub disagreements: Vec<Disagreement>,
+    /// What the stand (or the environment) did that the manifest does not say, with the
+    /// estimated values: the rest of the diagnosis is on the motion so corrected.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stand: Vec<StandFinding>,
 }
 
 /// The model at the end of a diagnosis's ladder: the base model plus each added effect.
@@ -340,11 +348,48 @@ pub fn diagnose(
     opts: &FitOptions,
 ) -> Result<Diagnosis, EstimateError> {
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
-    let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
-    conclude(a, model, runs, motions, opts, has_temp)
+    let Some(mut suspect) = stand::Suspect::new(runs, motions) else {
+        let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
+        return conclude(a, model, runs, motions, opts, has_temp, None)?
+            .ok_or_else(|| EstimateError::NotConverged("the diagnosis did not settle".into()));
+    };
+    for (i, mount, finding) in mount::wrong_mounts(model, runs, motions, opts)? {
+        suspect.set_mount(i, mount, finding);
+    }
+    // The stand as a suspect: each time a stand group explains the residual better than any
+    // sensor effect, the motion is corrected and the diagnosis starts again on it.
+    for _ in 0..=MAX_STAND_FINDINGS {
+        let tracks = suspect.tracks(runs);
+        let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
+        let owned = suspect.motions(motions);
+        let now: Vec<&crate::session::MotionSpec> = owned.iter().collect();
+        let a = analyse(model, refit(model, &moved, opts)?, &moved, &now, has_temp);
+        let check = StandCheck { suspect: &mut suspect, declared: runs };
+        if let Some(d) = conclude(a, model, &moved, &now, opts, has_temp, Some(check))? {
+            return Ok(d);
+        }
+    }
+    Err(EstimateError::NotConverged(format!(
+        "the stand kept explaining more after {MAX_STAND_FINDINGS} corrections; check the runs' labels"
+    )))
 }
 
-/// The diagnosis of an analysed session.
+/// Stand groups found at most (each restarts the diagnosis on the corrected motion).
+const MAX_STAND_FINDINGS: usize = 8;
+
+/// The stand check of a climb: the suspect and the runs with their declared motion.
+struct StandCheck<'s, 'r, 'a> {
+    suspect: &'s mut stand::Suspect,
+    declared: &'r [FitRun<'a>],
+}
+
+/// The noise model of every run and channel of an analysis.
+fn noise_models(space: &Space) -> Vec<Vec<crate::stats::ArModel>> {
+    space.runs.iter().map(|rg| rg.noise.iter().map(|n| n.ar.clone()).collect()).collect()
+}
+
+/// The diagnosis of an analysed session (None: the stand check corrected the motion and
+/// the diagnosis starts again).
 fn conclude(
     a: Analysis,
     model: &Model,
@@ -352,7 +397,8 @@ fn conclude(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
     has_temp: bool,
-) -> Result<Diagnosis, EstimateError> {
+    mut stand_check: Option<StandCheck<'_, '_, '_>>,
+) -> Result<Option<Diagnosis>, EstimateError> {
     let mut warnings = Vec::new();
     if !has_temp {
         warnings.push("no temperature in some runs: temperature effects were not tried".to_string());
@@ -365,7 +411,11 @@ fn conclude(
     } else {
         Vec::new()
     };
-    let (mut steps, first_round, mut a) = climb(a, model, runs, motions, opts, has_temp, &mut warnings)?;
+    let (mut steps, first_round, mut a, restart) =
+        climb(a, model, runs, motions, opts, has_temp, &mut warnings, stand_check.as_mut())?;
+    if restart {
+        return Ok(None);
+    }
     // Each temperature polynomial's degree, again with every effect found in the model.
     let mut changed = temperature::revisit_degrees(&a.space, &mut steps, &mut warnings);
     // A sensor still systematic after its effects: only the first of them is the closest
@@ -433,9 +483,18 @@ fn conclude(
         ));
     }
     let unidentifiable = unidentifiable(&final_fit, &first_round);
+    let stand = match stand_check {
+        Some(sc) if sc.suspect.changed() => {
+            let sys = sc.suspect.systems(&ladder_of(model, &steps), &final_fit, runs, &noise_models(&a.space));
+            sc.suspect.findings(&sys, &a.names)
+        }
+        _ => Vec::new(),
+    };
+    // The stand explains what the unit does not need to: nothing left is "explained".
+    let verdict = if verdict == Verdict::Adequate && !stand.is_empty() { Verdict::Explained } else { verdict };
     let proposal =
         if verdict == Verdict::Explained { steps.iter().map(|s| s.effect.clone()).collect() } else { Vec::new() };
-    Ok(Diagnosis {
+    Ok(Some(Diagnosis {
         model: model.name.clone(),
         channels,
         noise: noise_reports(&a.space),
@@ -449,7 +508,17 @@ fn conclude(
         warnings,
         final_fit,
         disagreements,
-    })
+        stand,
+    }))
+}
+
+/// The base model plus each step's effect.
+fn ladder_of(model: &Model, steps: &[Step]) -> Model {
+    let mut m = model.clone();
+    for s in steps {
+        let _ = m.add_effect(&s.effect);
+    }
+    m
 }
 
 fn run_span(r: &FitRun<'_>) -> f64 {
@@ -506,7 +575,9 @@ fn refit_reduced(
     Ok(f)
 }
 
-type Climb = (Vec<Step>, Vec<Candidate>, Analysis);
+/// Steps, first-round candidates, the last analysis, and whether the stand check changed
+/// the motion (the climb then stops: the diagnosis starts again on the corrected motion).
+type Climb = (Vec<Step>, Vec<Candidate>, Analysis, bool);
 
 /// The greedy climb over candidate effects (module documentation, step 3). After each
 /// effect is added the model is refitted (nonlinear parameters by variable projection on
@@ -521,6 +592,7 @@ fn climb(
     opts: &FitOptions,
     has_temp: bool,
     warnings: &mut Vec<String>,
+    mut stand_check: Option<&mut StandCheck<'_, '_, '_>>,
 ) -> Result<Climb, EstimateError> {
     let mut current = model.clone();
     let mut steps: Vec<Step> = Vec::new();
@@ -559,6 +631,16 @@ fn climb(
             first_round = Some(scored.iter().map(|s| s.0.clone()).collect());
         }
         let passing: Vec<&(Candidate, Vec<usize>)> = scored.iter().filter(|s| s.0.rejected.is_none()).collect();
+        if let Some(sc) = stand_check.as_deref_mut() {
+            // The stand beside the unit: a stand group that beats every sensor candidate on BIC.
+            let sensor_bic = passing.iter().map(|c| c.0.delta_bic).reduce(f64::min);
+            let noise = noise_models(space);
+            let sys = sc.suspect.systems(&current, &a.base_fit, runs, &noise);
+            if let Some(pick) = sc.suspect.pick(&sys, sensor_bic) {
+                sc.suspect.accept(pick, &current, sc.declared, &noise, opts)?;
+                return Ok((steps, first_round.unwrap_or_default(), a, true));
+            }
+        }
         let Some(best) = passing.iter().max_by(|x, y| x.0.evidence.delta_q.total_cmp(&y.0.evidence.delta_q)) else {
             break;
         };
@@ -596,7 +678,7 @@ fn climb(
         current = m;
         a = next;
     }
-    Ok((steps, first_round.unwrap_or_default(), a))
+    Ok((steps, first_round.unwrap_or_default(), a, false))
 }
 
 /// The passing candidates that explain the same residual feature as `best`: each adds less
@@ -783,7 +865,8 @@ pub fn compare(
     let first = analyse(&base, refit(&base, runs, opts)?, runs, motions, has_temp);
     let space = first.space.clone();
     let base_fit = first.base_fit.clone();
-    let d = conclude(first, &base, runs, motions, opts, has_temp)?;
+    let d = conclude(first, &base, runs, motions, opts, has_temp, None)?
+        .ok_or_else(|| EstimateError::NotConverged("the diagnosis did not settle".into()))?;
     let mut models = vec![("paper (eqs. 3-4)".to_string(), Model::paper()), ("default".to_string(), base.clone())];
     let mut m = base;
     for st in &d.steps {
