@@ -43,7 +43,12 @@ fn within(f: &StandFinding, name: &str, truth: f64) {
 /// A stand error alone: named as the stand, no sensor effect, residual explained.
 fn stand_only(stand: &[&str], seed: u64) -> Diagnosis {
     let d = run_diagnose(&on_stand("", &[], stand, seed));
-    assert!(d.steps.is_empty(), "{stand:?} seed {seed}: sensor effects added: {:?} (stand {:#?})", effects(&d), d.stand);
+    assert!(
+        d.steps.is_empty(),
+        "{stand:?} seed {seed}: sensor effects added: {:?} (stand {:#?})",
+        effects(&d),
+        d.stand
+    );
     assert!(d.unexplained.is_empty(), "{stand:?} seed {seed}: {:?}", d.unexplained);
     for f in &d.stand {
         println!("{}", f.message);
@@ -56,7 +61,11 @@ fn a_cone_angle_off_its_label_is_the_stand() {
     for seed in [1, 2] {
         let d = stand_only(&["cone=0.3"], seed);
         within(finding(&d, &["cone-angle"]), "cone angle offset", 0.3);
-        assert!(d.stand[0].message.contains("10.300") && d.stand[0].message.contains("--stand"), "{}", d.stand[0].message);
+        assert!(
+            d.stand[0].message.contains("10.300") && d.stand[0].message.contains("--stand"),
+            "{}",
+            d.stand[0].message
+        );
     }
 }
 
@@ -126,4 +135,13 @@ fn clean_stands_bring_no_stand_finding() {
     }
     println!("false discoveries on 6 clean sessions: {false_findings}");
     assert_eq!(false_findings, 0);
+}
+
+#[test]
+fn a_run_on_another_mount_is_named_with_the_mount_that_fits() {
+    // Declared [+y, +z, +x]; recorded on [+z, +x, +y].
+    let d = stand_only(&["mount=yzx-cone+10:+z,+x,+y"], 12);
+    let f = finding(&d, &["mount"]);
+    assert!(f.message.contains("'yzx-cone+10'") && f.message.contains("[+z, +x, +y]"), "{}", f.message);
+    assert_eq!(d.stand.iter().filter(|f| f.id == "mount").count(), 1, "{:#?}", d.stand);
 }

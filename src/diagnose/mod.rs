@@ -31,6 +31,7 @@ pub mod space;
 pub mod stand;
 mod stand_words;
 mod temperature;
+mod with_stand;
 
 pub use disagreement::{per_run_disagreements, Disagreement, DISAGREEMENT_Z};
 pub use lines::Line;
@@ -348,44 +349,12 @@ pub fn diagnose(
     opts: &FitOptions,
 ) -> Result<Diagnosis, EstimateError> {
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
-    let Some(mut suspect) = stand::Suspect::new(runs, motions) else {
+    let Some(suspect) = stand::Suspect::new(runs, motions) else {
         let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
         return conclude(a, model, runs, motions, opts, has_temp, None)?
             .ok_or_else(|| EstimateError::NotConverged("the diagnosis did not settle".into()));
     };
-    for (i, mount, finding) in mount::wrong_mounts(model, runs, motions, opts)? {
-        suspect.set_mount(i, mount, finding);
-    }
-    // The stand as a suspect: each time a stand group explains the residual better than any
-    // sensor effect, the motion is corrected and the diagnosis starts again on it.
-    for _ in 0..=MAX_STAND_FINDINGS {
-        let tracks = suspect.tracks(runs);
-        let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
-        let owned = suspect.motions(motions);
-        let now: Vec<&crate::session::MotionSpec> = owned.iter().collect();
-        let a = analyse(model, refit(model, &moved, opts)?, &moved, &now, has_temp);
-        let check = StandCheck { suspect: &mut suspect, declared: runs };
-        if let Some(d) = conclude(a, model, &moved, &now, opts, has_temp, Some(check))? {
-            return Ok(d);
-        }
-    }
-    Err(EstimateError::NotConverged(format!(
-        "the stand kept explaining more after {MAX_STAND_FINDINGS} corrections; check the runs' labels"
-    )))
-}
-
-/// Stand groups found at most (each restarts the diagnosis on the corrected motion).
-const MAX_STAND_FINDINGS: usize = 8;
-
-/// The stand check of a climb: the suspect and the runs with their declared motion.
-struct StandCheck<'s, 'r, 'a> {
-    suspect: &'s mut stand::Suspect,
-    declared: &'r [FitRun<'a>],
-}
-
-/// The noise model of every run and channel of an analysis.
-fn noise_models(space: &Space) -> Vec<Vec<crate::stats::ArModel>> {
-    space.runs.iter().map(|rg| rg.noise.iter().map(|n| n.ar.clone()).collect()).collect()
+    with_stand::diagnose(suspect, model, runs, motions, opts, has_temp)
 }
 
 /// The diagnosis of an analysed session (None: the stand check corrected the motion and
@@ -397,7 +366,7 @@ fn conclude(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
     has_temp: bool,
-    mut stand_check: Option<StandCheck<'_, '_, '_>>,
+    mut stand_check: Option<with_stand::StandCheck<'_, '_, '_>>,
 ) -> Result<Option<Diagnosis>, EstimateError> {
     let mut warnings = Vec::new();
     if !has_temp {
@@ -483,13 +452,7 @@ fn conclude(
         ));
     }
     let unidentifiable = unidentifiable(&final_fit, &first_round);
-    let stand = match stand_check {
-        Some(sc) if sc.suspect.changed() => {
-            let sys = sc.suspect.systems(&ladder_of(model, &steps), &final_fit, runs, &noise_models(&a.space));
-            sc.suspect.findings(&sys, &a.names)
-        }
-        _ => Vec::new(),
-    };
+    let stand = with_stand::findings(stand_check, model, &steps, &final_fit, runs, &a);
     // The stand explains what the unit does not need to: nothing left is "explained".
     let verdict = if verdict == Verdict::Adequate && !stand.is_empty() { Verdict::Explained } else { verdict };
     let proposal =
@@ -510,15 +473,6 @@ fn conclude(
         disagreements,
         stand,
     }))
-}
-
-/// The base model plus each step's effect.
-fn ladder_of(model: &Model, steps: &[Step]) -> Model {
-    let mut m = model.clone();
-    for s in steps {
-        let _ = m.add_effect(&s.effect);
-    }
-    m
 }
 
 fn run_span(r: &FitRun<'_>) -> f64 {
@@ -592,7 +546,7 @@ fn climb(
     opts: &FitOptions,
     has_temp: bool,
     warnings: &mut Vec<String>,
-    mut stand_check: Option<&mut StandCheck<'_, '_, '_>>,
+    mut stand_check: Option<&mut with_stand::StandCheck<'_, '_, '_>>,
 ) -> Result<Climb, EstimateError> {
     let mut current = model.clone();
     let mut steps: Vec<Step> = Vec::new();
@@ -632,12 +586,8 @@ fn climb(
         }
         let passing: Vec<&(Candidate, Vec<usize>)> = scored.iter().filter(|s| s.0.rejected.is_none()).collect();
         if let Some(sc) = stand_check.as_deref_mut() {
-            // The stand beside the unit: a stand group that beats every sensor candidate on BIC.
             let sensor_bic = passing.iter().map(|c| c.0.delta_bic).reduce(f64::min);
-            let noise = noise_models(space);
-            let sys = sc.suspect.systems(&current, &a.base_fit, runs, &noise);
-            if let Some(pick) = sc.suspect.pick(&sys, sensor_bic) {
-                sc.suspect.accept(pick, &current, sc.declared, &noise, opts)?;
+            if sc.check(&current, &a, runs, sensor_bic, opts)? {
                 return Ok((steps, first_round.unwrap_or_default(), a, true));
             }
         }

@@ -78,8 +78,7 @@ pub fn wrong_mounts(
         return Ok(Vec::new());
     }
     let all = refit(model, runs, opts)?;
-    let scores: Vec<f64> =
-        runs.iter().map(|r| run_score(model, &all, r, r.track, r.len().div_ceil(SAMPLES))).collect();
+    let scores: Vec<f64> = runs.iter().map(|r| run_score(model, &all, r, r.track, r.len().div_ceil(SAMPLES))).collect();
     let mut sorted = scores.clone();
     let median = crate::stats::median(&mut sorted).unwrap_or(0.0);
     let suspects: Vec<usize> = (0..runs.len())
@@ -88,8 +87,7 @@ pub fn wrong_mounts(
     if suspects.is_empty() || suspects.len() * 2 > runs.len() {
         return Ok(Vec::new());
     }
-    let others: Vec<FitRun<'_>> =
-        (0..runs.len()).filter(|i| !suspects.contains(i)).map(|i| runs[i]).collect();
+    let others: Vec<FitRun<'_>> = (0..runs.len()).filter(|i| !suspects.contains(i)).map(|i| runs[i]).collect();
     let rest = refit(model, &others, opts)?;
     let rest_scores: Vec<f64> =
         others.iter().map(|r| run_score(model, &rest, r, r.track, r.len().div_ceil(SAMPLES))).collect();
@@ -103,7 +101,8 @@ pub fn wrong_mounts(
         else {
             continue;
         };
-        let g = if run.is_empty() { 9.80665 } else { run.track.at(0).a_m_s2.xyz.iter().map(|x| x * x).sum::<f64>().sqrt() };
+        let g =
+            if run.is_empty() { 9.80665 } else { run.track.at(0).a_m_s2.xyz.iter().map(|x| x * x).sum::<f64>().sqrt() };
         let stand = StandMotion::ideal(cone_angle_deg.to_radians(), rate_deg_s.to_radians(), phase_deg.to_radians());
         let step = run.len().div_ceil(SAMPLES);
         let now = run_score(model, &rest, run, run.track, step);

@@ -159,7 +159,11 @@ impl Suspect {
             let kind = match (m, run.track.mount()) {
                 (MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg }, Some(mount)) if norm.is_finite() => {
                     g_m_s2 = norm;
-                    let d = StandMotion::ideal(cone_angle_deg.to_radians(), rate_deg_s.to_radians(), phase_deg.to_radians());
+                    let d = StandMotion::ideal(
+                        cone_angle_deg.to_radians(),
+                        rate_deg_s.to_radians(),
+                        phase_deg.to_radians(),
+                    );
                     RunStand::Conic { declared: d, now: d, mount: mount.clone() }
                 }
                 (MotionSpec::Static { earth_rate_rad_s, .. }, _) if norm > 0.0 && norm.is_finite() => {
@@ -320,9 +324,8 @@ impl Suspect {
             let sf = fit.sensor(s);
             model.terms(s).iter().map(|t| sf.value(&t.term.name).unwrap_or(t.term.nominal)).collect()
         });
-        let seen: [Option<Track>; 2] = SensorKind::BOTH.map(|s| {
-            crate::estimate::seen_tracks(model, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop())
-        });
+        let seen: [Option<Track>; 2] = SensorKind::BOTH
+            .map(|s| crate::estimate::seen_tracks(model, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
         let resid = super::picture::run_residual(model, fit, run).0;
         // Per channel: global indices of its columns (model coefficients, then stand).
         let index: Vec<Vec<usize>> = (0..6)
@@ -579,7 +582,8 @@ impl Systems {
             if !own.is_empty() {
                 let go = DMatrix::from_fn(own.len(), own.len(), |i, j| gf[(own[i], own[j])]);
                 let rhs = DVector::from_fn(own.len(), |i, _| {
-                    bf[own[i]] - (0..g.nrows()).filter(|j| !own.contains(j)).map(|j| gf[(own[i], j)] * beta[j]).sum::<f64>()
+                    bf[own[i]]
+                        - (0..g.nrows()).filter(|j| !own.contains(j)).map(|j| gf[(own[i], j)] * beta[j]).sum::<f64>()
                 });
                 let sol = pinv_sym(&go).0 * rhs;
                 for (i, &o) in own.iter().enumerate() {
@@ -604,13 +608,28 @@ impl Suspect {
     /// `sensor_bic` (the best sensor candidate's ΔBIC, if any passes).
     pub fn pick(&self, sys: &Systems, sensor_bic: Option<f64>) -> Option<Pick> {
         let mut best: Option<Pick> = None;
+        let mut passed: Vec<&str> = Vec::new();
         for (gi, g) in self.groups.iter().enumerate() {
             let (ev, values) = sys.evidence(&g.params);
             if ev.rejection().is_some() || !self.plausible(g.id, &values) {
                 continue;
             }
+            passed.push(g.id);
             if best.as_ref().is_none_or(|b| ev.delta_bic < b.evidence.delta_bic) {
                 best = Some(Pick { group: gi, evidence: ev });
+            }
+        }
+        // One value for every run before one per run: the common group first when it passes
+        // (its linearisation around the labels leaves a little that per-run values absorb);
+        // the per-run group comes next, around the corrected motion, only if the runs differ.
+        if let Some(b) = best.as_mut() {
+            if let Some(common) = self.groups[b.group].id.strip_suffix("-per-run") {
+                if passed.contains(&common) {
+                    if let Some(ci) = self.groups.iter().position(|g| g.id == common) {
+                        b.group = ci;
+                        b.evidence = sys.evidence(&self.groups[ci].params).0;
+                    }
+                }
             }
         }
         best.filter(|b| sensor_bic.is_none_or(|s| b.evidence.delta_bic < s))
@@ -673,9 +692,14 @@ impl Suspect {
     /// motion: the values are the motion's departures from the labels). `names` are the
     /// runs' names.
     pub fn findings(&self, sys: &Systems, names: &[String]) -> Vec<StandFinding> {
+        // A common group whose per-run group was found later is part of it.
+        let per_run_found =
+            |id: &str| self.accepted.iter().any(|(g, _)| self.groups[*g].id.strip_suffix("-per-run") == Some(id));
+        let accepted: Vec<&(usize, Evidence)> =
+            self.accepted.iter().filter(|(g, _)| !per_run_found(self.groups[*g].id)).collect();
         let mut joint: Vec<Combo> = Vec::new();
         let mut spans = Vec::new();
-        for (gi, _) in &self.accepted {
+        for (gi, _) in &accepted {
             let start = joint.len();
             joint.extend(self.groups[*gi].params.iter().cloned());
             spans.push(start..joint.len());
@@ -683,8 +707,7 @@ impl Suspect {
         let (g, _) = reduce(&sys.total, sys.base, &joint);
         let (pinv, _) = pinv_sym(&g);
         let labels = self.labels();
-        let found: Vec<StandFinding> = self
-            .accepted
+        let found: Vec<StandFinding> = accepted
             .iter()
             .zip(spans)
             .map(|((gi, ev), span)| {

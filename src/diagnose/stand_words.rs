@@ -23,12 +23,8 @@ fn value(name: String, v: f64, se: f64, unit: &str) -> StandValue {
 
 /// Runs whose value stands out of its error (|v| > 3 SE), as `run v ± se unit` (the first six).
 fn listed(values: &[StandValue], ctx: &[ParamContext], show: impl Fn(&StandValue, &ParamContext) -> String) -> String {
-    let off: Vec<String> = values
-        .iter()
-        .zip(ctx)
-        .filter(|(v, _)| v.value.abs() > 3.0 * v.std_error)
-        .map(|(v, c)| show(v, c))
-        .collect();
+    let off: Vec<String> =
+        values.iter().zip(ctx).filter(|(v, _)| v.value.abs() > 3.0 * v.std_error).map(|(v, c)| show(v, c)).collect();
     let more = if off.len() > 6 { format!(" and {} more", off.len() - 6) } else { String::new() };
     format!("{} of {} runs: {}{more}", off.len(), values.len(), off.into_iter().take(6).collect::<Vec<_>>().join("; "))
 }
@@ -62,8 +58,7 @@ pub fn finding(
             let mut rates: Vec<f64> = labels.iter().map(|l| deg(l.1)).collect();
             rates.sort_by(f64::total_cmp);
             rates.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-            let each: Vec<String> =
-                rates.iter().map(|r| format!("{:.4} °/s, not {r} °/s", r * (1.0 + v[0]))).collect();
+            let each: Vec<String> = rates.iter().map(|r| format!("{:.4} °/s, not {r} °/s", r * (1.0 + v[0]))).collect();
             (
                 vec![value("rate error (every conic run)".into(), d, s, "%")],
                 format!("the stand: rate {d:+.3} ± {s:.3} % off the manifest ({}): {fix}", each.join("; ")),
@@ -79,17 +74,16 @@ pub fn finding(
                 .iter()
                 .zip(se)
                 .zip(ctx)
-                .map(|((x, s), c)| value(format!("{what} of run {}", c.run.as_deref().unwrap_or("?")), k * x, k * s, unit))
+                .map(|((x, s), c)| {
+                    value(format!("{what} of run {}", c.run.as_deref().unwrap_or("?")), k * x, k * s, unit)
+                })
                 .collect();
             let words = listed(&values, ctx, |x, c| {
                 let run = c.run.as_deref().unwrap_or("?");
                 match id {
-                    "cone-angle-per-run" => format!(
-                        "{run} {:.3} ± {:.3}°, not {}°",
-                        deg(c.label) + x.value,
-                        x.std_error,
-                        deg(c.label)
-                    ),
+                    "cone-angle-per-run" => {
+                        format!("{run} {:.3} ± {:.3}°, not {}°", deg(c.label) + x.value, x.std_error, deg(c.label))
+                    }
                     "stand-rate-per-run" => format!(
                         "{run} {:.4} °/s ({:+.3} ± {:.3} %), not {} °/s",
                         deg(c.label) * (1.0 + x.value / 100.0),
@@ -122,7 +116,8 @@ pub fn finding(
             let (c, s) = (v[0], v[1]);
             let amp = c.hypot(s);
             let r = 100.0 * h * amp;
-            let se_r = 100.0 * h * if amp > 0.0 { ((c * se[0]).powi(2) + (s * se[1]).powi(2)).sqrt() / amp } else { se[0] };
+            let se_r =
+                100.0 * h * if amp > 0.0 { ((c * se[0]).powi(2) + (s * se[1]).powi(2)).sqrt() / amp } else { se[0] };
             let psi = deg(c.atan2(s));
             let se_psi = if amp > 0.0 { deg(se[0].hypot(se[1]) / (std::f64::consts::SQRT_2 * amp)) } else { 180.0 };
             let times = if h == 1.0 { "once" } else { "twice" };
@@ -141,7 +136,12 @@ pub fn finding(
             let psi = deg(v[1].atan2(v[0]));
             let values = vec![
                 value("cone-axis wobble".into(), amp, se_a, "deg"),
-                value("cone-axis wobble, phase".into(), psi, if amp > 0.0 { deg(se_a.to_radians() / amp.to_radians()) } else { 180.0 }, "deg"),
+                value(
+                    "cone-axis wobble, phase".into(),
+                    psi,
+                    if amp > 0.0 { deg(se_a.to_radians() / amp.to_radians()) } else { 180.0 },
+                    "deg",
+                ),
             ];
             let message = format!(
                 "the stand: its cone angle wobbles once per revolution by {amp:.3} ± {se_a:.3}° (phase {psi:.0}°): fit with --stand or repair the stand's bearing"
@@ -172,7 +172,11 @@ fn earth(v: &[f64], se: &[f64], has_conic: bool) -> (Vec<StandValue>, String) {
     );
     if let Some((h, hs)) = horizontal {
         values.push(value("Earth's rate, horizontal (stand base)".into(), h * DEG_H, hs * DEG_H, "deg/h"));
-        message.push_str(&format!(", horizontal part {:.2} ± {:.2} °/h (its direction depends on the heading)", h * DEG_H, hs * DEG_H));
+        message.push_str(&format!(
+            ", horizontal part {:.2} ± {:.2} °/h (its direction depends on the heading)",
+            h * DEG_H,
+            hs * DEG_H
+        ));
     }
     message.push_str(": declare earth_rate on the static runs (or fit with --stand); it is not a gyro g-sensitivity");
     (values, message)

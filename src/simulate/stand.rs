@@ -53,7 +53,8 @@ impl StandErrors {
     /// (None unless conic).
     pub fn conic_motion(&self, declared: &MotionSpec, conic_index: usize) -> Option<StandMotion> {
         let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = *declared else { return None };
-        let phase_off = if self.phase_deg.is_empty() { 0.0 } else { self.phase_deg[conic_index % self.phase_deg.len()] };
+        let phase_off =
+            if self.phase_deg.is_empty() { 0.0 } else { self.phase_deg[conic_index % self.phase_deg.len()] };
         let ripple = std::array::from_fn(|h| {
             let [r, psi] = self.ripple[h];
             // Speed ripple r·cos(hθ₀ + ψ) is the angle ripple (r/h)·sin(hθ₀ + ψ).
@@ -120,7 +121,8 @@ impl StandErrors {
             "wobble" => self.wobble_deg = <[f64; 2]>::try_from(nums(value, 2)?).unwrap_or_default(),
             "earth" => self.earth = Some(<[f64; 2]>::try_from(nums(value, 2)?).unwrap_or_default()),
             "mount" => {
-                let (run, m) = value.split_once(':').ok_or_else(|| format!("mount: '{value}': expected RUN:+y,+x,-z"))?;
+                let (run, m) =
+                    value.split_once(':').ok_or_else(|| format!("mount: '{value}': expected RUN:+y,+x,-z"))?;
                 let names: Vec<&str> = m.split(',').collect();
                 let mount = Mount::parse(&names).map_err(|e| format!("mount: {e}"))?;
                 self.mounts.push((run.to_string(), mount));
