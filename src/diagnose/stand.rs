@@ -663,7 +663,13 @@ impl Suspect {
         noise: &[Vec<ArModel>],
         opts: &FitOptions,
     ) -> Result<(), EstimateError> {
-        let params = self.groups[pick.group].params.clone();
+        // Every group found so far moves with the new one (joint Gauss–Newton): one at a
+        // time would leave each biased by what the others still hold.
+        let mut groups: Vec<usize> = self.accepted.iter().map(|a| a.0).collect();
+        if !groups.contains(&pick.group) {
+            groups.push(pick.group);
+        }
+        let params: Vec<Combo> = groups.iter().flat_map(|&g| self.groups[g].params.iter().cloned()).collect();
         for _ in 0..MAX_STEPS {
             let tracks = self.tracks(runs);
             let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
@@ -683,7 +689,9 @@ impl Suspect {
                 break;
             }
         }
-        self.accepted.push((pick.group, pick.evidence));
+        if !self.accepted.iter().any(|a| a.0 == pick.group) {
+            self.accepted.push((pick.group, pick.evidence));
+        }
         Ok(())
     }
 
