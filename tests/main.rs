@@ -9,6 +9,7 @@ mod common;
 mod datasheet;
 mod diagnose;
 mod diagnose_hard;
+mod diagnose_stand;
 mod docs;
 mod exit_codes;
 mod exports;

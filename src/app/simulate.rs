@@ -64,6 +64,9 @@ pub struct SimulateOptions {
     pub si_units: bool,
     /// Disturbances outside the catalogue.
     pub disturb: Vec<Disturbance>,
+    /// How the stand really moved, unknown to the manifest (`KEY=VALUE` each, see
+    /// [`crate::simulate::stand::StandErrors::set`]).
+    pub stand: Vec<String>,
     /// Temperature reading noise (standard deviation), °C.
     pub temp_noise_c: f64,
     /// Temperature reading step, °C (0: no rounding).
@@ -100,6 +103,7 @@ impl Default for SimulateOptions {
             session_clock_s: None,
             si_units: false,
             disturb: Vec::new(),
+            stand: Vec::new(),
             temp_noise_c: 0.0,
             temp_quantum_c: 0.001,
         }
@@ -151,6 +155,9 @@ pub fn config(o: &SimulateOptions) -> Result<SimConfig, AppError> {
     }
     cfg.realism.si_units = o.si_units;
     cfg.realism.disturbances = o.disturb.clone();
+    for spec in &o.stand {
+        cfg.stand.set(spec).map_err(|e| AppError::Invalid(format!("--stand {e}")))?;
+    }
     cfg.seed = o.seed;
     cfg.sample_rate_hz = o.rate_hz;
     let mounts = crate::simulate::cyclic_mounts(o.mounts);

@@ -139,7 +139,16 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     for w in &d.warnings {
         outln!("warning: {w}");
     }
+    if !d.stand.is_empty() {
+        outln!("\nthe stand, not the unit (the diagnosis above is on the motion so corrected):");
+        for f in &d.stand {
+            outln!("  {}", f.message);
+        }
+    }
     match d.verdict {
+        Verdict::Explained if d.proposal.is_empty() => {
+            outln!("\nverdict: the stand explains the residual (above); with it, the unit's model is adequate: nothing to add to the unit.")
+        }
         Verdict::Adequate => {
             outln!("\nverdict: the model is adequate: residuals are at the noise floor; nothing to add.")
         }

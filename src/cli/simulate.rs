@@ -104,6 +104,14 @@ pub struct Args {
     /// sine:CHANNEL:FREQ_HZ:AMPLITUDE or saturate:SENSOR:LIMIT (deg/s or g; channels gyro-y …).
     #[arg(long = "disturb", value_parser = crosscal::simulate::realism::Disturbance::parse)]
     disturb: Vec<crosscal::simulate::realism::Disturbance>,
+    /// The stand moved otherwise than the manifest says (repeatable, KEY=VALUE): cone=DEG
+    /// (added to every cone angle), rate=REL (−0.005: 0.5 % slow), phase=DEG[,DEG…] (per
+    /// conic run, in turn), tilt=DEG,DEG (base tilt about x, y), ripple1=REL,PHASE_DEG and
+    /// ripple2=REL,PHASE_DEG (speed ripple once and twice per revolution), wobble=DEG,PHASE_DEG
+    /// (cone-axis wobble), mount=RUN:+y,+x,-z (a run recorded on another mount),
+    /// earth=LAT_DEG,HEADING_DEG (the Earth's rotation, undeclared).
+    #[arg(long = "stand", value_name = "KEY=VALUE")]
+    stand: Vec<String>,
 }
 
 fn parse_set(s: &str) -> Result<(String, f64), String> {
@@ -149,6 +157,7 @@ impl Args {
             session_clock_s: self.session_clock,
             si_units: self.si_units,
             disturb: self.disturb.clone(),
+            stand: self.stand.clone(),
             temp_noise_c: self.temp_noise,
             temp_quantum_c: self.temp_quantum,
         }

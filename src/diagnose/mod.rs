@@ -21,19 +21,24 @@
 pub mod algebra;
 mod disagreement;
 pub mod lines;
+mod mount;
 pub mod picture;
 pub mod protocol;
 pub mod report;
 pub mod select;
 pub mod separate;
 pub mod space;
+pub mod stand;
+mod stand_words;
 mod temperature;
+mod with_stand;
 
 pub use disagreement::{per_run_disagreements, Disagreement, DISAGREEMENT_Z};
 pub use lines::Line;
 pub use picture::{channel_reports, residuals, RunMotions, RunResiduals};
 pub use select::{Estimate, Evidence, BIC_EVIDENCE};
 pub use space::HARMONICS;
+pub use stand::{StandFinding, StandValue};
 pub use temperature::{DegreeChoice, DegreeScore};
 
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
@@ -201,6 +206,10 @@ pub struct Diagnosis {
     /// Coefficients whose single-run estimates disagree with the all-run fit (a sign that
     /// something depends on rate, direction, cone angle or mount).
     pub disagreements: Vec<Disagreement>,
+    /// What the stand (or the environment) did that the manifest does not say, with the
+    /// estimated values: the rest of the diagnosis is on the motion so corrected.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub stand: Vec<StandFinding>,
 }
 
 /// The model at the end of a diagnosis's ladder: the base model plus each added effect.
@@ -340,11 +349,16 @@ pub fn diagnose(
     opts: &FitOptions,
 ) -> Result<Diagnosis, EstimateError> {
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
-    let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
-    conclude(a, model, runs, motions, opts, has_temp)
+    let Some(suspect) = stand::Suspect::new(runs, motions) else {
+        let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
+        return conclude(a, model, runs, motions, opts, has_temp, None)?
+            .ok_or_else(|| EstimateError::NotConverged("the diagnosis did not settle".into()));
+    };
+    with_stand::diagnose(suspect, model, runs, motions, opts, has_temp)
 }
 
-/// The diagnosis of an analysed session.
+/// The diagnosis of an analysed session (None: the stand check corrected the motion and
+/// the diagnosis starts again).
 fn conclude(
     a: Analysis,
     model: &Model,
@@ -352,7 +366,8 @@ fn conclude(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
     has_temp: bool,
-) -> Result<Diagnosis, EstimateError> {
+    mut stand_check: Option<with_stand::StandCheck<'_, '_, '_>>,
+) -> Result<Option<Diagnosis>, EstimateError> {
     let mut warnings = Vec::new();
     if !has_temp {
         warnings.push("no temperature in some runs: temperature effects were not tried".to_string());
@@ -365,7 +380,11 @@ fn conclude(
     } else {
         Vec::new()
     };
-    let (mut steps, first_round, mut a) = climb(a, model, runs, motions, opts, has_temp, &mut warnings)?;
+    let (mut steps, first_round, mut a, restart) =
+        climb(a, model, runs, motions, opts, has_temp, &mut warnings, stand_check.as_mut())?;
+    if restart {
+        return Ok(None);
+    }
     // Each temperature polynomial's degree, again with every effect found in the model.
     let mut changed = temperature::revisit_degrees(&a.space, &mut steps, &mut warnings);
     // A sensor still systematic after its effects: only the first of them is the closest
@@ -433,9 +452,12 @@ fn conclude(
         ));
     }
     let unidentifiable = unidentifiable(&final_fit, &first_round);
+    let stand = with_stand::findings(stand_check, model, &steps, &final_fit, runs, &a);
+    // The stand explains what the unit does not need to: nothing left is "explained".
+    let verdict = if verdict == Verdict::Adequate && !stand.is_empty() { Verdict::Explained } else { verdict };
     let proposal =
         if verdict == Verdict::Explained { steps.iter().map(|s| s.effect.clone()).collect() } else { Vec::new() };
-    Ok(Diagnosis {
+    Ok(Some(Diagnosis {
         model: model.name.clone(),
         channels,
         noise: noise_reports(&a.space),
@@ -449,7 +471,8 @@ fn conclude(
         warnings,
         final_fit,
         disagreements,
-    })
+        stand,
+    }))
 }
 
 fn run_span(r: &FitRun<'_>) -> f64 {
@@ -506,7 +529,9 @@ fn refit_reduced(
     Ok(f)
 }
 
-type Climb = (Vec<Step>, Vec<Candidate>, Analysis);
+/// Steps, first-round candidates, the last analysis, and whether the stand check changed
+/// the motion (the climb then stops: the diagnosis starts again on the corrected motion).
+type Climb = (Vec<Step>, Vec<Candidate>, Analysis, bool);
 
 /// The greedy climb over candidate effects (module documentation, step 3). After each
 /// effect is added the model is refitted (nonlinear parameters by variable projection on
@@ -521,6 +546,7 @@ fn climb(
     opts: &FitOptions,
     has_temp: bool,
     warnings: &mut Vec<String>,
+    mut stand_check: Option<&mut with_stand::StandCheck<'_, '_, '_>>,
 ) -> Result<Climb, EstimateError> {
     let mut current = model.clone();
     let mut steps: Vec<Step> = Vec::new();
@@ -559,6 +585,13 @@ fn climb(
             first_round = Some(scored.iter().map(|s| s.0.clone()).collect());
         }
         let passing: Vec<&(Candidate, Vec<usize>)> = scored.iter().filter(|s| s.0.rejected.is_none()).collect();
+        // A recording at its numerical resolution (noiseless) has nothing for the stand to explain.
+        if let Some(sc) = stand_check.as_deref_mut().filter(|_| !exact.iter().all(|e| *e)) {
+            let sensor_bic = passing.iter().map(|c| c.0.delta_bic).reduce(f64::min);
+            if sc.check(&current, &a, runs, sensor_bic, opts)? {
+                return Ok((steps, first_round.unwrap_or_default(), a, true));
+            }
+        }
         let Some(best) = passing.iter().max_by(|x, y| x.0.evidence.delta_q.total_cmp(&y.0.evidence.delta_q)) else {
             break;
         };
@@ -596,7 +629,7 @@ fn climb(
         current = m;
         a = next;
     }
-    Ok((steps, first_round.unwrap_or_default(), a))
+    Ok((steps, first_round.unwrap_or_default(), a, false))
 }
 
 /// The passing candidates that explain the same residual feature as `best`: each adds less
@@ -783,7 +816,8 @@ pub fn compare(
     let first = analyse(&base, refit(&base, runs, opts)?, runs, motions, has_temp);
     let space = first.space.clone();
     let base_fit = first.base_fit.clone();
-    let d = conclude(first, &base, runs, motions, opts, has_temp)?;
+    let d = conclude(first, &base, runs, motions, opts, has_temp, None)?
+        .ok_or_else(|| EstimateError::NotConverged("the diagnosis did not settle".into()))?;
     let mut models = vec![("paper (eqs. 3-4)".to_string(), Model::paper()), ("default".to_string(), base.clone())];
     let mut m = base;
     for st in &d.steps {

@@ -140,6 +140,9 @@ pub fn html(
     let mut s = page_start(title);
     let verdict = match d.verdict {
         Verdict::Adequate => "The model is adequate: the residuals are at the noise floor; nothing to add.".to_string(),
+        Verdict::Explained if d.proposal.is_empty() => {
+            "The stand explains the residual; with it, the unit's model is adequate.".to_string()
+        }
         Verdict::Explained => format!("Add {}: the residual then sits at the noise floor.", d.proposal.join(", ")),
         Verdict::Unexplained => {
             format!(
@@ -149,6 +152,9 @@ pub fn html(
         }
     };
     let _ = write!(s, "<p class=\"verdict\">{verdict}</p>");
+    for f in &d.stand {
+        let _ = write!(s, "<p class=\"verdict\">{}</p>", esc(&f.message));
+    }
     for w in &d.warnings {
         let _ = write!(s, "<p>warning: {}</p>", esc(w));
     }

@@ -9,6 +9,7 @@
 //! ```
 
 pub mod derivative;
+pub mod stand;
 mod track;
 
 use crate::frames::{Stand, V3};

@@ -42,6 +42,8 @@ enum Source {
     Conic { c: ConicAt, mount: Mount, lag_s: f64 },
     /// The same state at every sample (static runs; NaN for protocol runs).
     Constant(SensorKinematics),
+    /// An imperfect conic stand ([`super::stand::StandMotion`]) evaluated at `t − lag_s`.
+    Stand { s: super::stand::StandMotion, g_m_s2: f64, mount: Mount, lag_s: f64 },
 }
 
 /// True motion of one run in sensor axes, one state per recorded sample (SI units).
@@ -121,6 +123,7 @@ impl Track {
                 let _ = self.t_s[k];
                 *s
             }
+            Source::Stand { s, g_m_s2, mount, lag_s } => s.sensor_at(self.t_s[k] - lag_s, *g_m_s2, mount),
         };
         for m in &self.maps {
             m.apply(&mut s);
@@ -138,8 +141,29 @@ impl Track {
     /// The mount of a conic track (None for stored or constant motion).
     pub fn mount(&self) -> Option<&Mount> {
         match &self.source {
-            Source::Conic { mount, .. } => Some(mount),
+            Source::Conic { mount, .. } | Source::Stand { mount, .. } => Some(mount),
             _ => None,
+        }
+    }
+
+    /// The same stamps (and temperature branch and maps) on an imperfect conic stand's
+    /// motion, through `mount` (the stand's own settings replace the declared ones).
+    pub fn on_stand(&self, s: super::stand::StandMotion, g_m_s2: f64, mount: Mount) -> Track {
+        Track {
+            source: Source::Stand { s, g_m_s2, mount, lag_s: 0.0 },
+            epsilon_source: "exact (stand motion with its estimated imperfections differentiated)".into(),
+            ..self.clone()
+        }
+    }
+
+    /// The same stamps (and temperature branch and maps) with states given in stand axes
+    /// per sample, turned into sensor axes by `mount` (a stand that logs its angle).
+    pub fn on_logged(&self, states: &[Kinematics], mount: &Mount, epsilon_source: String) -> Track {
+        let to = |f: fn(&Kinematics) -> V3<Stand>| states.iter().map(|k| mount.to_sensor(f(k))).collect();
+        Track {
+            source: Source::Sampled { w: to(|k| k.w_rad_s), e: to(|k| k.e_rad_s2), a: to(|k| k.a_m_s2) },
+            epsilon_source,
+            ..self.clone()
         }
     }
 
@@ -166,6 +190,10 @@ impl Track {
             Source::Conic { c, mount, lag_s } => {
                 Track { source: Source::Conic { c: *c, mount: mount.clone(), lag_s: lag_s + tau_s }, ..self.clone() }
             }
+            Source::Stand { s, g_m_s2, mount, lag_s } => Track {
+                source: Source::Stand { s: *s, g_m_s2: *g_m_s2, mount: mount.clone(), lag_s: lag_s + tau_s },
+                ..self.clone()
+            },
             Source::Constant(_) => self.clone(),
             _ => {
                 let states: Vec<SensorKinematics> = self.states().collect();

@@ -143,6 +143,7 @@ pub fn predict_config(model: &Model, cfg: &SimConfig, sigma: [f64; 6]) -> Result
         gyro_process: Default::default(),
         accel_process: Default::default(),
         realism: Default::default(),
+        stand: Default::default(),
         temp_reading: Default::default(),
         ..cfg.clone()
     };

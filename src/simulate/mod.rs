@@ -7,6 +7,7 @@
 pub mod noise;
 pub mod protocol;
 pub mod realism;
+pub mod stand;
 pub mod thermal;
 
 use crate::atomic::write_new;
@@ -177,6 +178,8 @@ pub struct SimConfig {
     pub accel_process: noise::NoiseProcess,
     /// Session clock, jitter, quantisation, units and disturbances outside the catalogue.
     pub realism: realism::Realism,
+    /// How the stand really moved, unknown to the manifest written (a perfect stand by default).
+    pub stand: stand::StandErrors,
 }
 
 /// The cyclic mounts used for re-mounted runs: nominal, then x→y→z→x twice.
@@ -231,6 +234,7 @@ impl SimConfig {
             gyro_process: Default::default(),
             accel_process: Default::default(),
             realism: Default::default(),
+            stand: Default::default(),
         }
     }
 
@@ -278,7 +282,7 @@ impl SimConfig {
             let t0 = if self.realism.session_clock_gap_s.is_some() { clock_s } else { 0.0 };
             let t_s: Vec<f64> = (0..n).map(|k| t0 + k as f64 / self.sample_rate_hz).collect();
             let mut rec = Recording { t_s: t_s.into(), ..Default::default() };
-            let tr = track_for(&plan.motion, &plan.mount, &rec, self.g_m_s2, &deriv);
+            let tr = self.true_track(plan, &rec, conic_index, &deriv);
             // Nonlinear effects change the motion as each sensor sees it.
             let seen = |sensor: SensorKind| {
                 let mut t = tr.clone();
@@ -365,6 +369,26 @@ impl SimConfig {
                 source: None,
             },
             runs,
+        }
+    }
+}
+
+impl SimConfig {
+    /// The true motion of a run: the stand's real motion and mount (the manifest keeps the
+    /// declared ones).
+    fn true_track(
+        &self,
+        plan: &RunPlan,
+        rec: &Recording,
+        conic_index: usize,
+        deriv: &DerivativeConfig,
+    ) -> crate::motion::Track {
+        let mount = self.stand.mount_of(&plan.name, &plan.mount).clone();
+        let truth = self.stand.static_motion(&plan.motion);
+        let tr = track_for(&truth, &mount, rec, self.g_m_s2, deriv);
+        match self.stand.conic_motion(&plan.motion, conic_index).filter(|_| !self.stand.is_zero()) {
+            Some(m) => tr.on_stand(m, self.g_m_s2, mount),
+            None => tr,
         }
     }
 }

@@ -1,0 +1,795 @@
+//! The stand as a suspect: when the stand did not move as the manifest says, the residual
+//! it leaves is explained by the stand's own parameters, not by the unit.
+//!
+//! Each conic run's true motion is an imperfect stand ([`crate::motion::stand`]) around its
+//! label: per run a cone angle, a rate (relative) and a starting phase; common to the runs
+//! a base tilt (two angles), a once- and a twice-per-revolution speed ripple (cos, sin),
+//! a wobble of the cone axis (cos, sin) and the Earth's rate in base axes (three; its
+//! vertical part also turns static poses' gyro outputs along their up, and each static pose
+//! has its own horizontal part, the heading being unknown). These parameters are
+//! linearised around the current motion: the column of a parameter is the change of the
+//! fitted model's prediction per unit change of it (a forward difference of the true
+//! inputs pushed through the model). The columns, the model's own free coefficients and
+//! the residual are prewhitened with the diagnosis's noise model (the same AR filter per
+//! run and channel as [`super::space`]), and the stand's *groups* — cone angle (common or
+//! per run), rate (common or per run), phase per run, base tilt, ripple ×1, ripple ×2,
+//! cone wobble, Earth rotation — are judged by the rules of [`super::select`] (χ² gain
+//! with p and ΔBIC, gain on left-out runs). A group that passes, is physically plausible
+//! and beats the best sensor candidate on BIC is estimated (Gauss–Newton on the whole
+//! motion) and the diagnosis starts again on the corrected motion; at the end every group
+//! found is reported with its value ± standard error, from the joint generalised
+//! least-squares solution of all of them with the model's coefficients.
+
+use super::algebra::{pinv_sym, Lsq};
+use super::select::Evidence;
+use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
+use crate::frames::Mount;
+use crate::model::{forward, Model, State, TermRef};
+use crate::motion::stand::StandMotion;
+use crate::motion::{SampleMap, SensorKinematics, Track};
+use crate::session::MotionSpec;
+use crate::stats::ArModel;
+use crate::units::SensorKind;
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+/// Motion parameters of a conic run: cone, rate (relative), phase, tilt ×2, ripple ×4,
+/// wobble ×2, Earth ×3.
+const KNOBS: usize = 14;
+/// The first common knob (tilt); knobs before it belong to one run.
+const COMMON: usize = 3;
+/// Forward-difference step of each knob (rad, relative, rad/s for the Earth's rate).
+const STEP: [f64; KNOBS] = [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-8, 1e-8, 1e-8];
+/// Samples per whitened block.
+const BLOCK: usize = 256;
+/// Gauss–Newton steps on an accepted group.
+const MAX_STEPS: usize = 8;
+/// The Earth's rotation rate, rad/s.
+const EARTH_RAD_S: f64 = 7.292_115e-5;
+
+/// One stand finding: a group of the stand's parameters that explains the residual.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StandFinding {
+    /// Group id (`cone-angle`, `stand-rate-per-run`, `base-tilt`, `earth-rotation`, …).
+    pub id: String,
+    /// Its parameters: estimated value ± standard error, in the units named.
+    pub values: Vec<StandValue>,
+    /// The finding and the fix, in words.
+    pub message: String,
+    /// The evidence when it was accepted (same rules as a catalogue effect).
+    pub evidence: Evidence,
+}
+
+/// One estimated stand parameter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StandValue {
+    /// What it is (`cone angle offset`, `rate error of run cone+10`, …).
+    pub name: String,
+    /// Estimated value (unit below).
+    pub value: f64,
+    /// Standard error.
+    pub std_error: f64,
+    /// Unit (`deg`, `%`, `deg/h`).
+    pub unit: String,
+}
+
+/// What the stand may be doing in one run.
+#[derive(Debug, Clone)]
+enum RunStand {
+    /// A conic run: its label and the motion now believed.
+    Conic { declared: StandMotion, now: StandMotion, mount: Mount },
+    /// A static pose: its up in sensor axes and the Earth's rate now believed (sensor axes).
+    Static { up: [f64; 3], earth: [f64; 3] },
+    /// Anything else (no stand parameters).
+    Other,
+}
+
+/// A constant rate added to a static pose's true rate (the Earth's, estimated).
+#[derive(Debug)]
+struct AddRate([f64; 3]);
+
+impl SampleMap for AddRate {
+    fn apply(&self, k: &mut SensorKinematics) {
+        for i in 0..3 {
+            k.w_rad_s[i] += self.0[i];
+        }
+    }
+}
+
+/// One parameter of a group: a combination of global stand parameters.
+type Combo = Vec<(usize, f64)>;
+
+/// A stand group.
+#[derive(Debug, Clone)]
+struct Group {
+    id: &'static str,
+    params: Vec<Combo>,
+}
+
+/// The stand's parameters in a session and what has been found so far.
+#[derive(Debug, Clone)]
+pub struct Suspect {
+    runs: Vec<RunStand>,
+    g_m_s2: f64,
+    /// Per run: (global stand index, direction) of its local stand columns.
+    locals: Vec<Vec<(usize, Dir)>>,
+    /// Number of global stand parameters.
+    width: usize,
+    groups: Vec<Group>,
+    accepted: Vec<(usize, Evidence)>,
+    mounts: Vec<StandFinding>,
+}
+
+/// How a local stand column moves the motion.
+#[derive(Debug, Clone, Copy)]
+enum Dir {
+    /// A knob of the run's stand motion.
+    Knob(usize),
+    /// A rate along a direction (sensor axes) on a static pose.
+    Rate([f64; 3]),
+}
+
+/// The whitened system of one run (global stand parameters after the model's).
+struct Fold {
+    g: DMatrix<f64>,
+    b: DVector<f64>,
+    yy: f64,
+}
+
+/// The systems of every run around one model and fit.
+pub struct Systems {
+    folds: Vec<Fold>,
+    total: Fold,
+    base: usize,
+    samples: usize,
+}
+
+impl Suspect {
+    /// The stand of the runs (`motions[i]` is run i's declared motion). None when no run
+    /// has stand parameters.
+    pub fn new(runs: &[FitRun<'_>], motions: &[&MotionSpec]) -> Option<Self> {
+        let mut out = Vec::with_capacity(runs.len());
+        let mut g_m_s2 = 0.0;
+        let mut earth_declared = false;
+        for (run, m) in runs.iter().zip(motions) {
+            let a = if run.is_empty() { [f64::NAN; 3] } else { run.track.at(0).a_m_s2.xyz };
+            let norm = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+            let kind = match (m, run.track.mount()) {
+                (MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg }, Some(mount)) if norm.is_finite() => {
+                    g_m_s2 = norm;
+                    let d = StandMotion::ideal(
+                        cone_angle_deg.to_radians(),
+                        rate_deg_s.to_radians(),
+                        phase_deg.to_radians(),
+                    );
+                    RunStand::Conic { declared: d, now: d, mount: mount.clone() }
+                }
+                (MotionSpec::Static { earth_rate_rad_s, .. }, _) if norm > 0.0 && norm.is_finite() => {
+                    earth_declared |= *earth_rate_rad_s != [0.0; 3];
+                    RunStand::Static { up: a.map(|x| x / norm), earth: [0.0; 3] }
+                }
+                _ => RunStand::Other,
+            };
+            out.push(kind);
+        }
+        let conic: Vec<usize> = (0..out.len()).filter(|&i| matches!(out[i], RunStand::Conic { .. })).collect();
+        let statics: Vec<usize> = (0..out.len()).filter(|&i| matches!(out[i], RunStand::Static { .. })).collect();
+        if conic.is_empty() && (statics.is_empty() || earth_declared) {
+            return None;
+        }
+        let nc = conic.len();
+        let common = 3 * nc;
+        let earth_z = common + 10;
+        let mut locals = vec![Vec::new(); out.len()];
+        for (ci, &r) in conic.iter().enumerate() {
+            let mut l: Vec<(usize, Dir)> = (0..COMMON).map(|k| (3 * ci + k, Dir::Knob(k))).collect();
+            let last = if earth_declared { KNOBS - 3 } else { KNOBS };
+            l.extend((COMMON..last).map(|k| (common + k - COMMON, Dir::Knob(k))));
+            locals[r] = l;
+        }
+        let mut width = common + KNOBS - COMMON;
+        let mut horizontals = Vec::new();
+        if !earth_declared {
+            for &r in &statics {
+                if let RunStand::Static { up, .. } = out[r] {
+                    let [e1, e2] = crate::simulate::stand::horizontal_basis(up);
+                    locals[r] = vec![(earth_z, Dir::Rate(up)), (width, Dir::Rate(e1)), (width + 1, Dir::Rate(e2))];
+                    horizontals.push(vec![(width, 1.0)]);
+                    horizontals.push(vec![(width + 1, 1.0)]);
+                    width += 2;
+                }
+            }
+        }
+        let per_run = |k: usize| -> Vec<Combo> { (0..nc).map(|ci| vec![(3 * ci + k, 1.0)]).collect() };
+        let all = |k: usize| -> Vec<Combo> { vec![(0..nc).map(|ci| (3 * ci + k, 1.0)).collect()] };
+        let pair = |k: usize| -> Vec<Combo> { vec![vec![(common + k, 1.0)], vec![(common + k + 1, 1.0)]] };
+        let mut groups = Vec::new();
+        if nc > 0 {
+            groups.push(Group { id: "cone-angle", params: all(0) });
+            groups.push(Group { id: "stand-rate", params: all(1) });
+            if nc > 1 {
+                groups.push(Group { id: "cone-angle-per-run", params: per_run(0) });
+                groups.push(Group { id: "stand-rate-per-run", params: per_run(1) });
+            }
+            groups.push(Group { id: "phase-per-run", params: per_run(2) });
+            groups.push(Group { id: "base-tilt", params: pair(0) });
+            groups.push(Group { id: "speed-ripple-1", params: pair(2) });
+            groups.push(Group { id: "speed-ripple-2", params: pair(4) });
+            groups.push(Group { id: "cone-wobble", params: pair(6) });
+        }
+        if !earth_declared {
+            let mut p = if nc > 0 { vec![vec![(common + 8, 1.0)], vec![(common + 9, 1.0)]] } else { Vec::new() };
+            p.push(vec![(earth_z, 1.0)]);
+            p.extend(horizontals);
+            groups.push(Group { id: "earth-rotation", params: p });
+        }
+        Some(Self { runs: out, g_m_s2, locals, width, groups, accepted: Vec::new(), mounts: Vec::new() })
+    }
+
+    /// Whether any stand parameter or mount has been changed from the labels.
+    pub fn changed(&self) -> bool {
+        !self.accepted.is_empty() || !self.mounts.is_empty()
+    }
+
+    /// Run `run` was recorded on `mount` (a conic run; the finding says so).
+    pub fn set_mount(&mut self, run: usize, mount: Mount, finding: StandFinding) {
+        if let Some(RunStand::Conic { mount: m, .. }) = self.runs.get_mut(run) {
+            *m = mount;
+            self.mounts.push(finding);
+        }
+    }
+
+    /// The runs' tracks on the motion now believed.
+    pub fn tracks(&self, runs: &[FitRun<'_>]) -> Vec<Track> {
+        runs.iter()
+            .zip(&self.runs)
+            .map(|(r, s)| match s {
+                RunStand::Conic { now, mount, .. } => r.track.on_stand(*now, self.g_m_s2, mount.clone()),
+                RunStand::Static { earth, .. } if *earth != [0.0; 3] => r.track.mapped(Arc::new(AddRate(*earth))),
+                _ => r.track.clone(),
+            })
+            .collect()
+    }
+
+    /// The declared motions with each conic run's cone angle, rate and phase now believed.
+    pub fn motions(&self, motions: &[&MotionSpec]) -> Vec<MotionSpec> {
+        motions
+            .iter()
+            .zip(&self.runs)
+            .map(|(m, s)| match s {
+                RunStand::Conic { now, .. } => MotionSpec::Conic {
+                    cone_angle_deg: now.cone_angle_rad.to_degrees(),
+                    rate_deg_s: now.rate_rad_s.to_degrees(),
+                    phase_deg: now.phase_rad.to_degrees(),
+                },
+                _ => (*m).clone(),
+            })
+            .collect()
+    }
+
+    /// Moves global stand parameter `p` by `d`.
+    fn nudge(&mut self, p: usize, d: f64) {
+        for (r, locals) in self.locals.iter().enumerate() {
+            for &(gi, dir) in locals.iter().filter(|(gi, _)| *gi == p) {
+                let _ = gi;
+                match (&mut self.runs[r], dir) {
+                    (RunStand::Conic { declared, now, .. }, Dir::Knob(k)) => knob(now, declared.rate_rad_s, k, d),
+                    (RunStand::Static { earth, .. }, Dir::Rate(v)) => {
+                        for i in 0..3 {
+                            earth[i] += d * v[i];
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+
+    /// The whitened systems of every run around `model` and its fit, with the noise models
+    /// `noise[run][channel]`.
+    pub fn systems(&self, model: &Model, fit: &Fit, runs: &[FitRun<'_>], noise: &[Vec<ArModel>]) -> Systems {
+        let layout = BaseLayout::new(model, fit);
+        let folds: Vec<Fold> = (0..runs.len())
+            .into_par_iter()
+            .map(|r| self.run_system(r, model, fit, &layout, &runs[r], &noise[r]))
+            .collect();
+        let p = layout.count + self.width;
+        let mut total = Fold { g: DMatrix::zeros(p, p), b: DVector::zeros(p), yy: 0.0 };
+        for f in &folds {
+            total.g += &f.g;
+            total.b += &f.b;
+            total.yy += f.yy;
+        }
+        let samples = runs.iter().map(|r| 6 * r.len()).sum();
+        Systems { folds, total, base: layout.count, samples }
+    }
+
+    #[allow(clippy::too_many_lines)]
+    fn run_system(
+        &self,
+        r: usize,
+        model: &Model,
+        fit: &Fit,
+        layout: &BaseLayout,
+        run: &FitRun<'_>,
+        noise: &[ArModel],
+    ) -> Fold {
+        let p_all = layout.count + self.width;
+        let n = run.len();
+        let locals = &self.locals[r];
+        let terms: [Vec<TermRef<'_>>; 2] = SensorKind::BOTH.map(|s| model.terms(s));
+        let values: [Vec<f64>; 2] = SensorKind::BOTH.map(|s| {
+            let sf = fit.sensor(s);
+            model.terms(s).iter().map(|t| sf.value(&t.term.name).unwrap_or(t.term.nominal)).collect()
+        });
+        let seen: [Option<Track>; 2] = SensorKind::BOTH
+            .map(|s| crate::estimate::seen_tracks(model, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
+        let resid = super::picture::run_residual(model, fit, run).0;
+        // Per channel: global indices of its columns (model coefficients, then stand).
+        let index: Vec<Vec<usize>> = (0..6)
+            .map(|c| {
+                let mut v: Vec<usize> = layout.channel[c].iter().map(|x| x.0).collect();
+                v.extend(locals.iter().map(|l| layout.count + l.0));
+                v
+            })
+            .collect();
+        let mut chans: Vec<Whitener> = (0..6).map(|c| Whitener::new(index[c].len() + 1, &noise[c])).collect();
+        let predict = |s: &State| {
+            let g = forward(&terms[0], &values[0], s);
+            let a = forward(&terms[1], &values[1], s);
+            [g[0], g[1], g[2], a[0], a[1], a[2]]
+        };
+        let stand = match &self.runs[r] {
+            RunStand::Conic { declared, now, mount } => Some((declared.rate_rad_s, *now, mount)),
+            _ => None,
+        };
+        let mut d = vec![[0.0f64; 6]; locals.len()];
+        let mut row = Vec::new();
+        for k in 0..n {
+            let st = run.state(k);
+            let p0 = predict(&st);
+            for (j, &(_, dir)) in locals.iter().enumerate() {
+                let mut s1 = st;
+                match (dir, &stand) {
+                    (Dir::Knob(kn), Some((rate, now, mount))) => {
+                        let mut m = *now;
+                        knob(&mut m, *rate, kn, STEP[kn]);
+                        let x = m.sensor_at(run.track.t_s[k], self.g_m_s2, mount);
+                        s1.w = x.w_rad_s.xyz;
+                        s1.e = x.e_rad_s2.xyz;
+                        s1.a = x.a_m_s2.xyz;
+                    }
+                    (Dir::Rate(v), _) => {
+                        for i in 0..3 {
+                            s1.w[i] += STEP[KNOBS - 1] * v[i];
+                        }
+                    }
+                    _ => {}
+                }
+                let p1 = predict(&s1);
+                let h = match dir {
+                    Dir::Knob(kn) => STEP[kn],
+                    Dir::Rate(_) => STEP[KNOBS - 1],
+                };
+                for c in 0..6 {
+                    d[j][c] = (p1[c] - p0[c]) / h;
+                }
+            }
+            let states: [State; 2] = std::array::from_fn(|si| match &seen[si] {
+                Some(t) => FitRun { track: t, ..*run }.state(k),
+                None => st,
+            });
+            for c in 0..6 {
+                let (si, ch) = (c / 3, c % 3);
+                row.clear();
+                row.extend(layout.channel[c].iter().map(|&(_, ti)| terms[si][ti].regressor(&states[si])));
+                let _ = ch;
+                row.extend(d.iter().map(|x| x[c]));
+                row.push(resid[c][k]);
+                chans[c].push(&row);
+            }
+        }
+        let mut fold = Fold { g: DMatrix::zeros(p_all, p_all), b: DVector::zeros(p_all), yy: 0.0 };
+        for (c, w) in chans.into_iter().enumerate() {
+            let gm = w.finish();
+            let m = gm.nrows();
+            for (i, &gi) in index[c].iter().enumerate() {
+                for (j, &gj) in index[c].iter().enumerate() {
+                    fold.g[(gi, gj)] += gm[(i, j)];
+                }
+                fold.b[gi] += gm[(i, m - 1)];
+            }
+            fold.yy += gm[(m - 1, m - 1)];
+        }
+        fold
+    }
+}
+
+/// Applies a knob of a stand motion (rate relative to the label `declared_rate`).
+fn knob(m: &mut StandMotion, declared_rate: f64, k: usize, d: f64) {
+    match k {
+        0 => m.cone_angle_rad += d,
+        1 => m.rate_rad_s += d * declared_rate,
+        2 => m.phase_rad += d,
+        3 | 4 => m.tilt_rad[k - 3] += d,
+        5..=8 => m.ripple_rad[(k - 5) / 2][(k - 5) % 2] += d,
+        9 | 10 => m.wobble_rad[k - 9] += d,
+        _ => m.earth_rad_s[k - 11] += d,
+    }
+}
+
+/// The model's free coefficients as global parameters: per channel (global index, term index).
+struct BaseLayout {
+    channel: [Vec<(usize, usize)>; 6],
+    count: usize,
+}
+
+impl BaseLayout {
+    fn new(model: &Model, fit: &Fit) -> Self {
+        let mut channel: [Vec<(usize, usize)>; 6] = Default::default();
+        let mut count = 0;
+        for (si, s) in SensorKind::BOTH.into_iter().enumerate() {
+            let sf = fit.sensor(s);
+            for (ti, t) in model.terms(s).iter().enumerate() {
+                let free = sf.coefficients.iter().any(|c| c.name == t.term.name && c.status == CoefStatus::Fitted);
+                if free {
+                    channel[3 * si + t.term.channel].push((count, ti));
+                    count += 1;
+                }
+            }
+        }
+        Self { channel, count }
+    }
+}
+
+/// Prewhitens rows with an AR filter (scaled to unit innovation variance) and accumulates
+/// their Gram a block at a time; the first p rows (no history) are left out.
+struct Whitener {
+    phi: Vec<f64>,
+    scale: f64,
+    history: Vec<Vec<f64>>,
+    block: DMatrix<f64>,
+    rows: usize,
+    gram: DMatrix<f64>,
+}
+
+impl Whitener {
+    fn new(m: usize, ar: &ArModel) -> Self {
+        let scale = if ar.innovation_var > 0.0 { 1.0 / ar.innovation_var.sqrt() } else { 0.0 };
+        Self {
+            phi: ar.phi.clone(),
+            scale,
+            history: Vec::with_capacity(ar.phi.len() + 1),
+            block: DMatrix::zeros(BLOCK, m),
+            rows: 0,
+            gram: DMatrix::zeros(m, m),
+        }
+    }
+
+    fn push(&mut self, x: &[f64]) {
+        let p = self.phi.len();
+        if self.history.len() == p {
+            for (j, v) in x.iter().enumerate() {
+                let mut w = *v;
+                for (l, f) in self.phi.iter().enumerate() {
+                    w -= f * self.history[p - 1 - l][j];
+                }
+                self.block[(self.rows, j)] = w * self.scale;
+            }
+            self.rows += 1;
+            if self.rows == BLOCK {
+                self.flush();
+            }
+        }
+        if p > 0 {
+            if self.history.len() == p {
+                let mut oldest = self.history.remove(0);
+                oldest.clear();
+                oldest.extend_from_slice(x);
+                self.history.push(oldest);
+            } else {
+                self.history.push(x.to_vec());
+            }
+        }
+    }
+
+    fn flush(&mut self) {
+        if self.rows > 0 {
+            let w = self.block.rows(0, self.rows);
+            self.gram.gemm_tr(1.0, &w, &w, 1.0);
+            self.rows = 0;
+        }
+    }
+
+    fn finish(mut self) -> DMatrix<f64> {
+        self.flush();
+        self.gram
+    }
+}
+
+/// A group's solution on a system: the model's coefficients plus the group's parameters.
+fn reduce(s: &Fold, base: usize, group: &[Combo]) -> (DMatrix<f64>, DVector<f64>) {
+    let p = s.g.nrows();
+    let q = base + group.len();
+    let mut t = DMatrix::<f64>::zeros(p, q);
+    for i in 0..base {
+        t[(i, i)] = 1.0;
+    }
+    for (j, combo) in group.iter().enumerate() {
+        for &(gi, w) in combo {
+            t[(base + gi, base + j)] += w;
+        }
+    }
+    (t.transpose() * &s.g * &t, t.transpose() * &s.b)
+}
+
+impl Systems {
+    /// The evidence for a group and its values and standard errors (all-run GLS).
+    fn evidence(&self, group: &[Combo]) -> (Evidence, Vec<(f64, f64)>) {
+        let (g, b) = reduce(&self.total, self.base, group);
+        let base_set: Vec<usize> = (0..self.base).collect();
+        let all: Vec<usize> = (0..g.nrows()).collect();
+        let l0 = Lsq::solve(&g, &b, self.total.yy, &base_set);
+        let l1 = Lsq::solve(&g, &b, self.total.yy, &all);
+        let delta_q = (l0.q - l1.q).max(0.0);
+        let added = l1.rank.saturating_sub(l0.rank);
+        let p_value = if added == 0 {
+            1.0
+        } else {
+            use statrs::distribution::{ChiSquared, ContinuousCDF};
+            ChiSquared::new(added as f64).map(|d| d.sf(delta_q)).unwrap_or(1.0)
+        };
+        let n = self.samples.max(2) as f64;
+        let heldout = if self.folds.len() > 1 { self.heldout_gain(group) } else { delta_q };
+        let (pinv, _) = pinv_sym(&g);
+        let values = (0..group.len())
+            .map(|j| (l1.beta[self.base + j], pinv[(self.base + j, self.base + j)].max(0.0).sqrt()))
+            .collect();
+        let ev = Evidence {
+            delta_q,
+            added_params: added,
+            p_value,
+            delta_bic: -delta_q + added as f64 * n.ln(),
+            heldout_gain: heldout,
+            heterogeneity_p: 1.0,
+            spread: 0.0,
+            delta_q_sensor: [0.0; 2],
+            nonlinear: false,
+        };
+        (ev, values)
+    }
+
+    /// Σ over left-out runs of the χ² reduction: the model's coefficients and the group's
+    /// common parameters from the other runs; the left-out run's own parameters (a per-run
+    /// group's) refitted on that run alone with the rest held.
+    fn heldout_gain(&self, group: &[Combo]) -> f64 {
+        let base_set: Vec<usize> = (0..self.base).collect();
+        let mut gain = 0.0;
+        for f in &self.folds {
+            let rest = Fold { g: &self.total.g - &f.g, b: &self.total.b - &f.b, yy: self.total.yy - f.yy };
+            let (g, b) = reduce(&rest, self.base, group);
+            let (gf, bf) = reduce(f, self.base, group);
+            let all: Vec<usize> = (0..g.nrows()).collect();
+            let l0 = Lsq::solve(&g, &b, rest.yy, &base_set);
+            let l1 = Lsq::solve(&g, &b, rest.yy, &all);
+            // The run's own parameters: those the other runs do not see at all.
+            let own: Vec<usize> =
+                (self.base..g.nrows()).filter(|&i| g[(i, i)] <= 1e-12 * gf[(i, i)] && gf[(i, i)] > 0.0).collect();
+            let q0 = l0.q_on(&gf, &bf, f.yy);
+            let mut beta = DVector::from_fn(g.nrows(), |i, _| l1.value(i));
+            if !own.is_empty() {
+                let go = DMatrix::from_fn(own.len(), own.len(), |i, j| gf[(own[i], own[j])]);
+                let rhs = DVector::from_fn(own.len(), |i, _| {
+                    bf[own[i]]
+                        - (0..g.nrows()).filter(|j| !own.contains(j)).map(|j| gf[(own[i], j)] * beta[j]).sum::<f64>()
+                });
+                let sol = pinv_sym(&go).0 * rhs;
+                for (i, &o) in own.iter().enumerate() {
+                    beta[o] = sol[i];
+                }
+            }
+            let q1 = f.yy - 2.0 * beta.dot(&bf) + beta.dot(&(&gf * &beta));
+            gain += q0 - q1;
+        }
+        gain
+    }
+}
+
+/// What the stand check decided at one step of the climb.
+pub struct Pick {
+    group: usize,
+    evidence: Evidence,
+}
+
+impl Suspect {
+    /// The best stand group on `sys` that passes the rules, is plausible, and beats
+    /// `sensor_bic` (the best sensor candidate's ΔBIC, if any passes).
+    pub fn pick(&self, sys: &Systems, sensor_bic: Option<f64>) -> Option<Pick> {
+        let mut best: Option<Pick> = None;
+        let mut passed: Vec<&str> = Vec::new();
+        for (gi, g) in self.groups.iter().enumerate() {
+            let (ev, values) = sys.evidence(&g.params);
+            if ev.rejection().is_some() || !self.plausible(g.id, &values) {
+                continue;
+            }
+            passed.push(g.id);
+            if best.as_ref().is_none_or(|b| ev.delta_bic < b.evidence.delta_bic) {
+                best = Some(Pick { group: gi, evidence: ev });
+            }
+        }
+        // One value for every run before one per run: the common group first when it passes
+        // (its linearisation around the labels leaves a little that per-run values absorb);
+        // the per-run group comes next, around the corrected motion, only if the runs differ.
+        if let Some(b) = best.as_mut() {
+            if let Some(common) = self.groups[b.group].id.strip_suffix("-per-run") {
+                if passed.contains(&common) {
+                    if let Some(ci) = self.groups.iter().position(|g| g.id == common) {
+                        b.group = ci;
+                        b.evidence = sys.evidence(&self.groups[ci].params).0;
+                    }
+                }
+            }
+        }
+        best.filter(|b| sensor_bic.is_none_or(|s| b.evidence.delta_bic < s))
+    }
+
+    /// Whether a group's estimate is something a stand does (within its limits).
+    fn plausible(&self, id: &str, values: &[(f64, f64)]) -> bool {
+        let within = |limit: f64| values.iter().all(|(v, _)| v.abs() <= limit);
+        match id {
+            "cone-angle" | "cone-angle-per-run" => within(2f64.to_radians()),
+            "stand-rate" | "stand-rate-per-run" => within(0.05),
+            "phase-per-run" => within(30f64.to_radians()),
+            "base-tilt" | "cone-wobble" => within(2f64.to_radians()),
+            "speed-ripple-1" | "speed-ripple-2" => within(0.1),
+            "earth-rotation" => {
+                // Every component at most the Earth's rate (3 SE of slack): a larger rate is not it.
+                values.iter().all(|(v, se)| v.abs() <= EARTH_RAD_S * 1.1 + 3.0 * se)
+                    && values.iter().any(|(v, se)| v.abs() > 3.0 * se)
+            }
+            _ => true,
+        }
+    }
+
+    /// Estimates the picked group by Gauss–Newton on the whole motion (the model refitted
+    /// at every step) and records it. `runs` are the runs with their declared tracks.
+    pub fn accept(
+        &mut self,
+        pick: Pick,
+        model: &Model,
+        runs: &[FitRun<'_>],
+        noise: &[Vec<ArModel>],
+        opts: &FitOptions,
+    ) -> Result<(), EstimateError> {
+        // Every group found so far moves with the new one (joint Gauss–Newton): one at a
+        // time would leave each biased by what the others still hold.
+        let mut groups: Vec<usize> = self.accepted.iter().map(|a| a.0).collect();
+        if !groups.contains(&pick.group) {
+            groups.push(pick.group);
+        }
+        let params: Vec<Combo> = groups.iter().flat_map(|&g| self.groups[g].params.iter().cloned()).collect();
+        for _ in 0..MAX_STEPS {
+            let tracks = self.tracks(runs);
+            let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
+            let fit = crate::estimate::fit(&FitRequest::runs(model, &moved).options(*opts))?.fit;
+            let sys = self.systems(model, &fit, &moved, noise);
+            let (_, values) = sys.evidence(&params);
+            let mut worst = 0.0f64;
+            for (combo, (v, se)) in params.iter().zip(&values) {
+                for &(gi, w) in combo {
+                    self.nudge(gi, w * v);
+                }
+                if *se > 0.0 {
+                    worst = worst.max(v.abs() / se);
+                }
+            }
+            if worst < 0.01 {
+                break;
+            }
+        }
+        if !self.accepted.iter().any(|a| a.0 == pick.group) {
+            self.accepted.push((pick.group, pick.evidence));
+        }
+        Ok(())
+    }
+
+    /// The findings so far, each group's values ± standard errors from the joint solution
+    /// of every accepted group with the model's coefficients on `sys` (around the final
+    /// motion: the values are the motion's departures from the labels). `names` are the
+    /// runs' names.
+    pub fn findings(&self, sys: &Systems, names: &[String]) -> Vec<StandFinding> {
+        // A common group whose per-run group was found later is part of it.
+        let per_run_found =
+            |id: &str| self.accepted.iter().any(|(g, _)| self.groups[*g].id.strip_suffix("-per-run") == Some(id));
+        let accepted: Vec<&(usize, Evidence)> =
+            self.accepted.iter().filter(|(g, _)| !per_run_found(self.groups[*g].id)).collect();
+        let mut joint: Vec<Combo> = Vec::new();
+        let mut spans = Vec::new();
+        for (gi, _) in &accepted {
+            let start = joint.len();
+            joint.extend(self.groups[*gi].params.iter().cloned());
+            spans.push(start..joint.len());
+        }
+        let (g, _) = reduce(&sys.total, sys.base, &joint);
+        let (pinv, _) = pinv_sym(&g);
+        let labels = self.labels();
+        let found: Vec<StandFinding> = accepted
+            .iter()
+            .zip(spans)
+            .map(|((gi, ev), span)| {
+                let group = &self.groups[*gi];
+                let se: Vec<f64> = span.map(|j| pinv[(sys.base + j, sys.base + j)].max(0.0).sqrt()).collect();
+                let values: Vec<f64> = group.params.iter().map(|c| self.departure(c)).collect();
+                let ctx = self.context(group, names);
+                super::stand_words::finding(group.id, &values, &se, &ctx, &labels, ev.clone())
+            })
+            .collect();
+        self.mounts.iter().cloned().chain(found).collect()
+    }
+
+    /// How far the motion now believed is from the labels along one group parameter.
+    fn departure(&self, combo: &Combo) -> f64 {
+        let Some(&(gi, _)) = combo.first() else { return 0.0 };
+        for (r, locals) in self.locals.iter().enumerate() {
+            if let Some(&(_, dir)) = locals.iter().find(|(g, _)| *g == gi) {
+                return match (&self.runs[r], dir) {
+                    (RunStand::Conic { declared, now, .. }, Dir::Knob(k)) => match k {
+                        0 => now.cone_angle_rad - declared.cone_angle_rad,
+                        1 => now.rate_rad_s / declared.rate_rad_s - 1.0,
+                        2 => now.phase_rad - declared.phase_rad,
+                        3 | 4 => now.tilt_rad[k - 3],
+                        5..=8 => now.ripple_rad[(k - 5) / 2][(k - 5) % 2],
+                        9 | 10 => now.wobble_rad[k - 9],
+                        _ => now.earth_rad_s[k - 11],
+                    },
+                    (RunStand::Static { earth, .. }, Dir::Rate(v)) => earth.iter().zip(v).map(|(a, b)| a * b).sum(),
+                    _ => 0.0,
+                };
+            }
+        }
+        0.0
+    }
+
+    /// Per group parameter: the run it belongs to (per-run groups) and its label.
+    fn context(&self, group: &Group, names: &[String]) -> Vec<super::stand_words::ParamContext> {
+        let per_run = 3 * self.conic_count();
+        group
+            .params
+            .iter()
+            .map(|c| {
+                let gi = c.first().map_or(usize::MAX, |x| x.0);
+                let run = if c.len() == 1 && gi < per_run {
+                    self.locals.iter().position(|l| l.iter().any(|(g, _)| *g == gi))
+                } else {
+                    None
+                };
+                let label = run.map_or(f64::NAN, |r| match &self.runs[r] {
+                    RunStand::Conic { declared, .. } => match gi % 3 {
+                        0 => declared.cone_angle_rad,
+                        1 => declared.rate_rad_s,
+                        _ => declared.phase_rad,
+                    },
+                    _ => f64::NAN,
+                });
+                super::stand_words::ParamContext { run: run.and_then(|r| names.get(r).cloned()), label }
+            })
+            .collect()
+    }
+
+    fn conic_count(&self) -> usize {
+        self.runs.iter().filter(|r| matches!(r, RunStand::Conic { .. })).count()
+    }
+
+    /// The declared cone angles and rates of the conic runs (for the words).
+    pub fn labels(&self) -> Vec<(f64, f64)> {
+        self.runs
+            .iter()
+            .filter_map(|r| match r {
+                RunStand::Conic { declared, .. } => Some((declared.cone_angle_rad, declared.rate_rad_s)),
+                _ => None,
+            })
+            .collect()
+    }
+}

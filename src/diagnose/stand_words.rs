@@ -1,0 +1,183 @@
+//! The stand's findings in words: each group's estimate ± standard error in the user's
+//! units, what the manifest said, and the fix.
+
+use super::select::Evidence;
+use super::stand::{StandFinding, StandValue};
+
+const EARTH_RAD_S: f64 = 7.292_115e-5;
+/// rad/s → °/h.
+const DEG_H: f64 = 180.0 / std::f64::consts::PI * 3600.0;
+
+/// One group parameter's context: the run it belongs to (per-run groups), its name and
+/// label (rad or rad/s; NaN for common parameters).
+pub struct ParamContext {
+    /// Run name, for a per-run parameter.
+    pub run: Option<String>,
+    /// The manifest's value of the quantity (cone angle, rate or phase), SI.
+    pub label: f64,
+}
+
+fn value(name: String, v: f64, se: f64, unit: &str) -> StandValue {
+    StandValue { name, value: v, std_error: se, unit: unit.to_string() }
+}
+
+/// Runs whose value stands out of its error (|v| > 3 SE), as `run v ± se unit` (the first six).
+fn listed(values: &[StandValue], ctx: &[ParamContext], show: impl Fn(&StandValue, &ParamContext) -> String) -> String {
+    let off: Vec<String> =
+        values.iter().zip(ctx).filter(|(v, _)| v.value.abs() > 3.0 * v.std_error).map(|(v, c)| show(v, c)).collect();
+    let more = if off.len() > 6 { format!(" and {} more", off.len() - 6) } else { String::new() };
+    format!("{} of {} runs: {}{more}", off.len(), values.len(), off.into_iter().take(6).collect::<Vec<_>>().join("; "))
+}
+
+/// The finding of a stand group: `v` and `se` in SI (rad, relative, rad/s), `labels` the
+/// declared (cone angle, rate) of the conic runs.
+pub fn finding(
+    id: &str,
+    v: &[f64],
+    se: &[f64],
+    ctx: &[ParamContext],
+    labels: &[(f64, f64)],
+    evidence: Evidence,
+) -> StandFinding {
+    let deg = f64::to_degrees;
+    let fix = "correct the manifest or fit with --stand";
+    let (values, message) = match id {
+        "cone-angle" => {
+            let (d, s) = (deg(v[0]), deg(se[0]));
+            let mut angles: Vec<f64> = labels.iter().map(|l| deg(l.0)).collect();
+            angles.sort_by(f64::total_cmp);
+            angles.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+            let each: Vec<String> = angles.iter().map(|a| format!("{:.3} ± {s:.3}°, not {a}°", a + d)).collect();
+            (
+                vec![value("cone angle offset (every conic run)".into(), d, s, "deg")],
+                format!("the stand: cone angle {} (every conic run {d:+.3}°): {fix}", each.join("; ")),
+            )
+        }
+        "stand-rate" => {
+            let (d, s) = (100.0 * v[0], 100.0 * se[0]);
+            let mut rates: Vec<f64> = labels.iter().map(|l| deg(l.1)).collect();
+            rates.sort_by(f64::total_cmp);
+            rates.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+            let each: Vec<String> = rates.iter().map(|r| format!("{:.4} °/s, not {r} °/s", r * (1.0 + v[0]))).collect();
+            (
+                vec![value("rate error (every conic run)".into(), d, s, "%")],
+                format!("the stand: rate {d:+.3} ± {s:.3} % off the manifest ({}): {fix}", each.join("; ")),
+            )
+        }
+        "cone-angle-per-run" | "stand-rate-per-run" | "phase-per-run" => {
+            let (what, unit, k) = match id {
+                "cone-angle-per-run" => ("cone angle", "deg", deg(1.0)),
+                "stand-rate-per-run" => ("rate error", "%", 100.0),
+                _ => ("starting phase", "deg", deg(1.0)),
+            };
+            let values: Vec<StandValue> = v
+                .iter()
+                .zip(se)
+                .zip(ctx)
+                .map(|((x, s), c)| {
+                    value(format!("{what} of run {}", c.run.as_deref().unwrap_or("?")), k * x, k * s, unit)
+                })
+                .collect();
+            let words = listed(&values, ctx, |x, c| {
+                let run = c.run.as_deref().unwrap_or("?");
+                match id {
+                    "cone-angle-per-run" => {
+                        format!("{run} {:.3} ± {:.3}°, not {}°", deg(c.label) + x.value, x.std_error, deg(c.label))
+                    }
+                    "stand-rate-per-run" => format!(
+                        "{run} {:.4} °/s ({:+.3} ± {:.3} %), not {} °/s",
+                        deg(c.label) * (1.0 + x.value / 100.0),
+                        x.value,
+                        x.std_error,
+                        deg(c.label)
+                    ),
+                    _ => format!("{run} {:+.2} ± {:.2}°", x.value, x.std_error),
+                }
+            });
+            let fix = if id == "phase-per-run" { "declare phase_deg per run or fit with --stand" } else { fix };
+            (values, format!("the stand: {what} off the manifest in {words}: {fix}"))
+        }
+        "base-tilt" => {
+            let (x, y) = (deg(v[0]), deg(v[1]));
+            let values = vec![
+                value("base tilt about x".into(), x, deg(se[0]), "deg"),
+                value("base tilt about y".into(), y, deg(se[1]), "deg"),
+            ];
+            let message = format!(
+                "the stand: its base is tilted {x:+.3} ± {:.3}° about x and {y:+.3} ± {:.3}° about y ({:.3}° from level): level the stand or fit with --stand",
+                deg(se[0]),
+                deg(se[1]),
+                x.hypot(y)
+            );
+            (values, message)
+        }
+        "speed-ripple-1" | "speed-ripple-2" => {
+            let h = if id == "speed-ripple-1" { 1.0 } else { 2.0 };
+            let (c, s) = (v[0], v[1]);
+            let amp = c.hypot(s);
+            let r = 100.0 * h * amp;
+            let se_r =
+                100.0 * h * if amp > 0.0 { ((c * se[0]).powi(2) + (s * se[1]).powi(2)).sqrt() / amp } else { se[0] };
+            let psi = deg(c.atan2(s));
+            let se_psi = if amp > 0.0 { deg(se[0].hypot(se[1]) / (std::f64::consts::SQRT_2 * amp)) } else { 180.0 };
+            let times = if h == 1.0 { "once" } else { "twice" };
+            let values = vec![
+                value(format!("speed ripple {times} per revolution"), r, se_r, "%"),
+                value(format!("speed ripple {times} per revolution, phase"), psi, se_psi, "deg"),
+            ];
+            let message = format!(
+                "the stand: its speed ripples {times} per revolution by {r:.3} ± {se_r:.3} % of the rate (phase {psi:.0} ± {se_psi:.0}°): log the stand's angle (angle_column) or fit with --stand"
+            );
+            (values, message)
+        }
+        "cone-wobble" => {
+            let amp = deg(v[0].hypot(v[1]));
+            let se_a = deg(se[0].hypot(se[1]) / std::f64::consts::SQRT_2);
+            let psi = deg(v[1].atan2(v[0]));
+            let values = vec![
+                value("cone-axis wobble".into(), amp, se_a, "deg"),
+                value(
+                    "cone-axis wobble, phase".into(),
+                    psi,
+                    if amp > 0.0 { deg(se_a.to_radians() / amp.to_radians()) } else { 180.0 },
+                    "deg",
+                ),
+            ];
+            let message = format!(
+                "the stand: its cone angle wobbles once per revolution by {amp:.3} ± {se_a:.3}° (phase {psi:.0}°): fit with --stand or repair the stand's bearing"
+            );
+            (values, message)
+        }
+        _ => earth(v, se, !labels.is_empty()),
+    };
+    StandFinding { id: id.to_string(), values, message, evidence }
+}
+
+/// The Earth's rotation: the conic runs' base-frame (x, y, up) then, per static pose, its
+/// two horizontal components (the vertical is shared).
+fn earth(v: &[f64], se: &[f64], has_conic: bool) -> (Vec<StandValue>, String) {
+    // With conic runs the first three are (x, y, up); on static poses only, the first is up.
+    let (up, up_se, horizontal) = if has_conic && v.len() >= 3 {
+        (v[2], se[2], Some(((v[0].hypot(v[1])), se[0].hypot(se[1]) / std::f64::consts::SQRT_2)))
+    } else {
+        (v[0], se[0], None)
+    };
+    let mut values = vec![value("Earth's rate, vertical".into(), up * DEG_H, up_se * DEG_H, "deg/h")];
+    let lat = (up / EARTH_RAD_S).clamp(-1.0, 1.0).asin().to_degrees();
+    let lat_se = (up_se / EARTH_RAD_S / (1.0 - (up / EARTH_RAD_S).powi(2)).max(1e-6).sqrt()).to_degrees();
+    let mut message = format!(
+        "the environment: the Earth's rotation, not declared in the manifest: vertical part {:.2} ± {:.2} °/h (latitude {lat:.0} ± {lat_se:.0}°)",
+        up * DEG_H,
+        up_se * DEG_H
+    );
+    if let Some((h, hs)) = horizontal {
+        values.push(value("Earth's rate, horizontal (stand base)".into(), h * DEG_H, hs * DEG_H, "deg/h"));
+        message.push_str(&format!(
+            ", horizontal part {:.2} ± {:.2} °/h (its direction depends on the heading)",
+            h * DEG_H,
+            hs * DEG_H
+        ));
+    }
+    message.push_str(": declare earth_rate on the static runs (or fit with --stand); it is not a gyro g-sensitivity");
+    (values, message)
+}

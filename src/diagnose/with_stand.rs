@@ -1,0 +1,98 @@
+//! The diagnosis with the stand as a suspect ([`super::stand`]): wrong mounts first, then
+//! the climb with a stand check at every step; each time a stand group explains the
+//! residual better than any sensor effect, the motion is corrected and the diagnosis
+//! starts again on it.
+
+use super::select::Space;
+use super::{analyse, conclude, refit, stand, Analysis, Diagnosis, RunMotions, Step};
+use crate::estimate::{EstimateError, Fit, FitOptions, FitRun};
+use crate::model::Model;
+
+/// Stand groups found at most (each restarts the diagnosis on the corrected motion).
+const MAX_STAND_FINDINGS: usize = 8;
+
+/// The stand check of a climb: the suspect and the runs with their declared motion.
+pub(super) struct StandCheck<'s, 'r, 'a> {
+    suspect: &'s mut stand::Suspect,
+    declared: &'r [FitRun<'a>],
+}
+
+/// The noise model of every run and channel of an analysis.
+fn noise_models(space: &Space) -> Vec<Vec<crate::stats::ArModel>> {
+    space.runs.iter().map(|rg| rg.noise.iter().map(|n| n.ar.clone()).collect()).collect()
+}
+
+impl StandCheck<'_, '_, '_> {
+    /// At one step of the climb around `current` (analysed in `a` on `runs`, the corrected
+    /// motion): whether a stand group beats every sensor candidate (best ΔBIC
+    /// `sensor_bic`); if so it is estimated and the motion corrected (true).
+    pub(super) fn check(
+        &mut self,
+        current: &Model,
+        a: &Analysis,
+        runs: &[FitRun<'_>],
+        sensor_bic: Option<f64>,
+        opts: &FitOptions,
+    ) -> Result<bool, EstimateError> {
+        let noise = noise_models(&a.space);
+        let sys = self.suspect.systems(current, &a.base_fit, runs, &noise);
+        match self.suspect.pick(&sys, sensor_bic) {
+            Some(pick) => {
+                self.suspect.accept(pick, current, self.declared, &noise, opts)?;
+                Ok(true)
+            }
+            None => Ok(false),
+        }
+    }
+}
+
+/// The stand's findings at the end of a diagnosis (empty without a stand check or when the
+/// motion is as declared), around the model at the end of the ladder.
+pub(super) fn findings(
+    check: Option<StandCheck<'_, '_, '_>>,
+    model: &Model,
+    steps: &[Step],
+    final_fit: &Fit,
+    runs: &[FitRun<'_>],
+    a: &Analysis,
+) -> Vec<stand::StandFinding> {
+    match check {
+        Some(sc) if sc.suspect.changed() => {
+            let mut m = model.clone();
+            for s in steps {
+                let _ = m.add_effect(&s.effect);
+            }
+            let sys = sc.suspect.systems(&m, final_fit, runs, &noise_models(&a.space));
+            sc.suspect.findings(&sys, &a.names)
+        }
+        _ => Vec::new(),
+    }
+}
+
+/// Diagnoses `model` on `runs` with the stand as a suspect.
+pub(super) fn diagnose(
+    mut suspect: stand::Suspect,
+    model: &Model,
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    opts: &FitOptions,
+    has_temp: bool,
+) -> Result<Diagnosis, EstimateError> {
+    for (i, mount, finding) in super::mount::wrong_mounts(model, runs, motions, opts)? {
+        suspect.set_mount(i, mount, finding);
+    }
+    for _ in 0..=MAX_STAND_FINDINGS {
+        let tracks = suspect.tracks(runs);
+        let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
+        let owned = suspect.motions(motions);
+        let now: Vec<&crate::session::MotionSpec> = owned.iter().collect();
+        let a = analyse(model, refit(model, &moved, opts)?, &moved, &now, has_temp);
+        let check = StandCheck { suspect: &mut suspect, declared: runs };
+        if let Some(d) = conclude(a, model, &moved, &now, opts, has_temp, Some(check))? {
+            return Ok(d);
+        }
+    }
+    Err(EstimateError::NotConverged(format!(
+        "the stand kept explaining more after {MAX_STAND_FINDINGS} corrections; check the runs' labels"
+    )))
+}

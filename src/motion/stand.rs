@@ -1,0 +1,255 @@
+//! An imperfect conic stand: the motion a stand really makes when it does not move exactly
+//! as its manifest says, and the motion of a stand that logs its angle.
+//!
+//! The attitude of the platform is R(θ, α) = Rz(−θ)·Ry(α)·Rz(θ) (body → base), with a
+//! variable stand angle θ(t) and a cone angle α that may wobble with θ. Body-frame rate
+//! (Rᵀ Ṙ = [ω]×), angular acceleration and specific force are, with
+//! f(α, θ) = (sin α cos θ, −sin α sin θ, 1 − cos α) and g(θ) = (sin θ, cos θ, 0):
+//! ```text
+//! ω = θ̇ f + α̇ g
+//! ε = θ̈ f + θ̇ (f_θ θ̇ + f_α α̇) + α̈ g + α̇ θ̇ g_θ
+//! a = |g| · Rᵀ u            (u: the base's up, tilted by the base tilt)
+//! ω += Rᵀ Ω_E               (the Earth's rate in base axes, when present)
+//! ```
+//! At constant θ̇ = ω_s, α fixed, u = e_z and Ω_E = 0 this is paper eq. 1.
+//!
+//! The stand's imperfections, all small: a cone angle and rate off their labels, a phase
+//! offset, a base tilt (two angles), a once- and twice-per-revolution speed ripple (the
+//! angle's deviation from uniform turning θ = θ₀ + Σₕ cₕ cos hθ₀ + sₕ sin hθ₀, θ₀ = ω_s t + φ,
+//! so the speed's relative ripple is h·√(cₕ² + sₕ²)), a wobble of the cone axis (α = α₀ +
+//! w_c cos θ + w_s sin θ) and the Earth's rotation.
+
+use super::{Kinematics, SensorKinematics};
+use crate::frames::{Mount, Stand, V3};
+
+/// The true motion of an imperfect conic stand (SI; angles in radians).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StandMotion {
+    /// Mean cone half-angle α₀, rad.
+    pub cone_angle_rad: f64,
+    /// Mean stand rate ω_s, rad/s (signed).
+    pub rate_rad_s: f64,
+    /// Phase φ at t = 0, rad.
+    pub phase_rad: f64,
+    /// Base tilt about the base's x and y axes, rad: up = (sin τ_y cos τ_x, −sin τ_x, cos τ_y cos τ_x).
+    pub tilt_rad: [f64; 2],
+    /// Angle ripple (cos, sin) once and twice per revolution, rad of θ.
+    pub ripple_rad: [[f64; 2]; 2],
+    /// Cone-axis wobble: α = α₀ + w_c cos θ + w_s sin θ, rad.
+    pub wobble_rad: [f64; 2],
+    /// The Earth's rate in base axes (x, y horizontal, z up), rad/s.
+    pub earth_rad_s: [f64; 3],
+}
+
+/// The stand's angle and its first two time derivatives at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Angle {
+    /// θ, rad.
+    pub theta: f64,
+    /// θ̇, rad/s.
+    pub rate: f64,
+    /// θ̈, rad/s².
+    pub accel: f64,
+}
+
+impl StandMotion {
+    /// The ideal stand of a conic run (paper eq. 1): every imperfection zero.
+    pub fn ideal(cone_angle_rad: f64, rate_rad_s: f64, phase_rad: f64) -> Self {
+        Self { cone_angle_rad, rate_rad_s, phase_rad, ..Self::default() }
+    }
+
+    /// The stand's angle at time `t_s` (uniform turning plus the ripple).
+    #[inline]
+    pub fn angle(&self, t_s: f64) -> Angle {
+        let w = self.rate_rad_s;
+        let th0 = w * t_s + self.phase_rad;
+        let (mut theta, mut d1, mut d2) = (th0, 1.0, 0.0);
+        for (h, [c, s]) in self.ripple_rad.iter().enumerate() {
+            let h = (h + 1) as f64;
+            let (sn, cs) = (h * th0).sin_cos();
+            theta += c * cs + s * sn;
+            d1 += h * (-c * sn + s * cs);
+            d2 += h * h * (-c * cs - s * sn);
+        }
+        Angle { theta, rate: w * d1, accel: w * w * d2 }
+    }
+
+    /// The base's up direction (unit).
+    pub fn up(&self) -> [f64; 3] {
+        let [tx, ty] = self.tilt_rad;
+        [ty.sin() * tx.cos(), -tx.sin(), ty.cos() * tx.cos()]
+    }
+
+    /// Kinematics at time `t_s` in stand (platform) axes, gravity `g_m_s2`.
+    #[inline]
+    pub fn at(&self, t_s: f64, g_m_s2: f64) -> Kinematics {
+        self.at_angle(self.angle(t_s), g_m_s2)
+    }
+
+    /// Kinematics for a given stand angle and its derivatives (a logged angle).
+    pub fn at_angle(&self, an: Angle, g_m_s2: f64) -> Kinematics {
+        let Angle { theta, rate: td, accel: tdd } = an;
+        let (st, ct) = theta.sin_cos();
+        let [wc, ws] = self.wobble_rad;
+        let alpha = self.cone_angle_rad + wc * ct + ws * st;
+        let a1 = -wc * st + ws * ct; // dα/dθ
+        let a2 = -wc * ct - ws * st; // d²α/dθ²
+        let ad = a1 * td;
+        let add = a2 * td * td + a1 * tdd;
+        let (sa, ca) = alpha.sin_cos();
+        let f = [sa * ct, -sa * st, 1.0 - ca];
+        let f_t = [-sa * st, -sa * ct, 0.0];
+        let f_a = [ca * ct, -ca * st, sa];
+        let gv = [st, ct, 0.0];
+        let g_t = [ct, -st, 0.0];
+        let mut w = [0.0; 3];
+        let mut e = [0.0; 3];
+        for i in 0..3 {
+            w[i] = td * f[i] + ad * gv[i];
+            e[i] = tdd * f[i] + td * (f_t[i] * td + f_a[i] * ad) + add * gv[i] + ad * td * g_t[i];
+        }
+        let to_body = |v: [f64; 3]| rotate_t(theta, alpha, v);
+        let up = to_body(self.up());
+        if self.earth_rad_s != [0.0; 3] {
+            let we = to_body(self.earth_rad_s);
+            for i in 0..3 {
+                w[i] += we[i];
+            }
+        }
+        Kinematics {
+            w_rad_s: V3::new(w),
+            e_rad_s2: V3::new(e),
+            a_m_s2: V3::new([g_m_s2 * up[0], g_m_s2 * up[1], g_m_s2 * up[2]]),
+        }
+    }
+
+    /// Kinematics at `t_s` in sensor axes through `mount`.
+    #[inline]
+    pub fn sensor_at(&self, t_s: f64, g_m_s2: f64, mount: &Mount) -> SensorKinematics {
+        to_sensor(self.at(t_s, g_m_s2), mount)
+    }
+}
+
+/// A stand state in sensor axes.
+pub fn to_sensor(k: Kinematics, mount: &Mount) -> SensorKinematics {
+    SensorKinematics {
+        w_rad_s: mount.to_sensor(k.w_rad_s),
+        e_rad_s2: mount.to_sensor(k.e_rad_s2),
+        a_m_s2: mount.to_sensor(k.a_m_s2),
+    }
+}
+
+/// Rᵀ v with R = Rz(−θ)·Ry(α)·Rz(θ): Rᵀ = Rz(−θ)·Ry(−α)·Rz(θ).
+#[inline]
+fn rotate_t(theta: f64, alpha: f64, v: [f64; 3]) -> [f64; 3] {
+    let (s, c) = theta.sin_cos();
+    let (sa, ca) = alpha.sin_cos();
+    let w = [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]];
+    let x = [ca * w[0] - sa * w[2], w[1], sa * w[0] + ca * w[2]];
+    [c * x[0] + s * x[1], -s * x[0] + c * x[1], x[2]]
+}
+
+/// The stand's angle, rate and angular acceleration from a logged angle θ_k (rad) on the
+/// time stamps: θ unwrapped, θ̇ and θ̈ by the local least-squares (Savitzky–Golay)
+/// derivative `deriv` applied once and twice ([`super::derivative_offline`]).
+pub fn logged_angles(t_s: &[f64], theta_rad: &[f64], deriv: &super::DerivativeConfig) -> Vec<Angle> {
+    let n = t_s.len().min(theta_rad.len());
+    let mut unwrapped: Vec<V3<Stand>> = Vec::with_capacity(n);
+    let mut offset = 0.0;
+    for k in 0..n {
+        if k > 0 {
+            let jump = theta_rad[k] - theta_rad[k - 1];
+            offset -= std::f64::consts::TAU * (jump / std::f64::consts::TAU).round();
+        }
+        unwrapped.push(V3::new([theta_rad[k] + offset, 0.0, 0.0]));
+    }
+    let mut d1 = vec![V3::new([0.0; 3]); n];
+    super::derivative_offline(&t_s[..n], &unwrapped, deriv, &mut d1);
+    let mut d2 = vec![V3::new([0.0; 3]); n];
+    super::derivative_offline(&t_s[..n], &d1, deriv, &mut d2);
+    (0..n).map(|k| Angle { theta: unwrapped[k][0], rate: d1[k][0], accel: d2[k][0] }).collect()
+}
+
+/// How the kinematics of a run with a logged angle are derived (for reports).
+pub fn logged_method(deriv: &super::DerivativeConfig) -> String {
+    format!("from the stand's logged angle: rate and angular acceleration by {} (applied twice)", deriv.describe())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix3, Rotation3, Vector3};
+
+    fn attitude(theta: f64, alpha: f64) -> Matrix3<f64> {
+        let rz = |a: f64| *Rotation3::from_axis_angle(&Vector3::z_axis(), a).matrix();
+        let ry = |a: f64| *Rotation3::from_axis_angle(&Vector3::y_axis(), a).matrix();
+        rz(-theta) * ry(alpha) * rz(theta)
+    }
+
+    #[test]
+    fn the_closed_form_is_the_attitude_differentiated() {
+        let s = StandMotion {
+            cone_angle_rad: 0.2,
+            rate_rad_s: -0.5,
+            phase_rad: 0.3,
+            tilt_rad: [0.01, -0.02],
+            ripple_rad: [[0.02, -0.01], [0.005, 0.01]],
+            wobble_rad: [0.003, -0.002],
+            earth_rad_s: [0.0; 3],
+        };
+        let rot = |t: f64| {
+            let a = s.angle(t);
+            let (st, ct) = a.theta.sin_cos();
+            attitude(a.theta, s.cone_angle_rad + s.wobble_rad[0] * ct + s.wobble_rad[1] * st)
+        };
+        let h = 1e-5;
+        for k in 0..15 {
+            let t = 0.37 * k as f64;
+            let w_of = |t: f64| {
+                let d = (rot(t + h) - rot(t - h)) / (2.0 * h);
+                let m = rot(t).transpose() * d;
+                [m[(2, 1)], m[(0, 2)], m[(1, 0)]]
+            };
+            let got = s.at(t, 9.8);
+            let w = w_of(t);
+            for i in 0..3 {
+                assert!((got.w_rad_s[i] - w[i]).abs() < 1e-8, "ω {i}: {} vs {}", got.w_rad_s[i], w[i]);
+                let e = (w_of(t + 1e-3)[i] - w_of(t - 1e-3)[i]) / 2e-3;
+                assert!((got.e_rad_s2[i] - e).abs() < 1e-5, "ε {i}: {} vs {e}", got.e_rad_s2[i]);
+            }
+            let up = Vector3::from(s.up());
+            let a = rot(t).transpose() * up * 9.8;
+            for i in 0..3 {
+                assert!((got.a_m_s2[i] - a[i]).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn the_ideal_stand_is_paper_eq_1() {
+        let c = crate::motion::Conic::from_deg(10.0, 20.0, 5.0);
+        let s = StandMotion::ideal(c.cone_angle_rad, c.rate_rad_s, c.phase_rad);
+        for k in 0..10 {
+            let t = 0.9 * k as f64;
+            let (a, b) = (s.at(t, 9.8), c.at(t, 9.8));
+            for i in 0..3 {
+                assert!((a.w_rad_s[i] - b.w_rad_s[i]).abs() < 1e-14);
+                assert!((a.e_rad_s2[i] - b.e_rad_s2[i]).abs() < 1e-14);
+                assert!((a.a_m_s2[i] - b.a_m_s2[i]).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn a_logged_angle_gives_the_rate_and_acceleration() {
+        let s = StandMotion { rate_rad_s: 0.3, ripple_rad: [[0.01, 0.0], [0.0, 0.004]], ..StandMotion::default() };
+        let t: Vec<f64> = (0..4000).map(|k| k as f64 * 0.01).collect();
+        let th: Vec<f64> = t.iter().map(|&t| s.angle(t).theta.rem_euclid(std::f64::consts::TAU)).collect();
+        let got = logged_angles(&t, &th, &crate::motion::DerivativeConfig::default());
+        for k in [100, 2000, 3900] {
+            let want = s.angle(t[k]);
+            assert!((got[k].rate - want.rate).abs() < 1e-7, "{:?} {want:?}", got[k]);
+            assert!((got[k].accel - want.accel).abs() < 1e-5, "{:?} {want:?}", got[k]);
+        }
+    }
+}
