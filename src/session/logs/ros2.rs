@@ -302,9 +302,9 @@ fn mcap_file(path: &Path, st: &mut Streams<'_>, only: Option<usize>, sink: &mut 
                 schemas.insert(id, (name, encoding, data.to_vec()));
             }
             Event::Channel { id, schema_id, topic, encoding } => {
-                if !channels.contains_key(&id) {
+                if let std::collections::hash_map::Entry::Vacant(e) = channels.entry(id) {
                     mcap_channel(path, st, &schemas, schema_id, &topic, &encoding)?;
-                    channels.insert(id, topic);
+                    e.insert(topic);
                 }
             }
             Event::Message { channel_id, log_time, data } => {
