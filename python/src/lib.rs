@@ -313,6 +313,7 @@ fn datasheet(
 /// Mean, standard deviation, Cpk and its 95 % interval (Bissell) of values against limits.
 #[pyfunction]
 #[pyo3(signature = (values, lsl, usl))]
+#[allow(clippy::type_complexity)]
 fn cpk(
     py: Python<'_>,
     values: Vec<f64>,

@@ -50,7 +50,9 @@ struct Cli {
     effects_file: Vec<std::path::PathBuf>,
 }
 
+/// Parsed once per process: the size difference between the commands' arguments does not matter.
 #[derive(Debug, Subcommand)]
+#[allow(clippy::large_enum_variant)]
 enum Command {
     /// Write a synthetic stand session (the paper's unit by default).
     #[command(

@@ -75,8 +75,10 @@ pub struct StandValue {
     pub unit: String,
 }
 
-/// What the stand may be doing in one run.
+/// What the stand may be doing in one run (a few per session: the size difference between
+/// the variants does not matter).
 #[derive(Debug, Clone)]
+#[allow(clippy::large_enum_variant)]
 enum RunStand {
     /// A conic run: its label and the motion now believed.
     Conic { declared: StandMotion, now: StandMotion, mount: Mount },
@@ -167,7 +169,7 @@ impl Suspect {
                     RunStand::Conic { declared: d, now: d, mount: mount.clone() }
                 }
                 (MotionSpec::Static { earth_rate_rad_s, .. }, _) if norm > 0.0 && norm.is_finite() => {
-                    earth_declared |= *earth_rate_rad_s != [0.0; 3];
+                    earth_declared |= earth_rate_rad_s.iter().any(|&x| x != 0.0);
                     RunStand::Static { up: a.map(|x| x / norm), earth: [0.0; 3] }
                 }
                 _ => RunStand::Other,
@@ -247,7 +249,9 @@ impl Suspect {
             .zip(&self.runs)
             .map(|(r, s)| match s {
                 RunStand::Conic { now, mount, .. } => r.track.on_stand(*now, self.g_m_s2, mount.clone()),
-                RunStand::Static { earth, .. } if *earth != [0.0; 3] => r.track.mapped(Arc::new(AddRate(*earth))),
+                RunStand::Static { earth, .. } if earth.iter().any(|&x| x != 0.0) => {
+                    r.track.mapped(Arc::new(AddRate(*earth)))
+                }
                 _ => r.track.clone(),
             })
             .collect()

@@ -120,7 +120,7 @@ pub fn finding(
                 100.0 * h * if amp > 0.0 { ((c * se[0]).powi(2) + (s * se[1]).powi(2)).sqrt() / amp } else { se[0] };
             let psi = deg(c.atan2(s));
             let se_psi = if amp > 0.0 { deg(se[0].hypot(se[1]) / (std::f64::consts::SQRT_2 * amp)) } else { 180.0 };
-            let times = if h == 1.0 { "once" } else { "twice" };
+            let times = if h < 1.5 { "once" } else { "twice" };
             let values = vec![
                 value(format!("speed ripple {times} per revolution"), r, se_r, "%"),
                 value(format!("speed ripple {times} per revolution, phase"), psi, se_psi, "deg"),

@@ -110,7 +110,7 @@ impl StandMotion {
         }
         let to_body = |v: [f64; 3]| rotate_t(theta, alpha, v);
         let up = to_body(self.up());
-        if self.earth_rad_s != [0.0; 3] {
+        if self.earth_rad_s.iter().any(|&x| x != 0.0) {
             let we = to_body(self.earth_rad_s);
             for i in 0..3 {
                 w[i] += we[i];

@@ -79,7 +79,9 @@ impl StandErrors {
     /// perpendicular to it) when it is on.
     pub fn static_motion(&self, declared: &MotionSpec) -> MotionSpec {
         match (declared, self.earth) {
-            (MotionSpec::Static { up_stand, earth_rate_rad_s }, Some(_)) if *earth_rate_rad_s == [0.0; 3] => {
+            (MotionSpec::Static { up_stand, earth_rate_rad_s }, Some(_))
+                if earth_rate_rad_s.iter().all(|&x| x == 0.0) =>
+            {
                 let [x, y, up] = self.earth_base_rad_s();
                 let [e1, e2] = horizontal_basis(*up_stand);
                 let w = std::array::from_fn(|i| x * e1[i] + y * e2[i] + up * up_stand[i]);
