@@ -134,7 +134,7 @@ fn noise_command_reads_a_static_session_and_stores_the_result_in_a_new_profile_r
     // --save never overwrites.
     let (code, _, err) = run_in(d, &["noise", "still/session.json", "--save", "n.json"]);
     assert_ne!(code, 0);
-    assert!(err.contains("never overwritten"), "{err}");
+    assert!(err.contains("already exists") && err.contains("--force"), "{err}");
 
     // Into a profile: at fit time, and as a new revision of the latest one.
     let (code, _, err) = run_in(d, &["simulate", "-o", "stand", "--duration", "12", "--rate-hz", "50"]);

@@ -19,9 +19,10 @@
 //! profile store (`.lots/`) so that a control chart across the lots of a store
 //! ([`crate::datasheet::lot::control_chart`]) flags the lot whose mean or spread shifted.
 
+pub use super::lots::ControlChart;
 use crate::check::guarded::Decision;
 use crate::check::rules::{evaluate, Evidence, Rule, RuleResult, Rules};
-use crate::datasheet::lot::{cpk, Capability, ChartPoint};
+use crate::datasheet::lot::{cpk, Capability};
 use crate::estimate::{FitData, FitRequest, ModelChoice};
 use crate::model::ModelSpec;
 use crate::profile::{history, save, Profile};
@@ -111,26 +112,6 @@ pub struct BatchReport {
     /// What went wrong besides the units (the lot summary could not be stored).
     #[serde(default)]
     pub warnings: Vec<String>,
-}
-
-/// The control chart of one quantity and axis across the store's lots.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ControlChart {
-    /// Quantity.
-    pub quantity: String,
-    /// Axis.
-    pub axis: String,
-    /// Unit.
-    pub unit: String,
-    /// Lots, oldest first, each against the limits of the ones before it.
-    pub lots: Vec<ChartPoint>,
-}
-
-impl ControlChart {
-    /// The lots flagged (mean shifted or spread up).
-    pub fn flagged(&self) -> impl Iterator<Item = &ChartPoint> {
-        self.lots.iter().filter(|p| p.shifted || p.spread_up)
-    }
 }
 
 impl BatchReport {

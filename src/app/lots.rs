@@ -3,10 +3,29 @@
 //! with '.' is never taken for a unit), read back in time order for the control chart of
 //! every datasheet quantity across lots.
 
-use super::batch::ControlChart;
-use crate::datasheet::lot::{control_chart, Capability, LotPoint};
+use crate::datasheet::lot::{control_chart, Capability, ChartPoint, LotPoint};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+/// The control chart of one quantity and axis across the store's lots.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ControlChart {
+    /// Quantity.
+    pub quantity: String,
+    /// Axis.
+    pub axis: String,
+    /// Unit.
+    pub unit: String,
+    /// Lots, oldest first, each against the limits of the ones before it.
+    pub lots: Vec<ChartPoint>,
+}
+
+impl ControlChart {
+    /// The lots flagged (mean shifted or spread up).
+    pub fn flagged(&self) -> impl Iterator<Item = &ChartPoint> {
+        self.lots.iter().filter(|p| p.shifted || p.spread_up)
+    }
+}
 
 /// The lot-summary format.
 pub const LOT_FORMAT: &str = "crosscal-lot/1";

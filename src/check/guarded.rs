@@ -16,7 +16,6 @@
 //! |y| against `max`); a rule on several axes takes each axis's decision and the unit's
 //! is the worst (fail over indeterminate over pass).
 
-use super::rules::{Rule, RuleResult, Rules};
 use crate::datasheet::{Datasheet, Quantity};
 use serde::{Deserialize, Serialize};
 
@@ -167,66 +166,6 @@ pub fn deciding(axes: &[AxisDecision]) -> Option<&AxisDecision> {
         let m = |x: &AxisDecision| -(x.margin / x.uncertainty.max(f64::MIN_POSITIVE));
         a.decision.cmp(&b.decision).then(m(a).total_cmp(&m(b)))
     })
-}
-
-/// A datasheet rule on a unit's datasheet: every axis decided, the unit's decision the
-/// worst, reported with the deciding axis's value, uncertainty and nearest limit.
-pub(super) fn datasheet_rule(rules: &Rules, rule: &Rule, sheet: &crate::datasheet::Datasheet) -> RuleResult {
-    let Rule::Datasheet { quantity, axis, min, max, unit, magnitude, decision, k, name } = rule else {
-        return RuleResult::plain("?".into(), false, "not a datasheet rule".into());
-    };
-    let label = name.clone().unwrap_or_else(|| format!("datasheet {quantity}"));
-    let bounds = Bounds {
-        min: *min,
-        max: *max,
-        magnitude: magnitude.unwrap_or(true),
-        rule: decision.or(rules.decision).unwrap_or_default(),
-        k: k.or(rules.k).unwrap_or(DEFAULT_K),
-    };
-    let unit = unit.clone().or_else(|| crate::datasheet::spec(quantity).map(|s| s.unit.to_string()));
-    let axes = match decide(sheet, quantity, axis.as_deref(), &bounds) {
-        Ok(a) => a,
-        Err(why) => {
-            let mut r = RuleResult::plain(label, false, why);
-            r.unit = unit;
-            return r;
-        }
-    };
-    let Some(worst) = deciding(&axes).cloned() else {
-        return RuleResult::plain(label, false, format!("{quantity}: nothing to decide"));
-    };
-    let shown = if bounds.magnitude { worst.value.abs() } else { worst.value };
-    let limit = match (bounds.min, bounds.max) {
-        (Some(lo), Some(hi)) => Some(if (shown - lo).abs() < (hi - shown).abs() { lo } else { hi }),
-        (lo, hi) => hi.or(lo),
-    };
-    let u_name = unit.clone().unwrap_or_default();
-    let how = match bounds.rule {
-        DecisionRule::Guarded => format!("guarded, k = {}", bounds.k),
-        DecisionRule::Simple => "simple".into(),
-    };
-    let detail = format!(
-        "{}{} = {:.4e} ± {:.2e} {u_name} against {} {:.4e} ({how}): {}",
-        if bounds.magnitude { "|" } else { "" },
-        format_args!("{quantity} {}{}", worst.axis, if bounds.magnitude { "|" } else { "" }),
-        shown,
-        worst.uncertainty,
-        if limit == bounds.max { "max" } else { "min" },
-        limit.unwrap_or(f64::NAN),
-        worst.decision.word()
-    );
-    RuleResult {
-        rule: label,
-        pass: worst.decision == Decision::Pass,
-        detail,
-        decision: Some(worst.decision),
-        value: Some(worst.value),
-        uncertainty: Some(worst.uncertainty),
-        limit,
-        unit,
-        axes,
-        resolve: None,
-    }
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@
 //! noise-limited and passes: the data cannot show a remaining error.
 
 pub mod guarded;
+mod names;
 pub mod paper;
 pub mod rules;
 

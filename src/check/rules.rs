@@ -30,7 +30,9 @@
 //! (gyro random walk). Rules that need a session (residual, reduction, adequate) fail with
 //! that reason when none was checked.
 
-use super::guarded::{AxisDecision, Decision, DecisionRule};
+use super::guarded::{decide, deciding, AxisDecision, Bounds, Decision, DecisionRule, DEFAULT_K};
+pub use super::names::matches;
+use super::names::{noise_factor, noise_unit_fits};
 use super::CheckReport;
 use crate::profile::Profile;
 use crate::units::SensorKind;
@@ -422,62 +424,6 @@ fn no_check(ev: &Evidence<'_>) -> String {
     }
 }
 
-/// Shell-style match with `*` only.
-pub fn matches(pattern: &str, name: &str) -> bool {
-    let parts: Vec<&str> = pattern.split('*').collect();
-    if parts.len() == 1 {
-        return pattern == name;
-    }
-    let mut rest = name;
-    for (i, p) in parts.iter().enumerate() {
-        if i == 0 {
-            match rest.strip_prefix(p) {
-                Some(r) => rest = r,
-                None => return false,
-            }
-        } else if i == parts.len() - 1 {
-            return rest.ends_with(p);
-        } else {
-            match rest.find(p) {
-                Some(k) => rest = &rest[k + p.len()..],
-                None => return false,
-            }
-        }
-    }
-    true
-}
-
-/// Multiplier from a display unit to SI for noise terms.
-/// Whether `unit` measures `term` of `sensor` (an accelerometer bound in deg/h is a mistake,
-/// not a number to convert).
-fn noise_unit_fits(sensor: SensorKind, term: &str, unit: &str) -> bool {
-    unit == "SI"
-        || match (sensor, term) {
-            (SensorKind::Gyro, "white") => ["deg/sqrt(h)", "deg/s/sqrt(Hz)"].contains(&unit),
-            (SensorKind::Gyro, "bias_instability") => unit == "deg/h",
-            (SensorKind::Gyro, "random_walk") => unit == "deg/h/sqrt(h)",
-            (SensorKind::Accel, "white") => ["m/s/sqrt(h)", "ug/sqrt(Hz)"].contains(&unit),
-            (SensorKind::Accel, "bias_instability") => unit == "ug",
-            _ => false,
-        }
-}
-
-fn noise_factor(unit: &str) -> Option<f64> {
-    let deg = std::f64::consts::PI / 180.0;
-    let g = 9.80665;
-    Some(match unit {
-        "deg/sqrt(h)" => deg / 60.0,
-        "deg/s/sqrt(Hz)" => deg,
-        "m/s/sqrt(h)" => 1.0 / 60.0,
-        "ug/sqrt(Hz)" => 1e-6 * g,
-        "deg/h" => deg / 3600.0,
-        "ug" => 1e-6 * g,
-        "deg/h/sqrt(h)" => deg / 3600.0 / 60.0,
-        "SI" => 1.0,
-        _ => return None,
-    })
-}
-
 type Coefs<'a> = [&'a crate::estimate::Coefficient];
 
 /// (label, pass, detail) of one rule.
@@ -792,7 +738,7 @@ pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<Rule
         .iter()
         .map(|rule| {
             let (rule, pass, detail) = match rule {
-                Rule::Datasheet { .. } => return super::guarded::datasheet_rule(rules, rule, sheet),
+                Rule::Datasheet { .. } => return datasheet_rule(rules, rule, sheet),
                 Rule::Coefficient { select, min, max, max_abs_deviation, name } => coefficient_rule(
                     &coefs,
                     model.as_ref(),
@@ -837,6 +783,66 @@ pub fn evaluate(rules: &Rules, profile: &Profile, ev: &Evidence<'_>) -> Vec<Rule
             RuleResult::plain(rule, pass, detail)
         })
         .collect()
+}
+
+/// A datasheet rule on a unit's datasheet: every axis decided, the unit's decision the
+/// worst, reported with the deciding axis's value, uncertainty and nearest limit.
+fn datasheet_rule(rules: &Rules, rule: &Rule, sheet: &crate::datasheet::Datasheet) -> RuleResult {
+    let Rule::Datasheet { quantity, axis, min, max, unit, magnitude, decision, k, name } = rule else {
+        return RuleResult::plain("?".into(), false, "not a datasheet rule".into());
+    };
+    let label = name.clone().unwrap_or_else(|| format!("datasheet {quantity}"));
+    let bounds = Bounds {
+        min: *min,
+        max: *max,
+        magnitude: magnitude.unwrap_or(true),
+        rule: decision.or(rules.decision).unwrap_or_default(),
+        k: k.or(rules.k).unwrap_or(DEFAULT_K),
+    };
+    let unit = unit.clone().or_else(|| crate::datasheet::spec(quantity).map(|s| s.unit.to_string()));
+    let axes = match decide(sheet, quantity, axis.as_deref(), &bounds) {
+        Ok(a) => a,
+        Err(why) => {
+            let mut r = RuleResult::plain(label, false, why);
+            r.unit = unit;
+            return r;
+        }
+    };
+    let Some(worst) = deciding(&axes).cloned() else {
+        return RuleResult::plain(label, false, format!("{quantity}: nothing to decide"));
+    };
+    let shown = if bounds.magnitude { worst.value.abs() } else { worst.value };
+    let limit = match (bounds.min, bounds.max) {
+        (Some(lo), Some(hi)) => Some(if (shown - lo).abs() < (hi - shown).abs() { lo } else { hi }),
+        (lo, hi) => hi.or(lo),
+    };
+    let u_name = unit.clone().unwrap_or_default();
+    let how = match bounds.rule {
+        DecisionRule::Guarded => format!("guarded, k = {}", bounds.k),
+        DecisionRule::Simple => "simple".into(),
+    };
+    let detail = format!(
+        "{}{} = {:.4e} ± {:.2e} {u_name} against {} {:.4e} ({how}): {}",
+        if bounds.magnitude { "|" } else { "" },
+        format_args!("{quantity} {}{}", worst.axis, if bounds.magnitude { "|" } else { "" }),
+        shown,
+        worst.uncertainty,
+        if limit == bounds.max { "max" } else { "min" },
+        limit.unwrap_or(f64::NAN),
+        worst.decision.word()
+    );
+    RuleResult {
+        rule: label,
+        pass: worst.decision == Decision::Pass,
+        detail,
+        decision: Some(worst.decision),
+        value: Some(worst.value),
+        uncertainty: Some(worst.uncertainty),
+        limit,
+        unit,
+        axes,
+        resolve: None,
+    }
 }
 
 #[cfg(test)]

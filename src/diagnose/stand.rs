@@ -32,7 +32,6 @@ use crate::stats::ArModel;
 use crate::units::SensorKind;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
 /// Motion parameters of a conic run: cone, rate (relative), phase, tilt ×2, ripple ×4,
@@ -49,31 +48,7 @@ const MAX_STEPS: usize = 8;
 /// The Earth's rotation rate, rad/s.
 const EARTH_RAD_S: f64 = 7.292_115e-5;
 
-/// One stand finding: a group of the stand's parameters that explains the residual.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct StandFinding {
-    /// Group id (`cone-angle`, `stand-rate-per-run`, `base-tilt`, `earth-rotation`, …).
-    pub id: String,
-    /// Its parameters: estimated value ± standard error, in the units named.
-    pub values: Vec<StandValue>,
-    /// The finding and the fix, in words.
-    pub message: String,
-    /// The evidence when it was accepted (same rules as a catalogue effect).
-    pub evidence: Evidence,
-}
-
-/// One estimated stand parameter.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct StandValue {
-    /// What it is (`cone angle offset`, `rate error of run cone+10`, …).
-    pub name: String,
-    /// Estimated value (unit below).
-    pub value: f64,
-    /// Standard error.
-    pub std_error: f64,
-    /// Unit (`deg`, `%`, `deg/h`).
-    pub unit: String,
-}
+pub use super::stand_words::{StandFinding, StandValue};
 
 /// What the stand may be doing in one run (a few per session: the size difference between
 /// the variants does not matter).

@@ -2,8 +2,36 @@
 //! units, what the manifest said, and the fix.
 
 use super::select::Evidence;
-use super::stand::{StandFinding, StandValue};
+use serde::{Deserialize, Serialize};
 
+/// One stand finding: a group of the stand's parameters that explains the residual.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StandFinding {
+    /// Group id (`cone-angle`, `stand-rate-per-run`, `base-tilt`, `earth-rotation`, …).
+    pub id: String,
+    /// Its parameters: estimated value ± standard error, in the units named.
+    pub values: Vec<StandValue>,
+    /// The finding and the fix, in words.
+    pub message: String,
+    /// The evidence when it was accepted (same rules as a catalogue effect).
+    pub evidence: Evidence,
+}
+
+/// One estimated stand parameter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StandValue {
+    /// What it is (`cone angle offset`, `rate error of run cone+10`, …).
+    pub name: String,
+    /// Estimated value (unit below).
+    pub value: f64,
+    /// Standard error.
+    pub std_error: f64,
+    /// Unit (`deg`, `%`, `deg/h`).
+    pub unit: String,
+}
+
+/// The fix of a stand finding the manifest can carry.
+const FIX: &str = "correct the manifest or fit with --stand";
 const EARTH_RAD_S: f64 = 7.292_115e-5;
 /// rad/s → °/h.
 const DEG_H: f64 = 180.0 / std::f64::consts::PI * 3600.0;
@@ -40,7 +68,6 @@ pub fn finding(
     evidence: Evidence,
 ) -> StandFinding {
     let deg = f64::to_degrees;
-    let fix = "correct the manifest or fit with --stand";
     let (values, message) = match id {
         "cone-angle" => {
             let (d, s) = (deg(v[0]), deg(se[0]));
@@ -50,7 +77,7 @@ pub fn finding(
             let each: Vec<String> = angles.iter().map(|a| format!("{:.3} ± {s:.3}°, not {a}°", a + d)).collect();
             (
                 vec![value("cone angle offset (every conic run)".into(), d, s, "deg")],
-                format!("the stand: cone angle {} (every conic run {d:+.3}°): {fix}", each.join("; ")),
+                format!("the stand: cone angle {} (every conic run {d:+.3}°): {FIX}", each.join("; ")),
             )
         }
         "stand-rate" => {
@@ -61,7 +88,7 @@ pub fn finding(
             let each: Vec<String> = rates.iter().map(|r| format!("{:.4} °/s, not {r} °/s", r * (1.0 + v[0]))).collect();
             (
                 vec![value("rate error (every conic run)".into(), d, s, "%")],
-                format!("the stand: rate {d:+.3} ± {s:.3} % off the manifest ({}): {fix}", each.join("; ")),
+                format!("the stand: rate {d:+.3} ± {s:.3} % off the manifest ({}): {FIX}", each.join("; ")),
             )
         }
         "cone-angle-per-run" | "stand-rate-per-run" | "phase-per-run" => {
@@ -94,7 +121,7 @@ pub fn finding(
                     _ => format!("{run} {:+.2} ± {:.2}°", x.value, x.std_error),
                 }
             });
-            let fix = if id == "phase-per-run" { "declare phase_deg per run or fit with --stand" } else { fix };
+            let fix = if id == "phase-per-run" { "declare phase_deg per run or fit with --stand" } else { FIX };
             (values, format!("the stand: {what} off the manifest in {words}: {fix}"))
         }
         "base-tilt" => {
