@@ -57,7 +57,7 @@ def test_check_refuses_another_units_profile(unit):
 
 def test_save_keeps_run_files_inside_the_folder(tmp_path):
     t, g, a = _record(50)
-    for name in ("../ESC", "/tmp/abs", "sub/run", ".."):
+    for name in ("../ESC", "/tmp/abs", "sub/run", "../.."):
         run = {"name": name, "motion": {"kind": "static", "up_stand": [0, 0, 1]}, "t": t, "gyro": g, "accel": a}
         s = crosscal.Session.from_arrays("U1", [run])
         with pytest.raises(errors.UsageError, match="plain file name"):
