@@ -129,9 +129,12 @@ fn channel_table(title: &str, c: &[ChannelReport]) -> String {
     s
 }
 
-/// The HTML report. `after` are the residuals at the end of the ladder, when effects were added.
+/// The HTML report of the diagnosis of the session at `session` (its manifest, for the
+/// `Fit it with:` command). `after` are the residuals at the end of the ladder, when effects
+/// were added.
 pub fn html(
     title: &str,
+    session: &str,
     d: &Diagnosis,
     before: &[RunResiduals],
     after: Option<&[RunResiduals]>,
@@ -143,7 +146,12 @@ pub fn html(
         Verdict::Explained if d.proposal.is_empty() => {
             "The stand explains the residual; with it, the unit's model is adequate.".to_string()
         }
-        Verdict::Explained => format!("Add {}: the residual then sits at the noise floor.", d.proposal.join(", ")),
+        Verdict::Explained => format!(
+            "Add {}: the residual then sits at the noise floor. Fit it with: <code>crosscal fit {} {}</code>",
+            d.proposal.join(", "),
+            esc(session),
+            d.proposal.iter().map(|e| format!("--effect {}", esc(e))).collect::<Vec<_>>().join(" ")
+        ),
         Verdict::Unexplained => {
             format!(
                 "A systematic residual remains that no catalogued effect explains:<br>{}",
@@ -160,16 +168,18 @@ pub fn html(
     }
     s.push_str(&channel_table(&format!("model '{}'", d.model), &d.channels));
     if !d.candidates.is_empty() {
-        s.push_str("<h3>candidate effects</h3><table><tr><th>effect</th><th>params</th><th>RSS change</th><th>p-value</th><th>ΔBIC</th><th>explanation</th></tr>");
+        s.push_str("<h3>candidate effects</h3><table><tr><th>effect</th><th>params</th><th>RSS change</th><th>p-value</th><th>ΔBIC</th><th>left-out-run gain (χ²)</th><th>accepted, or why not</th><th>explanation</th></tr>");
         for c in d.candidates.iter().take(12) {
             let change = if c.rss_before > 0.0 { 100.0 * (c.rss_after / c.rss_before - 1.0) } else { 0.0 };
             let _ = write!(
                 s,
-                "<tr><td>{}</td><td>{}</td><td>{change:.2} %</td><td>{:.2e}</td><td>{:.1}</td><td style=\"text-align:left\">{}</td></tr>",
+                "<tr><td>{}</td><td>{}</td><td>{change:.2} %</td><td>{:.2e}</td><td>{:.1}</td><td>{:.1}</td><td style=\"text-align:left\">{}</td><td style=\"text-align:left\">{}</td></tr>",
                 esc(&c.effect),
                 c.added_params,
                 c.p_value,
                 c.delta_bic,
+                c.evidence.heldout_gain,
+                esc(c.rejected.as_deref().unwrap_or("qualifies")),
                 esc(&c.explanation)
             );
         }

@@ -28,6 +28,30 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// A tick label: up to four significant digits, never "-0" (a zero that rounding signed).
+pub fn tick(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return "0".into();
+    }
+    let mag = v.abs().log10().floor() as i32;
+    if !(-3..5).contains(&mag) {
+        return format!("{v:.1e}");
+    }
+    let digits = (3 - mag).clamp(0, 6) as usize;
+    let s = format!("{v:.digits$}");
+    let s = if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s };
+    if s.trim_start_matches('-').chars().all(|c| c == '0' || c == '.') {
+        "0".into()
+    } else {
+        s
+    }
+}
+
+/// A linear range with headroom above the data for the legend (share of the span).
+fn with_headroom((lo, hi): (f64, f64), share: f64) -> (f64, f64) {
+    (lo, hi + share * (hi - lo))
+}
+
 /// The project's chart frame on a drawing area: caption, margin and label areas.
 fn builder<'a, 'b>(
     root: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
@@ -61,6 +85,8 @@ pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(
     let mut buf = String::new();
     let (x0, x1) = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.0)));
     let (y0, y1) = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
+    // Room above the traces for the legend, so that it hides none of them.
+    let (y0, y1) = if series.len() > 1 { with_headroom((y0, y1), 0.45) } else { (y0, y1) };
     {
         let root = SVGBackend::with_string(&mut buf, (720, 260)).into_drawing_area();
         let _ = root.fill(&WHITE);
@@ -73,16 +99,21 @@ pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(
             .y_desc(y_label)
             .axis_desc_style(DESC_FONT)
             .label_style(TICK_FONT)
+            .x_label_formatter(&|v| tick(*v))
+            .y_label_formatter(&|v| tick(*v))
             .light_line_style(WHITE)
             .draw();
         for (i, (name, pts)) in series.iter().enumerate() {
             let c = COLORS[i % COLORS.len()];
+            if pts.is_empty() {
+                continue;
+            }
             if let Ok(s) = chart.draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(1))) {
                 s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
             }
         }
-        if series.len() > 1 {
-            legend(&mut chart, SeriesLabelPosition::MiddleRight);
+        if series.iter().filter(|s| !s.1.is_empty()).count() > 1 {
+            legend(&mut chart, SeriesLabelPosition::UpperRight);
         }
         let _ = root.present();
     }
@@ -116,6 +147,7 @@ pub fn bars(title: &str, x_label: &str, y_label: &str, values: &[(String, f64)])
                     String::new()
                 }
             })
+            .y_label_formatter(&|v| tick(*v))
             .light_line_style(WHITE)
             .draw();
         let _ = chart.draw_series(values.iter().enumerate().map(|(i, v)| {
@@ -141,6 +173,9 @@ pub fn loglog(
     let ys = measured.iter().flat_map(|p| [p.1, p.2, p.3]).chain(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
     let (x0, x1) = range(xs.filter(positive).map(f64::log10));
     let (y0, y1) = range(ys.filter(positive).map(f64::log10));
+    // Whole decades (every axis then carries labelled ticks), and a decade of headroom
+    // above the traces for the legend.
+    let (y0, y1) = (y0.floor(), y1.ceil() + 1.0);
     let (x0, x1, y0, y1) = (10f64.powf(x0), 10f64.powf(x1), 10f64.powf(y0), 10f64.powf(y1));
     {
         let root = SVGBackend::with_string(&mut buf, (720, 420)).into_drawing_area();
@@ -154,11 +189,15 @@ pub fn loglog(
             .y_desc(y_label)
             .axis_desc_style(DESC_FONT)
             .label_style(TICK_FONT)
-            .y_label_formatter(&|v| format!("{v:.1e}"))
+            .y_labels(10)
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .x_label_formatter(&|v| tick(*v))
             .draw();
         let c0 = COLORS[0];
         let inside = |y: f64| y.clamp(y0, y1);
-        if let Ok(s) = chart.draw_series(
+        if measured.is_empty() {
+            // No legend entry for a trace that is not drawn.
+        } else if let Ok(s) = chart.draw_series(
             measured
                 .iter()
                 .filter(|p| positive(&p.0) && positive(&p.2))
@@ -170,6 +209,9 @@ pub fn loglog(
             let c = COLORS[(i + 1) % COLORS.len()];
             let pts: Vec<(f64, f64)> =
                 pts.iter().copied().filter(|p| positive(&p.0) && p.1 >= y0 && p.1 <= y1).collect();
+            if pts.is_empty() {
+                continue;
+            }
             if let Ok(s) = chart.draw_series(LineSeries::new(pts, c.stroke_width(1))) {
                 s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
             }
@@ -189,7 +231,8 @@ pub fn ladder(title: &str, y_label: &str, rungs: &[String], series: &[(String, V
     let positive = |v: &f64| v.is_finite() && *v > 0.0;
     let ys = series.iter().flat_map(|s| s.1.iter().copied()).chain([1.0]);
     let (y0, y1) = range(ys.filter(positive).map(f64::log10));
-    let (y0, y1) = (10f64.powf(y0.min(-0.35)), 10f64.powf(y1.max(0.35)));
+    // Headroom above for the legend (it then hides no marker).
+    let (y0, y1) = (10f64.powf(y0.min(-0.35)), 10f64.powf(y1.max(0.35) + 0.25 * (y1.max(0.35) - y0.min(-0.35))));
     let vertical = rungs.iter().map(String::len).sum::<usize>() > 70 || n > 7;
     let width = 760u32.max(90 * n as u32);
     let label_area = if vertical { 14 + 8 * rungs.iter().map(String::len).max().unwrap_or(4) as u32 } else { 44 };
@@ -230,10 +273,14 @@ pub fn ladder(title: &str, y_label: &str, rungs: &[String], series: &[(String, V
         if let Ok(s) = chart.draw_series(dashes) {
             s.label("noise floor (1)").legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], grey));
         }
+        // Each channel a little to the side of the rung, so that channels at the same value
+        // (all at the noise floor) stay visible side by side.
+        let m = series.len().max(1) as f64;
         for (i, (name, ys)) in series.iter().enumerate() {
             let c = COLORS[i % COLORS.len()];
+            let dx = (i as f64 - 0.5 * (m - 1.0)) * (0.5 / m).min(0.08);
             let pts: Vec<(f64, f64)> =
-                ys.iter().enumerate().filter(|p| positive(p.1)).map(|(k, &y)| (k as f64, y)).collect();
+                ys.iter().enumerate().filter(|p| positive(p.1)).map(|(k, &y)| (k as f64 + dx, y)).collect();
             let _ = chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())));
             if let Ok(s) = chart.draw_series(LineSeries::new(pts, c.stroke_width(2))) {
                 s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
@@ -376,4 +423,22 @@ pub fn control_chart(title: &str, y_label: &str, lots: &[(f64, f64, Option<[f64;
         let _ = root.present();
     }
     buf
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tick;
+
+    #[test]
+    fn ticks_never_show_a_signed_zero_and_keep_four_digits() {
+        assert_eq!(tick(-0.0), "0");
+        assert_eq!(tick(-1e-12), "-1.0e-12");
+        assert_eq!(tick(-0.00004), "-4.0e-5");
+        assert_eq!(tick(0.25), "0.25");
+        assert_eq!(tick(-2.5), "-2.5");
+        assert_eq!(tick(123.456), "123.5");
+        assert_eq!(tick(12345.0), "12345");
+        assert_eq!(tick(2.0e6), "2.0e6");
+        assert_eq!(tick(f64::NAN), "0");
+    }
 }
