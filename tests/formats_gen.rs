@@ -209,37 +209,46 @@ fn a_ros2_sqlite_bag_of_plain_imu_messages_reads_back_bit_for_bit() {
     check_all(&bag, &ReadOptions::default(), N);
 }
 
-#[test]
-fn an_mcap_file_with_zstd_chunks_reads_back_bit_for_bit() {
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
-    let p = dir.path().join("gen.mcap");
-    {
-        let f = std::io::BufWriter::new(std::fs::File::create(&p).unwrap_or_else(|e| panic!("{e}")));
-        let mut w = mcap::WriteOptions::new()
-            .compression(Some(mcap::Compression::Zstd))
-            .chunk_size(Some(64 * 1024))
-            .create(f)
-            .unwrap_or_else(|e| panic!("{e}"));
-        // The schema as rosbag2 writes it: the type's own fields, then MSG: sections.
-        let def = "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n\
+/// Writes `n` IMU messages (`truth`, as `cdr_imu`) on `/imu` as an MCAP file with the given
+/// chunk compression and size, with the schema as rosbag2 writes it: the type's own fields,
+/// then MSG: sections.
+pub(crate) fn mcap_imu<W: std::io::Write + std::io::Seek>(
+    out: W,
+    n: usize,
+    compression: mcap::Compression,
+    chunk: u64,
+) {
+    let mut w = mcap::WriteOptions::new()
+        .compression(Some(compression))
+        .chunk_size(Some(chunk))
+        .create(out)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let def = "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n\
 geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\n\
 float64[9] linear_acceleration_covariance\n================================================================================\n\
 MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n================================================================================\n\
 MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
-        let schema = w.add_schema("sensor_msgs/msg/Imu", "ros2msg", def.as_bytes()).unwrap_or_else(|e| panic!("{e}"));
-        let ch = w.add_channel(schema, "/imu", "cdr", &Default::default()).unwrap_or_else(|e| panic!("{e}"));
-        for i in 0..N {
-            let (t, _, _) = truth(i);
-            let h = mcap::records::MessageHeader {
-                channel_id: ch,
-                sequence: i as u32,
-                log_time: t as u64,
-                publish_time: t as u64,
-            };
-            w.write_to_known_channel(&h, &cdr_imu(i)).unwrap_or_else(|e| panic!("{e}"));
-        }
-        w.finish().unwrap_or_else(|e| panic!("{e}"));
+    let schema = w.add_schema("sensor_msgs/msg/Imu", "ros2msg", def.as_bytes()).unwrap_or_else(|e| panic!("{e}"));
+    let ch = w.add_channel(schema, "/imu", "cdr", &Default::default()).unwrap_or_else(|e| panic!("{e}"));
+    for i in 0..n {
+        let (t, _, _) = truth(i);
+        let h = mcap::records::MessageHeader {
+            channel_id: ch,
+            sequence: i as u32,
+            log_time: t as u64,
+            publish_time: t as u64,
+        };
+        w.write_to_known_channel(&h, &cdr_imu(i)).unwrap_or_else(|e| panic!("{e}"));
     }
+    w.finish().unwrap_or_else(|e| panic!("{e}"));
+}
+
+#[test]
+fn an_mcap_file_with_zstd_chunks_reads_back_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let p = dir.path().join("gen.mcap");
+    let f = std::io::BufWriter::new(std::fs::File::create(&p).unwrap_or_else(|e| panic!("{e}")));
+    mcap_imu(f, N, mcap::Compression::Zstd, 64 * 1024);
     let (c, stats) = list(&p, &ReadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(c.format, crosscal::session::logs::LogFormat::Mcap);
     assert!((stats[0].rate_hz() - 200.0).abs() < 1e-6, "{}", stats[0].rate_hz());

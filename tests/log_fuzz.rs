@@ -13,7 +13,7 @@
 //!
 //! All three must be 0. Decoding errors that stop the reader are fine: they say why.
 
-use crate::formats_gen::{cdr_imu, df_fmt, ros1_bag_n, truth, ulog_data, ulog_msg};
+use crate::formats_gen::{cdr_imu, df_fmt, mcap_imu, ros1_bag_n, truth, ulog_data, ulog_msg};
 use crosscal::session::logs::{list, ReadOptions};
 use rand::{Rng, SeedableRng};
 use std::path::{Path, PathBuf};
@@ -159,31 +159,7 @@ fn write_sqlite(path: &Path, n: usize) {
 /// An MCAP file (written by the `mcap` crate): lz4 chunks of 8 KiB, a `ros2msg` schema.
 fn mcap_file(n: usize) -> Vec<u8> {
     let mut out = std::io::Cursor::new(Vec::new());
-    {
-        let mut w = mcap::WriteOptions::new()
-            .compression(Some(mcap::Compression::Lz4))
-            .chunk_size(Some(8 * 1024))
-            .create(&mut out)
-            .unwrap_or_else(|e| panic!("{e}"));
-        let def = "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n\
-geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\ngeometry_msgs/Vector3 linear_acceleration\n\
-float64[9] linear_acceleration_covariance\n================================================================================\n\
-MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n================================================================================\n\
-MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n";
-        let schema = w.add_schema("sensor_msgs/msg/Imu", "ros2msg", def.as_bytes()).unwrap_or_else(|e| panic!("{e}"));
-        let ch = w.add_channel(schema, "/imu", "cdr", &Default::default()).unwrap_or_else(|e| panic!("{e}"));
-        for i in 0..n {
-            let (t, _, _) = truth(i);
-            let h = mcap::records::MessageHeader {
-                channel_id: ch,
-                sequence: i as u32,
-                log_time: t as u64,
-                publish_time: t as u64,
-            };
-            w.write_to_known_channel(&h, &cdr_imu(i)).unwrap_or_else(|e| panic!("{e}"));
-        }
-        w.finish().unwrap_or_else(|e| panic!("{e}"));
-    }
+    mcap_imu(&mut out, n, mcap::Compression::Lz4, 8 * 1024);
     out.into_inner()
 }
 
