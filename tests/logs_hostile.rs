@@ -236,3 +236,21 @@ fn mcap_corruption_is_said_and_counted_and_huge_lengths_are_safe() {
         }
     }
 }
+
+/// Issue 38 item 12: a stream too short for `noise` is imported with the reason (its rate and
+/// span) and the way out, and nothing suggests a command that will fail.
+#[test]
+fn a_short_stream_suggests_only_what_works() {
+    let Some(f) = formats() else { return };
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let log = f.join("ulog/px4_cubeorange_three_imus.ulg");
+    let log = log.to_string_lossy();
+    let out = crate::common::run_ok(dir.path(), &["import", &log, "--imu", "1", "--out", "short"]);
+    assert!(out.contains("too few for crosscal noise, which needs at least 7"), "{out}");
+    assert!(out.contains("1.000 Hz over 5.00 s"), "{out}");
+    assert!(!out.contains("ready for") && !out.contains("next: crosscal noise"), "{out}");
+    // The session folder itself is a session argument (as `simulate --out` writes it).
+    crate::common::run_ok(dir.path(), &["simulate", "--out", "sim", "--duration", "4"]);
+    let fit = crate::common::run_ok(dir.path(), &["fit", "sim", "--out", "store"]);
+    assert!(fit.contains("profile written"), "{fit}");
+}

@@ -302,6 +302,7 @@ impl Session {
     /// Reads a manifest and all its recordings; with `strict`, gaps in `t` are errors.
     pub fn load_with(manifest_path: &Path, strict: bool) -> Result<Self, SessionError> {
         use rayon::prelude::*;
+        let manifest_path = &manifest_in(manifest_path);
         let manifest = read_manifest(manifest_path)?;
         let options = |spec: &RunSpec| ReadOptions { reference: matches!(spec.motion, MotionSpec::Reference), strict };
         // Runs with a file of their own are read in parallel; results (and errors) are taken
@@ -410,6 +411,7 @@ pub fn rows_past_end(manifest_path: &Path, spec: &RunSpec, len: usize) -> Sessio
 /// line when it does not exist or is not a regular file (a folder, FIFO or device), and the
 /// operating system's reason when it cannot be looked at (e.g. a symbolic-link loop).
 pub fn run_path(manifest_path: &Path, spec: &RunSpec) -> Result<PathBuf, SessionError> {
+    let manifest_path = &manifest_in(manifest_path);
     let dir = manifest_path.parent().unwrap_or(Path::new("."));
     let path = dir.join(&spec.file);
     let refuse = |what: String| {
@@ -492,8 +494,21 @@ fn within(name: &str, key: &str, x: f64, lo: f64, hi: f64, unit: &str) -> Result
     }
 }
 
-/// Reads and validates a manifest (without reading the recordings).
+/// The manifest a path names: the path itself, or `session.json` in it when it is a folder
+/// holding one (what `simulate --out` and `import --out` write).
+pub fn manifest_in(path: &Path) -> PathBuf {
+    let inside = path.join("session.json");
+    if path.is_dir() && inside.is_file() {
+        inside
+    } else {
+        path.to_path_buf()
+    }
+}
+
+/// Reads and validates a manifest (without reading the recordings); a folder holding a
+/// `session.json` reads that.
 pub fn read_manifest(path: &Path) -> Result<Manifest, SessionError> {
+    let path = &manifest_in(path);
     let text =
         crate::atomic::read_text(path).map_err(|source| SessionError::Io { path: path.to_path_buf(), source })?;
     parse_manifest(path, &text)

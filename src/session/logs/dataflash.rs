@@ -82,7 +82,9 @@ impl Fmt {
         let (_, off, c) = &self.cols[i];
         let s = b.get(*off..*off + char_size(*c)?)?;
         match c {
-            b'Q' => i64::try_from(u64::from_le_bytes(s.try_into().ok()?)).ok(),
+            // A stamp past i64 (a corrupt one) saturates: the time-stamp checks downstream
+            // drop it with a warning instead of the record vanishing here.
+            b'Q' => Some(i64::try_from(u64::from_le_bytes(s.try_into().ok()?)).unwrap_or(i64::MAX)),
             b'q' => Some(i64::from_le_bytes(s.try_into().ok()?)),
             b'I' => Some(i64::from(u32::from_le_bytes(s.try_into().ok()?))),
             b'i' => Some(i64::from(i32::from_le_bytes(s.try_into().ok()?))),
@@ -554,6 +556,9 @@ impl State<'_, '_> {
             p.finish(&mut |s| out.push(s));
             for s in out {
                 self.emit(stream, &s);
+            }
+            if let Some(w) = p.unpaired_warning(&self.out.streams[stream].name) {
+                self.out.warnings.push(w);
             }
         }
         if let Some(e) = self.err {

@@ -217,6 +217,11 @@ pub(crate) fn read_up_to(r: &mut impl std::io::Read, buf: &mut [u8]) -> std::io:
     Ok(n)
 }
 
+/// A stream with fewer than 1/this of the samples of the largest one …
+const SPORADIC_RATIO: u64 = 100;
+/// … and at most this many is called sporadic (a corrupt record, likely).
+const SPORADIC_MAX: u64 = 2;
+
 /// Reads every IMU sample of `path` (or of stream `only`) into `sink`.
 pub fn read(
     path: &Path,
@@ -238,6 +243,19 @@ pub fn read(
     }?;
     deglitch.finish(sink)?;
     contents.close_refusals();
+    // A stream of one or two samples beside one of hundreds: a corrupt record (an instance
+    // or id field) more likely than a sensor. (Real logs do hold streams of a few samples,
+    // logged at a low rate: PX4's sensor_accel/sensor_gyro in some configurations.)
+    let seen = deglitch.seen();
+    let most = seen.iter().copied().max().unwrap_or(0);
+    for (i, &n) in seen.iter().enumerate() {
+        if n > 0 && n <= SPORADIC_MAX && most >= 100 && n * SPORADIC_RATIO < most {
+            let name = contents.streams.get(i).map_or("?", |s| s.name.as_str());
+            contents.warnings.push(format!(
+                "{name}: only {n} sample(s) where another stream has {most}: likely a corrupt record (its instance or id field) rather than a sensor"
+            ));
+        }
+    }
     for (i, dropped, seen, first_ns) in deglitch.dropped() {
         let name = contents.streams.get(i).map_or("?", |s| s.name.as_str());
         contents.warnings.push(format!(
@@ -374,6 +392,9 @@ pub struct Pairer {
     gyro: std::collections::VecDeque<(i64, [f64; 3], Option<f64>)>,
     accel_dt: i64,
     accel_seen: u64,
+    /// Gyro samples with no accelerometer sample near their time (dropped).
+    unpaired: u64,
+    gyro_seen: u64,
 }
 
 /// Samples one pairer may hold back before the log is called inconsistent.
@@ -392,6 +413,7 @@ impl Pairer {
 
     /// Adds a gyro sample (time ns, rad/s, °C); false when too many wait for an accelerometer.
     pub fn gyro(&mut self, t_ns: i64, g: [f64; 3], temp: Option<f64>, out: &mut impl FnMut(LogSample)) -> bool {
+        self.gyro_seen += 1;
         self.gyro.push_back((t_ns, g, temp));
         self.drain(out, false);
         self.gyro.len() < PAIR_BACKLOG
@@ -400,7 +422,31 @@ impl Pairer {
     /// Pairs what is left at the end of the log.
     pub fn finish(&mut self, out: &mut impl FnMut(LogSample)) {
         self.drain(out, true);
+        self.unpaired += self.gyro.len() as u64;
         self.gyro.clear();
+    }
+
+    /// Gyro samples dropped so far for want of an accelerometer sample near their time
+    /// (a corrupt or missing accelerometer message, or a stamp far off).
+    pub fn unpaired(&self) -> u64 {
+        self.unpaired
+    }
+
+    /// The warning for the samples [`Self::unpaired`] counts, or for accelerometer samples
+    /// with no gyro sample at all, if any, for stream `name`.
+    pub fn unpaired_warning(&self, name: &str) -> Option<String> {
+        if self.gyro_seen == 0 && self.accel_seen > 0 {
+            return Some(format!(
+                "{name}: {} accelerometer sample(s) and no gyro sample to pair them with (a missing or corrupt gyro message): the stream is empty",
+                self.accel_seen
+            ));
+        }
+        (self.unpaired > 0).then(|| {
+            format!(
+                "{name}: {} gyro sample(s) had no accelerometer sample near their time (a missing or corrupt accelerometer message or time stamp) and are dropped",
+                self.unpaired
+            )
+        })
     }
 
     fn drain(&mut self, out: &mut impl FnMut(LogSample), end: bool) {
@@ -428,9 +474,46 @@ impl Pairer {
                 _ => None,
             };
             self.gyro.pop_front();
-            if let Some((acc, at)) = paired {
-                out(LogSample { t_ns: t, gyro_rad_s: g, accel_m_s2: acc, temp_c: gt.or(at) });
+            match paired {
+                Some((acc, at)) => out(LogSample { t_ns: t, gyro_rad_s: g, accel_m_s2: acc, temp_c: gt.or(at) }),
+                None => self.unpaired += 1,
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Gyro samples the pairer cannot pair are counted and named, never dropped silently.
+    #[test]
+    fn unpaired_samples_are_counted() {
+        let mut kept = 0usize;
+        let mut p = Pairer::default();
+        for k in 0..10i64 {
+            // Accelerometer samples stop after the fifth; gyro samples go on.
+            if k < 5 {
+                p.accel(k * 10, [0.0; 3], None, &mut |_| kept += 1);
+            }
+            p.gyro(k * 10, [0.0; 3], None, &mut |_| kept += 1);
+        }
+        p.finish(&mut |_| kept += 1);
+        assert_eq!(kept as u64 + p.unpaired(), 10);
+        assert!(p.unpaired() >= 4, "{}", p.unpaired());
+        assert!(p.unpaired_warning("s").is_some_and(|w| w.contains("no accelerometer sample")));
+        // Accelerometer samples and no gyro: the stream is empty, and it says so.
+        let mut q = Pairer::default();
+        q.accel(0, [0.0; 3], None, &mut |_| {});
+        q.finish(&mut |_| {});
+        assert!(q.unpaired_warning("s").is_some_and(|w| w.contains("no gyro sample")));
+        // Intact pairs: nothing to say.
+        let mut r = Pairer::default();
+        for k in 0..10i64 {
+            r.accel(k * 10, [0.0; 3], None, &mut |_| {});
+            r.gyro(k * 10, [0.0; 3], None, &mut |_| {});
+        }
+        r.finish(&mut |_| {});
+        assert_eq!(r.unpaired_warning("s"), None);
     }
 }

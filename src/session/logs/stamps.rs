@@ -73,6 +73,11 @@ impl Deglitch {
         Ok(())
     }
 
+    /// Samples met per stream (before any drop), by stream index.
+    pub fn seen(&self) -> Vec<u64> {
+        self.lanes.iter().map(|l| l.seen).collect()
+    }
+
     /// Per stream: (samples dropped, the time of the first one, ns), for streams with drops.
     pub fn dropped(&self) -> impl Iterator<Item = (usize, u64, u64, i64)> + '_ {
         self.lanes

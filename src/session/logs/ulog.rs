@@ -353,6 +353,12 @@ impl State<'_, '_> {
         };
         let name = String::from_utf8_lossy(&b[3..]).to_string();
         let size = format_size(&self.formats, &name, 0).map(|(total, pad)| (2 + total - pad, 2 + total));
+        if size.is_none() {
+            self.out.warnings.push(format!(
+                "byte {pos}: message id {id} subscribes '{}', a message the log defines no format for (a corrupt name?): its data is not read",
+                name.escape_debug()
+            ));
+        }
         self.sizes.insert(id, size);
         let mut fields = HashMap::new();
         let reader = match name.as_str() {
@@ -559,6 +565,9 @@ impl State<'_, '_> {
                     err.get_or_insert(e);
                 }
             });
+            if let Some(w) = p.unpaired_warning(&self.out.streams[stream].name) {
+                self.out.warnings.push(w);
+            }
         }
         if let Some(e) = self.err {
             return Err(e);

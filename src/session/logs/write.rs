@@ -276,9 +276,9 @@ fn decide(asked: SessionKind, s: &Summary) -> (SessionKind, String) {
         SessionKind::Static if !s.is_static() => (SessionKind::Static, format!("static as asked, though the data move: {seen}")),
         SessionKind::Static => (SessionKind::Static, format!("static as asked: {seen}")),
         SessionKind::MultiPosition => (SessionKind::MultiPosition, format!("multi-position as asked: {seen}")),
-        SessionKind::Auto if s.is_static() => (SessionKind::Static, format!("at rest throughout ({seen}): static, ready for crosscal noise")),
+        SessionKind::Auto if s.is_static() => (SessionKind::Static, format!("at rest throughout ({seen}): static")),
         SessionKind::Auto if s.orientations >= 2 && s.initial_rest_s().is_some() => {
-            (SessionKind::MultiPosition, format!("rests and motions ({seen}): multi-position, ready for crosscal fit"))
+            (SessionKind::MultiPosition, format!("rests and motions ({seen}): multi-position"))
         }
         SessionKind::Auto => (
             SessionKind::MultiPosition,
