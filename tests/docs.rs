@@ -308,9 +308,22 @@ fn run_page(page: &str) {
             String::from_utf8_lossy(&out.stdout),
             String::from_utf8_lossy(&out.stderr)
         );
-        if let Some((line, shown)) = b.shown.as_ref().filter(|_| !NOT_YET_COMPARED.contains(&page)) {
+        // CROSSCAL_DOCS_DIFF=DIR: every block's printed output and any mismatch go to files
+        // there (to update a page by hand), and every page is compared.
+        let diff_dir = std::env::var_os("CROSSCAL_DOCS_DIFF").map(PathBuf::from);
+        if let Some((line, shown)) =
+            b.shown.as_ref().filter(|_| diff_dir.is_some() || !NOT_YET_COMPARED.contains(&page))
+        {
             let printed = String::from_utf8_lossy(&out.stdout);
-            if let Err(e) = same_output(shown, &printed) {
+            let verdict = same_output(shown, &printed);
+            if let Some(dir) = &diff_dir {
+                let stem = format!("{}-{line}", page.replace('/', "_"));
+                std::fs::create_dir_all(dir).unwrap();
+                std::fs::write(dir.join(format!("{stem}.printed")), printed.as_bytes()).unwrap();
+                if let Err(e) = &verdict {
+                    std::fs::write(dir.join(format!("{stem}.mismatch")), format!("{e}\n--- shown\n{shown}")).unwrap();
+                }
+            } else if let Err(e) = verdict {
                 panic!("{page}:{line}: the output the page shows is not what the block above prints:\n{e}\n--- printed\n{printed}");
             }
         }
