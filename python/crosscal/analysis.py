@@ -12,7 +12,7 @@ import numpy as np
 
 from . import _crosscal
 from .profile import Profile
-from .session import PathLike, Session, read_session
+from .session import PathLike, Session, contiguous_f64, read_session
 
 SessionLike = Union[Session, PathLike]
 
@@ -142,7 +142,7 @@ class Corrected:
 
 
 def _f64(a: Any) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float64)
+    return contiguous_f64(a)
 
 
 def correct(

@@ -66,9 +66,23 @@ BY_CODE: dict[int, type] = {
 }
 
 
+class OutOfMemoryError(UsageError, MemoryError):
+    """Exit code 2: a request these data cannot satisfy in this machine's memory: the memory
+    a call needs for its inputs' size was refused (checked before the work starts, so the
+    interpreter never aborts on it). Work in blocks (``Streaming.push_block``) or on less."""
+
+
+class NotFoundError(UsageError, KeyError):
+    """Exit code 2: a run, coefficient or other name asked for is not there (a
+    :class:`KeyError` too, as a mapping's lookup raises)."""
+
+    def __str__(self) -> str:
+        return self.message
+
+
 def for_code(code: int, message: str) -> CrosscalError:
     """The exception of exit code ``code`` carrying ``message`` (used by the native module)."""
     return BY_CODE.get(code, UsageError)(message)
 
 
-__all__ = ["CrosscalError", "for_code", "BY_CODE"] + [c.__name__ for c in BY_CODE.values()]
+__all__ = ["CrosscalError", "OutOfMemoryError", "NotFoundError", "for_code", "BY_CODE"] + [c.__name__ for c in BY_CODE.values()]

@@ -12,6 +12,7 @@ from typing import Any, Optional, Union
 import numpy as np
 
 from . import _crosscal
+from .errors import NotFoundError
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -111,7 +112,7 @@ class Profile:
             for c in self.data[sensor]["coefficients"]:
                 if c["name"] == name:
                     return float(c["value"])
-        raise KeyError(f"no coefficient '{name}' in the profile")
+        raise NotFoundError(f"no coefficient '{name}' in the profile")
 
     def to_json(self) -> str:
         """The profile as crosscal writes it."""

@@ -17,6 +17,16 @@ from typing import Any, Iterable, Mapping, Optional, Sequence, Union
 import numpy as np
 
 from . import _crosscal
+from .errors import NotFoundError, OutOfMemoryError, UsageError
+
+
+def contiguous_f64(a: Any) -> np.ndarray:
+    """``a`` as a C-contiguous float64 array (a view when it is one); numpy's refusal to
+    allocate a copy is the package's :class:`~crosscal.errors.OutOfMemoryError`."""
+    try:
+        return np.ascontiguousarray(a, dtype=np.float64)
+    except MemoryError as e:
+        raise OutOfMemoryError(f"converting an input to a contiguous float64 array: {e}") from e
 
 COLUMNS = ("t", "gx", "gy", "gz", "ax", "ay", "az")
 
@@ -75,7 +85,7 @@ class Session:
             try:
                 return self.run_names.index(run)
             except ValueError:
-                raise KeyError(f"no run '{run}': runs are {', '.join(self.run_names)}") from None
+                raise NotFoundError(f"no run '{run}': runs are {', '.join(self.run_names)}") from None
         return int(run)
 
     def arrays(self, run: Union[int, str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, Optional[np.ndarray]]:
@@ -128,7 +138,7 @@ class Session:
         for i, r in enumerate(runs):
             name = str(r.get("name", f"run{i + 1}"))
             if "motion" not in r:
-                raise ValueError(f"run '{name}': no motion (e.g. {{'kind': 'conic', 'cone_angle_deg': 10, 'rate_deg_s': 10}})")
+                raise UsageError(f"run '{name}': no motion (e.g. {{'kind': 'conic', 'cone_angle_deg': 10, 'rate_deg_s': 10}})")
             entry: dict[str, Any] = {"name": name, "file": f"{name}.csv", "motion": dict(r["motion"])}
             for key in ("mount", "temperature_c", "start_s", "note"):
                 if key in r and r[key] is not None:
@@ -138,7 +148,7 @@ class Session:
                 df = r["data"]
                 missing = [c for c in COLUMNS if c not in df.columns]
                 if missing:
-                    raise ValueError(f"run '{name}': the DataFrame lacks column(s) {', '.join(missing)}")
+                    raise UsageError(f"run '{name}': the DataFrame lacks column(s) {', '.join(missing)}")
                 t = df["t"].to_numpy(dtype=np.float64)
                 gyro = df[["gx", "gy", "gz"]].to_numpy(dtype=np.float64)
                 accel = df[["ax", "ay", "az"]].to_numpy(dtype=np.float64)
@@ -147,10 +157,10 @@ class Session:
                 t, gyro, accel, temp = r["t"], r["gyro"], r["accel"], r.get("temp")
             columns.append(
                 (
-                    np.ascontiguousarray(t, dtype=np.float64),
-                    np.ascontiguousarray(gyro, dtype=np.float64),
-                    np.ascontiguousarray(accel, dtype=np.float64),
-                    None if temp is None else np.ascontiguousarray(temp, dtype=np.float64),
+                    contiguous_f64(t),
+                    contiguous_f64(gyro),
+                    contiguous_f64(accel),
+                    None if temp is None else contiguous_f64(temp),
                 )
             )
         manifest = {

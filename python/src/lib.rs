@@ -43,6 +43,52 @@ fn usage(py: Python<'_>, msg: impl Into<String>) -> PyErr {
     raise(py, crosscal::app::errors::EXIT_INPUT, msg.into())
 }
 
+/// Bytes per sample a call keeps beside its inputs: time, six axes and a flag in the
+/// outputs, and as much again of working buffers (derivatives, a corrected copy).
+const WORK_BYTES_PER_SAMPLE: u128 = 2 * (8 + 48 + 1);
+
+/// Checks, before the work starts, that the memory `what` needs for `samples` samples can
+/// be had: the allocation is asked for and given back, so a refusal is the package's
+/// `OutOfMemoryError` and never an abort of the interpreter (Rust's allocator aborts on a
+/// refused allocation in the middle of a computation).
+fn probe_memory(py: Python<'_>, samples: usize, what: &str) -> PyResult<()> {
+    let bytes = samples as u128 * WORK_BYTES_PER_SAMPLE;
+    // More than the machine has (RAM and swap) can never be had, whatever the kernel's
+    // overcommit policy would promise first.
+    let beyond_machine = machine_bytes().is_some_and(|m| bytes > m);
+    let refused = beyond_machine
+        || match usize::try_from(bytes) {
+            Ok(b) if b <= isize::MAX as usize => Vec::<u8>::new().try_reserve_exact(b).is_err(),
+            _ => true,
+        };
+    if !refused {
+        return Ok(());
+    }
+    let message = format!(
+        "{what}: {samples} samples need about {:.3e} bytes of memory beside the inputs, and the allocation was refused: work in blocks (Streaming.push_block with out=) or on fewer samples",
+        bytes as f64
+    );
+    let made = py
+        .import("crosscal.errors")
+        .and_then(|m| m.getattr("OutOfMemoryError"))
+        .and_then(|c| c.call1((message.clone(),)));
+    Err(match made {
+        Ok(e) => PyErr::from_value(e),
+        Err(_) => pyo3::exceptions::PyMemoryError::new_err(message),
+    })
+}
+
+/// RAM and swap of this machine, bytes (`MemTotal` + `SwapTotal` of /proc/meminfo; `None`
+/// where there is no such file).
+fn machine_bytes() -> Option<u128> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let kib = |key: &str| -> Option<u128> {
+        let line = text.lines().find(|l| l.starts_with(key))?;
+        line[key.len()..].trim().trim_end_matches("kB").trim().parse().ok()
+    };
+    Some((kib("MemTotal:")? + kib("SwapTotal:").unwrap_or(0)) * 1024)
+}
+
 /// A C-contiguous (n, 3) float64 array as n triples, borrowed.
 fn triples<'a>(py: Python<'_>, a: &'a PyReadonlyArray2<'_, f64>, what: &str) -> PyResult<&'a [[f64; 3]]> {
     if a.shape()[1] != 3 {
@@ -176,6 +222,7 @@ type RunArrays<'py> = (
 /// the manifest's units.
 #[pyfunction]
 fn session_from_columns(py: Python<'_>, manifest_json: &str, runs: Vec<RunArrays<'_>>) -> PyResult<Session> {
+    probe_memory(py, runs.iter().map(|r| r.0.len()).sum(), "Session.from_arrays")?;
     let mut cols = Vec::with_capacity(runs.len());
     for (i, (t, g, a, temp)) in runs.iter().enumerate() {
         let temp_c = match temp {
@@ -381,6 +428,7 @@ fn correct<'py>(
     let cal = calibration(py, &p, temperature_range)?;
     let io = IoUnits::for_profile(&p, gyro_unit, accel_unit).map_err(|e| err(py, e))?;
     let c = columns(py, &t, &gyro, &accel, temp.as_ref())?;
+    probe_memory(py, c.t.len(), "correct")?;
     let r = py.detach(|| crosscal::app::arrays::correct_arrays(&cal, &io, c, mode)).map_err(|e| err(py, e))?;
     let warnings: Vec<String> = r.temp_outside.warning().into_iter().collect();
     let flags = (!r.flags.is_empty()).then(|| r.flags.into_pyarray(py));
@@ -477,12 +525,16 @@ impl Streaming {
         let n = t.len();
         let out = match out {
             Some(o) => out_arrays(py, o, n)?,
-            None => (
-                PyArray1::zeros(py, n, false),
-                PyArray2::zeros(py, [n, 3], false),
-                PyArray2::zeros(py, [n, 3], false),
-                PyArray1::zeros(py, n, false),
-            ),
+            None => {
+                // numpy's refusal of the new arrays would panic in the binding: ask first.
+                probe_memory(py, n, "Streaming.push_block")?;
+                (
+                    PyArray1::zeros(py, n, false),
+                    PyArray2::zeros(py, [n, 3], false),
+                    PyArray2::zeros(py, [n, 3], false),
+                    PyArray1::zeros(py, n, false),
+                )
+            }
         };
         {
             let c = columns(py, &t, &gyro, &accel, temp.as_ref())?;

@@ -2,6 +2,8 @@
 one of the package's exception classes (never a PanicException, which ``except Exception``
 does not catch)."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -92,3 +94,38 @@ def test_out_arrays_that_alias_or_are_read_only_are_usage_errors(unit):
     out = (np.zeros(n), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n, dtype=np.uint8))
     r = s.push_block(t, g, a, out=out)
     assert r[0] is out[0] and np.isfinite(out[1]).all()
+
+
+def _huge_arrays(tmp_path):
+    """t, gyro and accel of more samples than this machine's RAM and swap could correct, as
+    sparse memory-mapped files (nothing is read or allocated to make them)."""
+    with open("/proc/meminfo") as f:
+        kib = {line.split(":")[0]: int(line.split()[1]) for line in f if line.split()[1].isdigit()}
+    n = int((kib["MemTotal"] + kib.get("SwapTotal", 0)) * 1024 // 100) + 1
+    arrays = []
+    for name, shape in (("t", (n,)), ("gyro", (n, 3)), ("accel", (n, 3))):
+        path = tmp_path / f"{name}.bin"
+        with open(path, "wb") as f:
+            f.truncate(8 * n * (3 if len(shape) == 2 else 1))
+        arrays.append(np.memmap(path, dtype=np.float64, mode="r", shape=shape))
+    return n, arrays
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/meminfo"), reason="needs Linux's /proc/meminfo")
+def test_inputs_too_large_for_memory_raise_the_packages_error(unit, tmp_path):
+    # Issue 38 item 8: the interpreter used to abort on the refused allocation.
+    _, profile = unit
+    n, (t, gyro, accel) = _huge_arrays(tmp_path)
+    with pytest.raises(crosscal.errors.OutOfMemoryError) as e:
+        crosscal.correct(profile, t, gyro, accel)
+    assert isinstance(e.value, MemoryError) and isinstance(e.value, crosscal.CrosscalError)
+    assert f"{n} samples" in str(e.value) and "push_block" in str(e.value)
+    with pytest.raises(crosscal.errors.OutOfMemoryError):
+        crosscal.Streaming(profile).push_block(t, gyro, accel)
+    with pytest.raises(crosscal.errors.OutOfMemoryError):
+        run = {"name": "r", "motion": {"kind": "static", "up_stand": [0, 0, 1]}, "t": t, "gyro": gyro, "accel": accel}
+        crosscal.Session.from_arrays("big", [run])
+    # A name that is not there is the package's error and still a KeyError.
+    with pytest.raises(crosscal.errors.NotFoundError) as e:
+        profile.value("gyro.no_such_coefficient")
+    assert isinstance(e.value, KeyError) and "no_such_coefficient" in str(e.value)
