@@ -254,3 +254,21 @@ fn a_short_stream_suggests_only_what_works() {
     let fit = crate::common::run_ok(dir.path(), &["fit", "sim", "--out", "store"]);
     assert!(fit.contains("profile written"), "{fit}");
 }
+
+/// Issue 38 item 12: a recording separated by semicolons or tabs is named as such, with the
+/// command that reads it, instead of "column 't' is absent".
+#[test]
+fn a_semicolon_or_tab_recording_names_its_delimiter_and_the_importer() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    crate::common::run_ok(dir.path(), &["simulate", "--out", "s", "--duration", "4"]);
+    for (sep, name) in [(";", "semicolons (';')"), ("\t", "tabs")] {
+        let csv = dir.path().join("s/cone+10.csv");
+        let text = std::fs::read_to_string(&csv).unwrap_or_else(|e| panic!("{e}"));
+        std::fs::write(&csv, text.replace([',', ';', '\t'], sep)).unwrap_or_else(|e| panic!("{e}"));
+        let (code, out, err) = crate::common::run_in(dir.path(), &["fit", "s", "--dry-run"]);
+        assert_eq!(code, 5, "{out}{err}");
+        assert!(err.contains("s/cone+10.csv:1:"), "{err}");
+        assert!(err.contains(&format!("separated by {name}")), "{err}");
+        assert!(err.contains("crosscal import text s/cone+10.csv"), "{err}");
+    }
+}

@@ -228,30 +228,56 @@ fn run_protocol(a: &Args, session: &Session, d: &ProtocolDiagnosis) -> anyhow::R
             outln!("  {:<26} {:>6} {:>11.2}% {:>11.2e}  {fit}", c.effect, c.added_params, change, c.p_value);
         }
     }
+    // The verdict reads as on a stand session: "add X … Fit it with:", "a systematic
+    // residual remains …", "the model is adequate …".
+    let fit_with = |e: &str| format!("crosscal fit {} --effect {e}", a.session.display());
     match d.proposal.as_deref().and_then(|p| d.candidates.iter().find(|c| c.effect == p)) {
-        Some(c) => {
-            outln!("\nverdict: missing effect {} (p = {:.1e})", c.effect, c.p_value);
-            if !d.indistinguishable.is_empty() {
-                outln!(
-                    "  these poses cannot tell it from {}: poses at other angles (e.g. 45° tilts) would separate them",
-                    d.indistinguishable.join(", ")
-                );
-            }
+        Some(c) if d.beyond_noise.is_empty() => {
+            outln!(
+                "\nverdict: add {} — it explains pose residuals the noise does not (p = {:.1e}).",
+                c.effect,
+                c.p_value
+            );
+            print_indistinguishable(d)?;
             match &c.fittable {
-                Ok(()) => outln!("next: crosscal fit {} --effect {}", a.session.display(), c.effect),
-                Err(why) => outln!("next: {why}"),
+                Ok(()) => outln!("Fit it with: {}", fit_with(&c.effect)),
+                Err(why) => outln!("It cannot be fitted on this session: {why}"),
+            }
+        }
+        Some(c) => {
+            // The p-value is computed against a noise model these poses reject (BEYOND NOISE
+            // above): not evidence of a unit effect on its own (issue 36).
+            outln!(
+                "\nverdict: a systematic residual remains that the noise does not explain (BEYOND NOISE above); {} is the closest catalogued match (p = {:.1e}, but against a noise model these poses reject, so not evidence on its own). Suspects before a unit effect: a gyro bias that wanders between the poses, poses not held still, the Earth's rotation (15.04 °/h; its vertical part follows gravity as a g-sensitivity does). A fixture instead of a hand, a longer warm-up and an orientation repeated late in the recording tell them apart.",
+                c.effect,
+                c.p_value
+            );
+            print_indistinguishable(d)?;
+            if c.fittable.is_ok() {
+                outln!("To try it anyway: {}", fit_with(&c.effect));
             }
         }
         None if !d.adequate() => outln!(
-            "\nverdict: not adequate: {} pose(s) or turn(s) stand out beyond the noise and the pose-to-pose scatter (listed above as OUTLIER); no catalogued effect explains them. What would fix it: a longer, truly still initial rest (the gyro bias), poses held longer and still, more poses, and an orientation repeated late in the recording (it separates a drifting bias from g-sensitivity)",
+            "\nverdict: a systematic residual remains that no catalogued effect explains: {} pose(s) or turn(s) stand out beyond the noise and the pose-to-pose scatter (listed above). What would fix it: a longer, truly still initial rest (the gyro bias), poses held longer and still, more poses, and an orientation repeated late in the recording (it separates a drifting bias from g-sensitivity)",
             d.standing_out().len()
         ),
         None => outln!(
-            "\nverdict: adequate: no catalogued effect explains the pose residuals (p ≥ {:.0e} for all), and no pose or turn stands out",
+            "\nverdict: the model is adequate: the pose residuals are at the noise floor (no catalogued effect has p < {:.0e}, no pose or turn stands out); nothing to add.",
             crosscal::diagnose::protocol::P_PROPOSE
         ),
     }
     Ok(Outcome::Ok)
+}
+
+/// The candidates the poses cannot tell from the proposal, if any.
+fn print_indistinguishable(d: &ProtocolDiagnosis) -> anyhow::Result<()> {
+    if !d.indistinguishable.is_empty() {
+        outln!(
+            "  these poses cannot tell it from {}: poses at other angles (e.g. 45° tilts) would separate them",
+            d.indistinguishable.join(", ")
+        );
+    }
+    Ok(())
 }
 
 /// The noise model, the spectrum's lines, the candidates and what cannot be identified.
