@@ -436,3 +436,19 @@ fn hand_held_sessions_beyond_the_noise_name_no_unit_effect() {
         assert!(!out.contains("Fit it with:"), "data{k}: {out}");
     }
 }
+
+/// Issue 38 item 12: too few poses says what the counts per threshold mean and what to do.
+#[test]
+fn too_few_poses_explains_its_counts_and_the_way_out() {
+    let truth = ProtocolTruth::mems(false);
+    let e = fit_protocol(
+        &multi_position(&truth, 20.0, 5, 3.0, 4).session(),
+        &Model::tedaldi(),
+        &ProtocolOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("too few static poses for the 9 accelerometer parameters"), "{e}");
+    assert!(e.contains("×m = m times the initial rest's variance"), "{e}");
+    assert!(e.contains("Hold 9 or more different orientations still"), "{e}");
+}

@@ -234,8 +234,10 @@ class Diagnosis:
 
     @property
     def verdict(self) -> str:
-        """Stand runs: ``adequate``, ``explained`` or ``unexplained``; a protocol session:
-        ``missing-effect``, ``adequate`` or ``not-adequate`` (as the command's verdict line)."""
+        """``adequate``, ``explained`` (an effect to add brings the residual to the noise) or
+        ``unexplained`` (a systematic residual remains), on stand runs and protocol sessions
+        alike, as the command's verdict line. On a protocol session whose pose residuals are
+        beyond the noise, a closest catalogued match is ``unexplained``: no evidence."""
         return self._native.verdict
 
     @property

@@ -623,9 +623,11 @@ impl Diagnosis {
                 Verdict::Explained => "explained",
                 Verdict::Unexplained => "unexplained",
             },
-            Diagnosed::Protocol(d) if d.proposal.is_some() => "missing-effect",
+            // The same words as a stand session's: a proposal on poses whose residuals are
+            // beyond the noise is not evidence, so that is "unexplained".
+            Diagnosed::Protocol(d) if d.proposal.is_some() && d.beyond_noise.is_empty() => "explained",
             Diagnosed::Protocol(d) if d.adequate() => "adequate",
-            Diagnosed::Protocol(_) => "not-adequate",
+            Diagnosed::Protocol(_) => "unexplained",
         }
     }
 

@@ -44,8 +44,13 @@ pub fn acceptance(
         let d = crate::diagnose::protocol::diagnose_protocol(session, &model)
             .map_err(|source| AppError::Fit { what: what.clone(), source })?;
         let mut why: Vec<String> = d.standing_out().iter().map(|p| format!("{p} stands out")).collect();
-        if let Some(p) = &d.proposal {
-            why.push(format!("missing effect: {p}"));
+        match &d.proposal {
+            Some(p) if d.beyond_noise.is_empty() => why.push(format!("missing effect: {p}")),
+            // Beyond the noise: the closest match is no evidence of a unit effect (issue 36).
+            Some(p) => {
+                why.push(format!("closest catalogued match {p} (not evidence: the residuals are beyond the noise)"))
+            }
+            None => {}
         }
         Some((why.is_empty(), why))
     } else if diagnose {
