@@ -61,7 +61,7 @@ fn edits() -> impl Strategy<Value = Vec<(f64, u8, u8)>> {
 }
 
 fn check_recording(bytes: &[u8], reference: bool) {
-    let opts = ReadOptions { reference, strict: false };
+    let opts = ReadOptions { reference, strict: false, angle_column: None };
     if let Ok(r) = parse_recording(Path::new("x.csv"), bytes, &Units::default(), 9.80665, opts) {
         assert!(!r.is_empty());
         assert!(r.t_s.windows(2).all(|w| w[1] > w[0]));

@@ -19,7 +19,7 @@ fn csv_corpus() {
     for f in corpus("csv") {
         let data = std::fs::read(&f).unwrap();
         for reference in [false, true] {
-            let opts = crosscal::session::ReadOptions { reference, strict: false };
+            let opts = crosscal::session::ReadOptions { reference, strict: false, angle_column: None };
             let units = crosscal::units::Units::default();
             if let Ok(r) = crosscal::session::parse_recording(&f, &data, &units, 9.80665, opts) {
                 assert!(r.t_s.windows(2).all(|w| w[1] > w[0]), "{}", f.display());

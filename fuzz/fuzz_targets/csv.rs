@@ -5,7 +5,7 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     for reference in [false, true] {
-        let opts = crosscal::session::ReadOptions { reference, strict: data.first().is_some_and(|b| b & 1 == 1) };
+        let opts = crosscal::session::ReadOptions { reference, strict: data.first().is_some_and(|b| b & 1 == 1), angle_column: None };
         let units = crosscal::units::Units::default();
         if let Ok(r) = crosscal::session::parse_recording(std::path::Path::new("f.csv"), data, &units, 9.80665, opts) {
             assert!(r.t_s.windows(2).all(|w| w[1] > w[0]));

@@ -74,7 +74,8 @@ const SPILL_VALUES: usize = 8;
 
 impl<'a> StreamRun<'a> {
     /// A conic or static run of a manifest; `None` for kinds that need the whole run in
-    /// memory (reference motion with a derived ε, protocol runs).
+    /// memory (reference motion with a derived ε, protocol runs, a conic run with a logged
+    /// stand angle, whose rate and angular acceleration are the angle's derivatives).
     /// `strict`: a gap in t is an error, not a warning.
     pub fn new(
         manifest_path: &Path,
@@ -82,7 +83,7 @@ impl<'a> StreamRun<'a> {
         spec: &'a RunSpec,
         strict: bool,
     ) -> Result<Option<Self>, SessionError> {
-        if !matches!(spec.motion, MotionSpec::Conic { .. } | MotionSpec::Static { .. }) {
+        if !matches!(spec.motion, MotionSpec::Conic { .. } | MotionSpec::Static { .. }) || spec.angle_column.is_some() {
             return Ok(None);
         }
         let path = run_path(manifest_path, spec)?;

@@ -254,10 +254,13 @@ pub fn track_for(
         })
     };
     let (source, epsilon_source) = match motion {
-        MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => {
-            let c = super::Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg).fixed(g_m_s2);
-            (Source::Conic { c, mount: mount.clone(), lag_s: 0.0 }, EPSILON_CONIC.to_string())
-        }
+        MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } => match rec.angle_rad.as_deref() {
+            Some(theta) => logged_source(cone_angle_deg.to_radians(), rec, theta, mount, g_m_s2, deriv),
+            None => {
+                let c = super::Conic::from_deg(*cone_angle_deg, *rate_deg_s, *phase_deg).fixed(g_m_s2);
+                (Source::Conic { c, mount: mount.clone(), lag_s: 0.0 }, EPSILON_CONIC.to_string())
+            }
+        },
         MotionSpec::Static { up_stand, earth_rate_rad_s } => {
             let k = Kinematics {
                 w_rad_s: V3::new(*earth_rate_rad_s),
@@ -289,6 +292,30 @@ pub fn track_for(
     }
     let temp_rate_c_s = rec.temp_c.as_ref().map(|t| crate::stats::temp_rate::centred(&rec.t_s, t).into());
     Track { t_s: rec.t_s.clone(), source, maps: Vec::new(), epsilon_source, temp_rate_c_s }
+}
+
+/// A conic run whose stand logs its angle: paper eq. 1 generalised to a variable stand
+/// angle (module [`super::stand`]: ω = θ̇ f, ε = θ̈ f + θ̇² f_θ at the declared cone angle),
+/// with θ̇ and θ̈ the logged angle's smoothed derivatives ([`super::stand::logged_angles`]).
+fn logged_source(
+    cone_angle_rad: f64,
+    rec: &crate::session::Recording,
+    theta_rad: &[f64],
+    mount: &Mount,
+    g_m_s2: f64,
+    deriv: &DerivativeConfig,
+) -> (Source, String) {
+    let stand = super::stand::StandMotion::ideal(cone_angle_rad, 0.0, 0.0);
+    let angles = super::stand::logged_angles(&rec.t_s, theta_rad, deriv);
+    let n = angles.len();
+    let (mut w, mut e, mut a) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    for an in angles {
+        let k = stand.at_angle(an, g_m_s2);
+        w.push(mount.to_sensor(k.w_rad_s));
+        e.push(mount.to_sensor(k.e_rad_s2));
+        a.push(mount.to_sensor(k.a_m_s2));
+    }
+    (Source::Sampled { w, e, a }, super::stand::logged_method(deriv))
 }
 
 /// A reference run's stored states, with ε given or derived from the reference rate.

@@ -41,6 +41,9 @@ pub struct Recording {
     pub temp_c: Option<Vec<f64>>,
     /// Reference columns, when requested and present.
     pub reference: Option<ReferenceColumns>,
+    /// The stand's logged angle, rad (the run's `angle_column`, recorded in degrees), when
+    /// the run names one.
+    pub angle_rad: Option<Vec<f64>>,
     /// SHA-256 of the file's bytes, hex.
     pub sha256: String,
     /// Non-fatal findings (gaps in `t`), each naming its line.
@@ -67,6 +70,7 @@ impl Recording {
             accel: self.accel[start..end].to_vec(),
             temp_c: self.temp_c.as_ref().map(|t| t[start..end].to_vec()),
             reference: self.reference.as_ref().map(|r| r.slice(start, end)),
+            angle_rad: self.angle_rad.as_ref().map(|a| a[start..end].to_vec()),
             sha256: self.sha256.clone(),
             warnings: self.warnings.clone(),
         }
@@ -74,12 +78,14 @@ impl Recording {
 }
 
 /// Which optional columns to read.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct ReadOptions {
     /// Require `wx_ref..az_ref` (and read `ex_ref..ez_ref` if present).
     pub reference: bool,
     /// Treat gaps in `t` (more than 5 median sample periods) as errors, not warnings.
     pub strict: bool,
+    /// Require this column, the stand's measured angle in degrees (a run's `angle_column`).
+    pub angle_column: Option<String>,
 }
 
 const REQUIRED: [&str; 7] = ["t", "gx", "gy", "gz", "ax", "ay", "az"];
@@ -134,6 +140,8 @@ pub struct Row {
     pub a_ref: [f64; 3],
     /// Reference angular acceleration, rad/s² (when `ex_ref..ez_ref` are present).
     pub e_ref: [f64; 3],
+    /// The stand's logged angle, rad (NaN without an angle column).
+    pub angle_rad: f64,
 }
 
 /// A reader that hashes (SHA-256) every byte it passes on.
@@ -274,8 +282,9 @@ impl<R: std::io::Read> Lines<R> {
 
 /// Slot of a column that is not read.
 const SKIP: u8 = u8::MAX;
-/// Values a row can have: t, gyro ×3, accel ×3, temp, reference ω ×3, f ×3, ε ×3.
-const SLOTS: usize = 17;
+/// Values a row can have: t, gyro ×3, accel ×3, temp, reference ω ×3, f ×3, ε ×3, the
+/// stand's angle.
+const SLOTS: usize = 18;
 
 /// The fields of one data line, parsed straight from its bytes into `vals` by slot (see
 /// [`RowReader`]); false when the line needs the general path (anything but finite
@@ -347,6 +356,7 @@ struct Columns {
     temp_idx: Option<usize>,
     ref_idx: Option<[usize; 6]>,
     eps_idx: Option<[usize; 3]>,
+    angle_idx: Option<usize>,
 }
 
 /// The header: the first line that is not blank or a comment (its line and column names).
@@ -393,7 +403,7 @@ fn read_header<R: std::io::Read>(
 }
 
 /// Where the required and optional columns are (errors name the header's line).
-fn map_columns(names: &[String], opts: ReadOptions, path: &Path, header_line: u64) -> Result<Columns, SessionError> {
+fn map_columns(names: &[String], opts: &ReadOptions, path: &Path, header_line: u64) -> Result<Columns, SessionError> {
     let find = |name: &str| names.iter().position(|n| n == name);
     // A column read twice would be ambiguous: which one holds the data?
     for name in REQUIRED.iter().chain(&["temp"]).chain(&REF_REQUIRED).chain(&REF_EPS) {
@@ -472,7 +482,31 @@ fn map_columns(names: &[String], opts: ReadOptions, path: &Path, header_line: u6
             }
         }
     }
-    Ok(Columns { idx, temp_idx, ref_idx, eps_idx })
+    let angle_idx = match &opts.angle_column {
+        Some(name) => Some(find(name).ok_or_else(|| {
+            csv_err(
+                Problem::Header,
+                path,
+                header_line,
+                "-",
+                format!(
+                    "the run's angle_column '{name}' (the stand's logged angle, degrees) is absent: the header has [{}]",
+                    names.join(",")
+                ),
+            )
+        })?),
+        None => None,
+    };
+    if let Some(k) = angle_idx.filter(|&k| idx.contains(&k) || temp_idx == Some(k)) {
+        return Err(csv_err(
+            Problem::Header,
+            path,
+            header_line,
+            format!("{} ({})", k + 1, names[k]),
+            "the run's angle_column names a column that holds the unit's outputs or temperature: expected a column of its own",
+        ));
+    }
+    Ok(Columns { idx, temp_idx, ref_idx, eps_idx, angle_idx })
 }
 
 /// Streams the rows of a recording: one reused buffer, no allocation per row; every row
@@ -497,6 +531,7 @@ pub struct RowReader<R: std::io::Read> {
     temp_idx: Option<usize>,
     ref_idx: Option<[usize; 6]>,
     eps_idx: Option<[usize; 3]>,
+    angle_idx: Option<usize>,
     width: usize,
     header_line: u64,
     factors: [f64; 5],
@@ -512,12 +547,16 @@ impl<R: std::io::Read> RowReader<R> {
         let mut lines = Lines::new(Hashing { inner: input, hash: Sha256::new(), nonblank: false, skip: false });
         let mut rec = csv::ByteRecord::new();
         let (header_line, names) = read_header(&mut lines, &mut rec, &path)?;
-        let Columns { idx, temp_idx, ref_idx, eps_idx } = map_columns(&names, opts, &path, header_line)?;
+        let Columns { idx, temp_idx, ref_idx, eps_idx, angle_idx } = map_columns(&names, &opts, &path, header_line)?;
         let width = names.len();
         let mut slots = vec![SKIP; width];
         let used = idx.iter().chain(&temp_idx).chain(ref_idx.iter().flatten()).chain(eps_idx.iter().flatten());
         for (slot, &col) in used.enumerate() {
             slots[col] = slot as u8;
+        }
+        // The angle has the last slot, whatever else is read.
+        if let Some(col) = angle_idx {
+            slots[col] = (SLOTS - 1) as u8;
         }
         let kg = units.gyro.to_rad_s();
         let ka = units.accel.to_m_s2(g_m_s2);
@@ -536,6 +575,7 @@ impl<R: std::io::Read> RowReader<R> {
             temp_idx,
             ref_idx,
             eps_idx,
+            angle_idx,
             width,
             header_line,
             factors: [units.time.to_s(), kg, ka, kwr, kar],
@@ -647,6 +687,7 @@ impl<R: std::io::Read> RowReader<R> {
                             row.e_ref = [v[s + 6] * kwr, v[s + 7] * kwr, v[s + 8] * kwr];
                         }
                     }
+                    row.angle_rad = if self.angle_idx.is_some() { v[SLOTS - 1].to_radians() } else { f64::NAN };
                     return Ok(true);
                 }
             }
@@ -721,6 +762,10 @@ impl<R: std::io::Read> RowReader<R> {
                 row.e_ref = self.triple(&e, kwr, line)?;
             }
         }
+        row.angle_rad = match self.angle_idx {
+            Some(k) => self.field(k, line)?.to_radians(),
+            None => f64::NAN,
+        };
         Ok(true)
     }
 
@@ -757,7 +802,7 @@ fn read_stream<R: std::io::Read>(
     g_m_s2: f64,
     opts: ReadOptions,
 ) -> Result<Recording, SessionError> {
-    let mut rows = RowReader::new(path, input, units, g_m_s2, opts)?;
+    let mut rows = RowReader::new(path, input, units, g_m_s2, opts.clone())?;
     let mut t_s = Vec::with_capacity(cap);
     let mut out = Recording {
         gyro: Vec::with_capacity(cap),
@@ -767,6 +812,7 @@ fn read_stream<R: std::io::Read>(
     };
     let mut refc =
         opts.reference.then(|| ReferenceColumns { e_rad_s2: rows.has_eps().then(Vec::new), ..Default::default() });
+    let mut angle = opts.angle_column.is_some().then(|| Vec::with_capacity(cap));
     let mut scan = super::sanity::StreamScan::new(units.time.to_s());
     let mut row = Row::default();
     while rows.read_row(&mut row)? {
@@ -778,6 +824,9 @@ fn read_stream<R: std::io::Read>(
         out.accel.push(row.accel);
         if let Some(v) = out.temp_c.as_mut() {
             v.push(row.temp_c);
+        }
+        if let Some(v) = angle.as_mut() {
+            v.push(row.angle_rad);
         }
         if let Some(r) = refc.as_mut() {
             r.w_rad_s.push(V3::new(row.w_ref));
@@ -798,6 +847,10 @@ fn read_stream<R: std::io::Read>(
         v.shrink_to_fit();
     }
     out.reference = refc;
+    out.angle_rad = angle.map(|mut v| {
+        v.shrink_to_fit();
+        v
+    });
     out.sha256 = rows.sha256();
     let (gaps, warnings) = scan.finish(&path.display().to_string());
     if let Some(gap) = gaps.first().filter(|_| opts.strict) {

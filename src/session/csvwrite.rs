@@ -88,15 +88,36 @@ pub fn recording_csv(
     temp_c: Option<&[f64]>,
     scale: [f64; 2],
 ) -> Vec<u8> {
+    recording_csv_with(t_s, gyro, accel, temp_c, scale, None)
+}
+
+/// [`recording_csv`] with one more column at the end, `(name, values)` written as they
+/// are (e.g. the stand's logged angle, `theta_deg`).
+pub fn recording_csv_with(
+    t_s: &[f64],
+    gyro: &[[f64; 3]],
+    accel: &[[f64; 3]],
+    temp_c: Option<&[f64]>,
+    scale: [f64; 2],
+    extra: Option<(&str, &[f64])>,
+) -> Vec<u8> {
     let mut text = Vec::with_capacity(t_s.len() * 128 + 32);
     text.extend_from_slice(recording_header(temp_c.is_some(), false).as_bytes());
+    if let Some((name, _)) = extra {
+        text.push(b',');
+        text.extend_from_slice(name.as_bytes());
+    }
     text.push(b'\n');
     let mut line = CsvLine::new();
     for (k, t) in t_s.iter().enumerate() {
         let (g, a) = (gyro.get(k).copied().unwrap_or([f64::NAN; 3]), accel.get(k).copied().unwrap_or([f64::NAN; 3]));
         let temp = temp_c.map(|tc| tc.get(k).copied().unwrap_or(f64::NAN));
+        line.sample(*t, g, a, [1.0, scale[0], scale[1]], temp, None);
+        if let Some((_, v)) = extra {
+            line.float(v.get(k).copied().unwrap_or(f64::NAN));
+        }
         // Writing to memory cannot fail.
-        let _ = line.sample(*t, g, a, [1.0, scale[0], scale[1]], temp, None).write_to(&mut text);
+        let _ = line.write_to(&mut text);
     }
     text
 }

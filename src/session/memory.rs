@@ -105,6 +105,7 @@ pub fn recording_from_columns(
         accel,
         temp_c: c.temp_c.map(<[f64]>::to_vec),
         reference: None,
+        angle_rad: None,
         sha256: super::csvread::hex(&sha2::Digest::finalize(hash)),
         warnings,
     })

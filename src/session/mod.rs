@@ -21,7 +21,7 @@ use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
 pub use csvread::{
     parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
 };
-pub use csvwrite::{recording_csv, recording_header, CsvLine};
+pub use csvwrite::{recording_csv, recording_csv_with, recording_header, CsvLine};
 pub use error::{Problem, SessionError};
 pub use open::{file_kind, open_recording, open_regular};
 pub use source::Source;
@@ -148,6 +148,7 @@ impl RunSpec {
             rows,
             start_s: None,
             duration_s: None,
+            angle_column: None,
         }
     }
 
@@ -171,6 +172,9 @@ impl RunSpec {
             }
             if let Some(d) = self.duration_s {
                 o.insert("duration_s".into(), serde_json::json!(d));
+            }
+            if let Some(c) = &self.angle_column {
+                o.insert("angle_column".into(), serde_json::json!(c));
             }
         }
         v
@@ -250,6 +254,11 @@ pub struct RunSpec {
     /// Planned duration, s (optional `duration_s`): for `plan --design` on runs not yet
     /// recorded; ignored by every other command (a recorded run's duration is its CSV's).
     pub duration_s: Option<f64>,
+    /// A conic run's column holding the stand's measured angle θ in degrees (optional
+    /// `angle_column`, e.g. `"theta_deg"`): the kinematics then follow the logged angle
+    /// (rate and angular acceleration from its smoothed derivatives) instead of uniform
+    /// turning at the declared rate and phase.
+    pub angle_column: Option<String>,
 }
 
 /// A parsed manifest.
@@ -304,7 +313,11 @@ impl Session {
         use rayon::prelude::*;
         let manifest_path = &manifest_in(manifest_path);
         let manifest = read_manifest(manifest_path)?;
-        let options = |spec: &RunSpec| ReadOptions { reference: matches!(spec.motion, MotionSpec::Reference), strict };
+        let options = |spec: &RunSpec| ReadOptions {
+            reference: matches!(spec.motion, MotionSpec::Reference),
+            strict,
+            angle_column: spec.angle_column.clone(),
+        };
         // Runs with a file of their own are read in parallel; results (and errors) are taken
         // in manifest order below.
         let mut own: Vec<Option<Result<Recording, SessionError>>> = manifest
@@ -717,7 +730,21 @@ fn parse_run(i: usize, r: &Value, bad_kind: &Bad<'_>) -> Result<RunSpec, Session
         }
         None => None,
     };
+    let angle_column = match r.get("angle_column") {
+        None => None,
+        Some(Value::String(c)) if matches!(motion, MotionSpec::Conic { .. }) && !c.trim().is_empty() => Some(c.clone()),
+        Some(Value::String(_)) if matches!(motion, MotionSpec::Conic { .. }) => {
+            return Err(bad("angle_column", format!("run '{name}': angle_column is empty: expected the name of the column holding the stand's angle in degrees")))
+        }
+        Some(Value::String(_)) => {
+            return Err(bad("angle_column", format!("run '{name}': angle_column (the stand's logged angle) is for conic runs: this run's motion is not conic")))
+        }
+        Some(_) => {
+            return Err(bad("angle_column", format!("run '{name}': angle_column must be a column name (a string), e.g. \"theta_deg\"")))
+        }
+    };
     Ok(RunSpec {
+        angle_column,
         duration_s,
         start_s,
         rows: run_rows(&name, r, &bad)?,

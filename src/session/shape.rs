@@ -58,6 +58,8 @@ struct RunKeys {
     duration_s: Option<IgnoredAny>,
     rows: Option<IgnoredAny>,
     note: Option<IgnoredAny>,
+    /// A conic run's column of the stand's logged angle, degrees.
+    angle_column: Option<IgnoredAny>,
     /// The user's own metadata.
     extra: Option<IgnoredAny>,
 }

@@ -345,6 +345,14 @@ impl SimConfig {
                 [1.0 / units.gyro.to_rad_s(), 1.0 / units.accel.to_m_s2(self.g_m_s2)],
                 &mut jrng,
             );
+            // A stand that logs its angle: the encoder's reading of the true angle.
+            let logged = self.stand.encoder_deg.and(self.stand.conic_motion(&plan.motion, conic_index));
+            rec.angle_rad = logged.map(|m| {
+                rec.t_s
+                    .iter()
+                    .map(|&t| self.stand.logged_deg(m.angle(t).theta).unwrap_or(f64::NAN).to_radians())
+                    .collect()
+            });
             conic_index += usize::from(matches!(plan.motion, MotionSpec::Conic { .. }));
             clock_s = t0 + n as f64 / self.sample_rate_hz + self.realism.session_clock_gap_s.unwrap_or(0.0);
             elapsed += plan.duration_s;
@@ -352,6 +360,7 @@ impl SimConfig {
                 spec: RunSpec {
                     mount: plan.mount.clone(),
                     note: self.chamber.as_ref().and_then(|c| c.note(runs.len(), plan.duration_s)),
+                    angle_column: rec.angle_rad.as_ref().map(|_| ANGLE_COLUMN.to_string()),
                     ..RunSpec::new(plan.name.clone(), format!("{}.csv", plan.name), plan.motion.clone(), None)
                 },
                 path: PathBuf::from(format!("{}.csv", plan.name)),
@@ -392,6 +401,9 @@ impl SimConfig {
         }
     }
 }
+
+/// The column a simulated stand that logs its angle writes it to, degrees.
+pub const ANGLE_COLUMN: &str = "theta_deg";
 
 /// Errors writing a simulated session.
 #[derive(Debug, thiserror::Error)]
@@ -445,7 +457,10 @@ pub fn write_session(session: &Session, dir: &Path) -> Result<PathBuf, SimulateE
     for run in &session.runs {
         let path = dir.join(&run.spec.file);
         let r = &run.rec;
-        let text = crate::session::recording_csv(&r.t_s, &r.gyro, &r.accel, r.temp_c.as_deref(), [kg, ka]);
+        let angle_deg: Option<Vec<f64>> = r.angle_rad.as_ref().map(|a| a.iter().map(|x| x.to_degrees()).collect());
+        let column = run.spec.angle_column.as_deref().unwrap_or(ANGLE_COLUMN);
+        let extra = angle_deg.as_deref().map(|a| (column, a));
+        let text = crate::session::recording_csv_with(&r.t_s, &r.gyro, &r.accel, r.temp_c.as_deref(), [kg, ka], extra);
         write_new(&path, &text).map_err(io(&path))?;
     }
     let text = session.manifest.to_json();

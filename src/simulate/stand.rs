@@ -31,12 +31,24 @@ pub struct StandErrors {
     pub mounts: Vec<(String, Mount)>,
     /// The Earth's rotation, not declared in the manifest: (latitude, heading), degrees.
     pub earth: Option<[f64; 2]>,
+    /// The stand logs its angle (an encoder) with this resolution, degrees (0: exact): each
+    /// conic run's CSV gets a `theta_deg` column, named by the run's `angle_column` in the
+    /// manifest. Not an imperfection: it is what lets a fit follow the others.
+    pub encoder_deg: Option<f64>,
 }
 
 impl StandErrors {
-    /// True when the stand is perfect.
+    /// True when the stand moves exactly as declared (whether it logs its angle or not).
     pub fn is_zero(&self) -> bool {
-        *self == Self::default()
+        Self { encoder_deg: None, ..self.clone() } == Self::default()
+    }
+
+    /// The angle an encoder of [`Self::encoder_deg`] logs for the true angle `theta_rad`,
+    /// degrees (rounded to the resolution).
+    pub fn logged_deg(&self, theta_rad: f64) -> Option<f64> {
+        let res = self.encoder_deg?;
+        let deg = theta_rad.to_degrees();
+        Some(if res > 0.0 { (deg / res).round() * res } else { deg })
     }
 
     /// The Earth's rate in a base whose x axis points `heading` degrees east of north
@@ -122,6 +134,13 @@ impl StandErrors {
             "ripple2" => self.ripple[1] = <[f64; 2]>::try_from(nums(value, 2)?).unwrap_or_default(),
             "wobble" => self.wobble_deg = <[f64; 2]>::try_from(nums(value, 2)?).unwrap_or_default(),
             "earth" => self.earth = Some(<[f64; 2]>::try_from(nums(value, 2)?).unwrap_or_default()),
+            "encoder" => {
+                let res = nums(value, 1)?[0];
+                if !(0.0..=1.0).contains(&res) {
+                    return Err(format!("encoder: resolution {res}°: expected 0 (exact) to 1 degree"));
+                }
+                self.encoder_deg = Some(res);
+            }
             "mount" => {
                 let (run, m) =
                     value.split_once(':').ok_or_else(|| format!("mount: '{value}': expected RUN:+y,+x,-z"))?;
@@ -131,7 +150,7 @@ impl StandErrors {
             }
             _ => {
                 return Err(format!(
-                    "'{key}': expected one of cone, rate, phase, tilt, ripple1, ripple2, wobble, earth, mount"
+                    "'{key}': expected one of cone, rate, phase, tilt, ripple1, ripple2, wobble, earth, mount, encoder"
                 ))
             }
         }
