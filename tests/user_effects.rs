@@ -169,6 +169,24 @@ fn scenario(c: &Case<'_>) {
         .unwrap();
     ok(dir, &["correct", "--profile", &p, &csv.display().to_string(), "-o", "corrected.csv"]);
     assert!(std::fs::metadata(dir.join("corrected.csv")).unwrap().len() > 0);
+
+    // Exports that cannot carry the user effect list it as lost, on stderr and in the file;
+    // the C header marks it not exact (issue 37 item 3), from the profile alone.
+    for to in ["imucal", "kalibr", "openvins", "ardupilot", "px4", "c-header"] {
+        let out = format!("export-{to}");
+        let (code, stdout, err) = run_in(dir, &["profile", "export", &p, "--to", to, "-o", &out]);
+        assert_eq!(code, 0, "export {to}: {stdout}{err}");
+        let file = std::fs::read_to_string(dir.join(&out)).unwrap();
+        assert!(err.contains(c.id), "export {to}: stderr does not list {}: {err}", c.id);
+        assert!(file.contains(c.id), "export {to}: the file does not list {}:\n{file}", c.id);
+        if to == "c-header" {
+            assert!(
+                file.contains("#define CROSSCAL_CORRECT_EXACT 0"),
+                "the C header does not say it is not exact:\n{file}"
+            );
+            assert!(file.contains(&format!("effect '{}'", c.id)) && file.contains("Not applied"), "{file}");
+        }
+    }
 }
 
 #[test]
