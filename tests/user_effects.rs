@@ -146,6 +146,14 @@ fn scenario(c: &Case<'_>) {
     assert!(after < 1.1, "{}: residual {after:.3}× the noise with the effect", c.id);
     assert!(fitted["user_effects"][0]["id"] == c.id, "the profile stores the definition");
 
+    // diagnose tries the user effect beside the catalogue and adds it first; with it, its
+    // channel is at the noise floor (the residual evaluated at the fitted parameters).
+    let out = ok(dir, &["diagnose", "sim/session.json", "--effects-file", "effects.toml", "--json"]);
+    let d: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(d["steps"][0]["effect"], c.id, "{}", d["steps"]);
+    let ch = if c.sensor == "gyro" { c.axis } else { 3 + c.axis };
+    assert_eq!(d["steps"][0]["channels"][ch]["systematic"], false, "{}", d["steps"][0]["channels"][ch]);
+
     // The ladder shows the rung.
     let out = ok(dir, &["compare", "sim/session.json", "--effects-file", "effects.toml", "--with", c.id, "--json"]);
     let rungs: serde_json::Value = serde_json::from_str(&out).unwrap();

@@ -231,6 +231,10 @@ struct Analysis {
 /// Analyses each run around a fitted model (in parallel; each run's residual lives only
 /// while its Grams are built).
 fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotions<'_>, has_temp: bool) -> Analysis {
+    // A user effect's linear part at the parameters the fit estimated (a knee at its fitted
+    // rate): the residual and the Grams are then those of the fitted model.
+    let bound = crate::estimate::bound_at_fit(model, &base_fit);
+    let model = &bound;
     let universe = space::Universe::new(model, &base_fit, has_temp);
     let residual = |i: usize| picture::run_residual(model, &base_fit, &runs[i]).0;
     let stats: Vec<space::RunNoiseStats> =
@@ -410,11 +414,15 @@ fn conclude(
             changed = true;
         }
     }
+    let mut m = model.clone();
+    for st in &steps {
+        let _ = m.add_effect(&st.effect);
+    }
+    // A user effect whose linear part moves with its parameters (a knee's rate): the climb's
+    // pictures are linearised around the model before it, which cannot follow the kink to
+    // its estimate; the last picture is drawn again around the final fit.
+    changed |= m.has_bound_parameters();
     if changed {
-        let mut m = model.clone();
-        for st in &steps {
-            let _ = m.add_effect(&st.effect);
-        }
         a = analyse(&m, refit(&m, runs, opts)?, runs, motions, has_temp);
         let noise = noise_reports(&a.space);
         if let Some(st) = steps.last_mut() {
@@ -825,10 +833,16 @@ pub fn compare(
         models.push((format!("+ {}", st.effect), m.clone()));
     }
     for effects in extra {
-        for e in effects {
+        // Effects the ladder already has (the diagnosis added them) are not added twice; a
+        // rung with nothing new is not repeated.
+        let new: Vec<&String> = effects.iter().filter(|e| !m.effect_ids().contains(&e.as_str())).collect();
+        if new.is_empty() {
+            continue;
+        }
+        for e in &new {
             let _ = m.add_effect(e);
         }
-        models.push((format!("+ {}", effects.join(" + ")), m.clone()));
+        models.push((format!("+ {}", new.iter().map(|e| e.as_str()).collect::<Vec<_>>().join(" + ")), m.clone()));
     }
     let mut rungs = Vec::with_capacity(models.len());
     let mut notes = Vec::new();

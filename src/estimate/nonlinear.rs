@@ -148,7 +148,13 @@ impl CostFunction for Objective<'_, '_> {
 /// The motion each run shows `sensor` under a fitted model's nonlinear parameters (None
 /// when no nonlinear effect touches that sensor).
 pub fn seen_tracks(model: &Model, fit: &Fit, sensor: SensorKind, runs: &[FitRun<'_>]) -> Option<Vec<Track>> {
-    let values: Vec<Vec<f64>> = model
+    tracks_for(model, &fitted_values(model, fit), sensor, runs)
+}
+
+/// The nonlinear parameters of each of `model`'s nonlinear entries as `fit` estimated them
+/// (an entry the fit does not carry keeps the model's values).
+pub fn fitted_values(model: &Model, fit: &Fit) -> Vec<Vec<f64>> {
+    model
         .nonlinear()
         .iter()
         .map(|e| {
@@ -159,8 +165,18 @@ pub fn seen_tracks(model: &Model, fit: &Fit, sensor: SensorKind, runs: &[FitRun<
                 e.values.clone()
             }
         })
-        .collect();
-    tracks_for(model, &values, sensor, runs)
+        .collect()
+}
+
+/// `model` with the linear parts of its user effects at the parameters `fit` estimated
+/// (a knee's coefficient column at the fitted knee rate), for evaluating the fit's residual;
+/// a plain clone when no linear part depends on a parameter.
+pub fn bound_at_fit(model: &Model, fit: &Fit) -> Model {
+    if model.has_bound_parameters() {
+        model.at_nonlinear_values(&fitted_values(model, fit))
+    } else {
+        model.clone()
+    }
 }
 
 /// The fitted nonlinear parameters' definitions, in order: (effect id, definition).
