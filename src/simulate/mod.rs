@@ -284,22 +284,7 @@ impl SimConfig {
             let mut rec = Recording { t_s: t_s.into(), ..Default::default() };
             let tr = self.true_track(plan, &rec, conic_index, &deriv);
             // Nonlinear effects change the motion as each sensor sees it.
-            let seen = |sensor: SensorKind| {
-                let mut t = tr.clone();
-                for e in self.truth.model.nonlinear() {
-                    if e.effect.sensor().is_none_or(|s| s == sensor) {
-                        let p: Vec<f64> = e
-                            .effect
-                            .params()
-                            .iter()
-                            .map(|d| self.truth.values.get(&d.name).copied().unwrap_or(d.nominal))
-                            .collect();
-                        t = e.effect.transform(&p, &t);
-                    }
-                }
-                t
-            };
-            let (tg, ta) = (seen(SensorKind::Gyro), seen(SensorKind::Accel));
+            let (tg, ta) = (self.seen(&tr, SensorKind::Gyro), self.seen(&tr, SensorKind::Accel));
             // Coloured noise draws from its own stream, so sessions without it are unchanged.
             let mut prng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x5eed_c0105 ^ runs.len() as u64);
             let dt = 1.0 / self.sample_rate_hz;
@@ -345,14 +330,7 @@ impl SimConfig {
                 [1.0 / units.gyro.to_rad_s(), 1.0 / units.accel.to_m_s2(self.g_m_s2)],
                 &mut jrng,
             );
-            // A stand that logs its angle: the encoder's reading of the true angle.
-            let logged = self.stand.encoder_deg.and(self.stand.conic_motion(&plan.motion, conic_index));
-            rec.angle_rad = logged.map(|m| {
-                rec.t_s
-                    .iter()
-                    .map(|&t| self.stand.logged_deg(m.angle(t).theta).unwrap_or(f64::NAN).to_radians())
-                    .collect()
-            });
+            rec.angle_rad = self.logged_angle(plan, conic_index, &rec.t_s);
             conic_index += usize::from(matches!(plan.motion, MotionSpec::Conic { .. }));
             clock_s = t0 + n as f64 / self.sample_rate_hz + self.realism.session_clock_gap_s.unwrap_or(0.0);
             elapsed += plan.duration_s;
@@ -383,6 +361,31 @@ impl SimConfig {
 }
 
 impl SimConfig {
+    /// The motion as `sensor` sees it: the unit's nonlinear effects (at their true
+    /// parameters) applied to the true motion `tr`.
+    fn seen(&self, tr: &crate::motion::Track, sensor: SensorKind) -> crate::motion::Track {
+        let mut t = tr.clone();
+        for e in self.truth.model.nonlinear() {
+            if e.effect.sensor().is_none_or(|s| s == sensor) {
+                let p: Vec<f64> = e
+                    .effect
+                    .params()
+                    .iter()
+                    .map(|d| self.truth.values.get(&d.name).copied().unwrap_or(d.nominal))
+                    .collect();
+                t = e.effect.transform(&p, &t);
+            }
+        }
+        t
+    }
+
+    /// A stand that logs its angle ([`stand::StandErrors::encoder_deg`]): the encoder's
+    /// reading of conic run `plan`'s true angle at each stamp, rad (None otherwise).
+    fn logged_angle(&self, plan: &RunPlan, conic_index: usize, t_s: &[f64]) -> Option<Vec<f64>> {
+        let m = self.stand.encoder_deg.and(self.stand.conic_motion(&plan.motion, conic_index))?;
+        Some(t_s.iter().map(|&t| self.stand.logged_deg(m.angle(t).theta).unwrap_or(f64::NAN).to_radians()).collect())
+    }
+
     /// The true motion of a run: the stand's real motion and mount (the manifest keeps the
     /// declared ones).
     fn true_track(
