@@ -617,17 +617,14 @@ impl Diagnosis {
     #[getter]
     fn verdict(&self) -> &'static str {
         use crosscal::diagnose::Verdict;
-        match &self.found {
-            Diagnosed::Stand(d) => match d.verdict {
-                Verdict::Adequate => "adequate",
-                Verdict::Explained => "explained",
-                Verdict::Unexplained => "unexplained",
-            },
-            // The same words as a stand session's: a proposal on poses whose residuals are
-            // beyond the noise is not evidence, so that is "unexplained".
-            Diagnosed::Protocol(d) if d.proposal.is_some() && d.beyond_noise.is_empty() => "explained",
-            Diagnosed::Protocol(d) if d.adequate() => "adequate",
-            Diagnosed::Protocol(_) => "unexplained",
+        let verdict = match &self.found {
+            Diagnosed::Stand(d) => d.verdict,
+            Diagnosed::Protocol(d) => d.verdict(),
+        };
+        match verdict {
+            Verdict::Adequate => "adequate",
+            Verdict::Explained => "explained",
+            Verdict::Unexplained => "unexplained",
         }
     }
 

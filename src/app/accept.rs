@@ -45,7 +45,7 @@ pub fn acceptance(
             .map_err(|source| AppError::Fit { what: what.clone(), source })?;
         let mut why: Vec<String> = d.standing_out().iter().map(|p| format!("{p} stands out")).collect();
         match &d.proposal {
-            Some(p) if d.beyond_noise.is_empty() => why.push(format!("missing effect: {p}")),
+            Some(p) if d.verdict() == crate::diagnose::Verdict::Explained => why.push(format!("missing effect: {p}")),
             // Beyond the noise: the closest match is no evidence of a unit effect (issue 36).
             Some(p) => {
                 why.push(format!("closest catalogued match {p} (not evidence: the residuals are beyond the noise)"))

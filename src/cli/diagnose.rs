@@ -231,8 +231,9 @@ fn run_protocol(a: &Args, session: &Session, d: &ProtocolDiagnosis) -> anyhow::R
     // The verdict reads as on a stand session: "add X … Fit it with:", "a systematic
     // residual remains …", "the model is adequate …".
     let fit_with = |e: &str| format!("crosscal fit {} --effect {e}", a.session.display());
+    let verdict = d.verdict();
     match d.proposal.as_deref().and_then(|p| d.candidates.iter().find(|c| c.effect == p)) {
-        Some(c) if d.beyond_noise.is_empty() => {
+        Some(c) if verdict == Verdict::Explained => {
             outln!(
                 "\nverdict: add {} — it explains pose residuals the noise does not (p = {:.1e}).",
                 c.effect,
@@ -257,7 +258,7 @@ fn run_protocol(a: &Args, session: &Session, d: &ProtocolDiagnosis) -> anyhow::R
                 outln!("To try it anyway: {}", fit_with(&c.effect));
             }
         }
-        None if !d.adequate() => outln!(
+        None if verdict == Verdict::Unexplained => outln!(
             "\nverdict: a systematic residual remains that no catalogued effect explains: {} pose(s) or turn(s) stand out beyond the noise and the pose-to-pose scatter (listed above). What would fix it: a longer, truly still initial rest (the gyro bias), poses held longer and still, more poses, and an orientation repeated late in the recording (it separates a drifting bias from g-sensitivity)",
             d.standing_out().len()
         ),

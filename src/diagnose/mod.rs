@@ -421,7 +421,7 @@ fn conclude(
     // A user effect whose linear part moves with its parameters (a knee's rate): the climb's
     // pictures are linearised around the model before it, which cannot follow the kink to
     // its estimate; the last picture is drawn again around the final fit.
-    changed |= m.has_bound_parameters();
+    changed |= !steps.is_empty() && m.has_bound_parameters();
     if changed {
         a = analyse(&m, refit(&m, runs, opts)?, runs, motions, has_temp);
         let noise = noise_reports(&a.space);

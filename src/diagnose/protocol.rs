@@ -252,6 +252,19 @@ fn stand_out(v: &[f64]) -> Vec<usize> {
 }
 
 impl ProtocolDiagnosis {
+    /// The verdict in a stand diagnosis's terms: `Explained` when the proposal explains pose
+    /// residuals that are otherwise within the noise model, `Adequate` when nothing stands
+    /// out, else `Unexplained` (a proposal on residuals beyond the noise is no evidence).
+    pub fn verdict(&self) -> super::Verdict {
+        if self.proposal.is_some() && self.beyond_noise.is_empty() {
+            super::Verdict::Explained
+        } else if self.adequate() {
+            super::Verdict::Adequate
+        } else {
+            super::Verdict::Unexplained
+        }
+    }
+
     /// Adequate: no missing effect, and no pose or turn the noise and the pose-to-pose
     /// scatter do not explain.
     pub fn adequate(&self) -> bool {

@@ -421,9 +421,8 @@ impl Pairer {
 
     /// Pairs what is left at the end of the log.
     pub fn finish(&mut self, out: &mut impl FnMut(LogSample)) {
+        // At the end every gyro sample is paired or counted as unpaired.
         self.drain(out, true);
-        self.unpaired += self.gyro.len() as u64;
-        self.gyro.clear();
     }
 
     /// Gyro samples dropped so far for want of an accelerometer sample near their time
