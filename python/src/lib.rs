@@ -618,7 +618,7 @@ impl Diagnosis {
     fn verdict(&self) -> &'static str {
         use crosscal::diagnose::Verdict;
         let verdict = match &self.found {
-            Diagnosed::Stand(d) => d.verdict,
+            Diagnosed::Stand(d) => d.verdict.clone(),
             Diagnosed::Protocol(d) => d.verdict(),
         };
         match verdict {
