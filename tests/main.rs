@@ -32,6 +32,7 @@ mod reference;
 mod reliability;
 mod reports;
 mod robust;
+mod slow_noise;
 mod stand;
 mod stream;
 mod thermal;

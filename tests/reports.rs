@@ -82,13 +82,6 @@ fn diagnose_report_has_a_section_per_channel_and_renders() {
     self_contained(&html, "diagnose report");
     assert!(html.contains("class=\"verdict\"") && html.contains("gyro-g-sensitivity"), "the verdict names the effect");
     assert!(count(&html, "<table") >= 2, "tables: residuals before, after each step");
-    // What the text says: the left-out-run gain and each candidate's reason, and the command.
-    assert!(html.contains("left-out-run gain") && html.contains("accepted, or why not"), "candidate table columns");
-    assert!(
-        html.contains("Fit it with: <code>crosscal fit u/session.json --effect gyro-g-sensitivity</code>"),
-        "the fit command in the verdict"
-    );
-    assert!(!html.contains(">-0<") && !html.contains(">-0.0<"), "no signed zero tick");
     for ch in ["gyro x", "gyro y", "gyro z", "accel x", "accel y", "accel z"] {
         assert_eq!(count(&html, &format!("<h2>{ch}</h2>")), 1, "one section for {ch}");
     }

@@ -799,6 +799,7 @@ fn simulate(py: Python<'_>, options: Bound<'_, pyo3::types::PyDict>) -> PyResult
             "vrw_m_s_rt_h" => o.vrw_m_s_rt_h = v.extract()?,
             "accel_bias_instability_ug" => o.accel_bias_instability_ug = v.extract()?,
             "accel_random_walk" => o.accel_random_walk = v.extract()?,
+            "carry_noise" => o.carry_noise = v.extract()?,
             "ar1" => o.ar1 = v.extract()?,
             "quantize" => o.quantize = v.extract()?,
             "jitter_ms" => o.jitter_ms = v.extract()?,

@@ -78,17 +78,18 @@ pub fn report(session: &Session, model: &Model, d: &Diagnosis) -> Result<(String
     let tr = tracks(session, &DerivativeConfig::default());
     let runs = fit_runs(session, &tr);
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
-    let base_fit = crate::estimate::fit(&FitRequest::runs(model, &runs))
-        .map_err(|source| AppError::Fit { what: what.clone(), source })?
-        .fit;
+    let base_fit =
+        crate::estimate::fit(&FitRequest::runs(model, &runs)).map_err(|source| AppError::Fit { what, source })?.fit;
     let before = crate::diagnose::residuals(model, &base_fit, &runs, &motions);
     let after = (!d.steps.is_empty()).then(|| {
         let m = crate::diagnose::ladder_model(model, d);
         crate::diagnose::residuals(&m, &d.final_fit, &runs, &motions)
     });
     let title = format!("crosscal diagnose: unit {}", session.manifest.serial);
-    let html = crate::diagnose::report::html(&title, &what, d, &before, after.as_deref(), &motions);
-    let figures = crate::diagnose::report::figures(&before, after.as_deref(), &motions);
+    let path = session.manifest_path.display().to_string();
+    let html = crate::diagnose::report::html(&title, &path, d, &before, after.as_deref(), &motions);
+    let mut figures = crate::diagnose::report::figures(&before, after.as_deref(), &motions);
+    figures.extend(d.shapes.iter().flat_map(crate::diagnose::report::shape_figures));
     Ok((html, figures))
 }
 

@@ -52,6 +52,9 @@ pub struct SimulateOptions {
     pub accel_bias_instability_ug: f64,
     /// Accelerometer random walk, m/s²/√s.
     pub accel_random_walk: f64,
+    /// The flicker and random walk run on over the session clock from run to run (a real
+    /// unit's bias wanders between runs) instead of restarting in each run.
+    pub carry_noise: bool,
     /// First-order Gauss–Markov correlation per sample of the white noises.
     pub ar1: Option<f64>,
     /// Output resolutions [gyro, accel] in the file's units.
@@ -97,6 +100,7 @@ impl Default for SimulateOptions {
             vrw_m_s_rt_h: 0.0,
             accel_bias_instability_ug: 0.0,
             accel_random_walk: 0.0,
+            carry_noise: false,
             ar1: None,
             quantize: None,
             jitter_ms: 0.0,
@@ -210,6 +214,7 @@ fn noise_processes(o: &SimulateOptions, cfg: &mut SimConfig) -> Result<(), AppEr
     cfg.accel_process.white_density = o.vrw_m_s_rt_h / 60.0;
     cfg.accel_process.bias_instability = o.accel_bias_instability_ug * 1e-6 * cfg.g_m_s2;
     cfg.accel_process.random_walk = o.accel_random_walk;
+    cfg.carry_noise = o.carry_noise;
     Ok(())
 }
 

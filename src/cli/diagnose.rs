@@ -163,9 +163,45 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             for u in &d.unexplained {
                 outln!("  {u}");
             }
+            print_shapes(&d)?;
         }
     }
     Ok(Outcome::Ok)
+}
+
+/// The catalogued effects tried in vain, and the shape of each failing channel's residual:
+/// the most departing partial-residual plots as tables, the shape in words, and the
+/// effects-file entry that would model it.
+fn print_shapes(d: &crosscal::diagnose::Diagnosis) -> anyhow::Result<()> {
+    if !d.tried.is_empty() {
+        outln!("\ncatalogued effects tried (none brings the residual to the noise floor, none is proposed):");
+        for t in &d.tried {
+            outln!("  {t}");
+        }
+    }
+    for sh in &d.shapes {
+        outln!("\nshape: {}", sh.words);
+        let (u, k) = sh.sensor.display_unit();
+        for p in sh.plots.iter().take(3) {
+            outln!("  residual ({u}) against {} [{}] (χ² {:.0} on {} dof):", p.label, p.variable, p.chi2, p.dof);
+            for b in &p.bins {
+                let x = match p.variable.as_str() {
+                    "run" => format!("run {}", b.x),
+                    v if v.contains("w_") => format!("{:+.3}", b.x.to_degrees()),
+                    v if v.starts_with("a_") || v.starts_with("abs(a_") => format!("{:+.4}", b.x / 9.80665),
+                    _ => format!("{:+.4}", b.x),
+                };
+                outln!("    {x:>12}  {:>12} ± {:<10} (n {})", format::num(b.mean * k), format::num(b.se * k), b.n);
+            }
+        }
+        if let Some(t) = &sh.effect_toml {
+            outln!("  as your own effect (paste into an effects file):\n");
+            for line in t.lines() {
+                outln!("    {line}");
+            }
+        }
+    }
+    Ok(())
 }
 
 /// `diagnose` on a protocol session: pose and turn residuals, candidate effects on the poses.
@@ -209,6 +245,9 @@ fn run_protocol(a: &Args, session: &Session, d: &ProtocolDiagnosis) -> anyhow::R
     }
     for o in &d.beyond_noise {
         outln!("  BEYOND NOISE: {o}");
+    }
+    if let Some(e) = &d.earth_rotation {
+        outln!("  EARTH: {e}");
     }
     for o in &d.moving_poses {
         outln!("  MOVING {o}: hold the pose still (a fixture, not a hand), or leave it out");
@@ -299,6 +338,24 @@ fn print_noise_lines_candidates(d: &crosscal::diagnose::Diagnosis) -> anyhow::Re
                 String::new()
             }
         );
+        if n.bias_instability > 0.0 || n.random_walk > 0.0 {
+            let (bu, bk, ku, kk) = match n.sensor {
+                crosscal::units::SensorKind::Gyro => (
+                    "°/h",
+                    180.0 / std::f64::consts::PI * 3600.0,
+                    "°/h/√h",
+                    180.0 / std::f64::consts::PI * 3600.0 * 60.0,
+                ),
+                crosscal::units::SensorKind::Accel => ("µg", 1e6 / 9.80665, "m/s²/√s", 1.0),
+            };
+            outln!(
+                "  {:<6} {:<4} slow wander (noise, not a systematic residual): bias instability {} {bu}, random walk {} {ku}",
+                "",
+                "",
+                format::num(n.bias_instability * bk),
+                format::num(n.random_walk * kk)
+            );
+        }
     }
     if !d.lines.is_empty() {
         outln!("\nnarrow lines in the residual spectrum:");

@@ -30,6 +30,12 @@ pub struct Args {
     /// Robust fit (Huber IRLS): spikes and outliers lose weight.
     #[arg(long)]
     robust: bool,
+    /// Standard errors that cover slow noise (flicker, bias random walk) as well as the
+    /// fast noise: the bias wandering over the session widens them (one more pass over the
+    /// samples). Use it on MEMS units whose `crosscal noise` shows bias instability or rate
+    /// random walk.
+    #[arg(long)]
+    slow_noise: bool,
     /// Gaps in t and unidentifiable coefficients are errors instead of warnings.
     #[arg(long)]
     strict: bool,
@@ -65,6 +71,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
     let spec = a.model.spec(&a.disable);
     let mut req = FitRequest::new(FitData::Manifest(&a.session), ModelChoice::Spec(&spec));
     req.options.robust = a.robust;
+    req.options.slow_noise = a.slow_noise;
     req.strict = a.strict;
     req.stand = a.stand;
     req.holdout = a.holdout.clone();

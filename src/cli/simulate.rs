@@ -83,6 +83,10 @@ pub struct Args {
     /// Accelerometer random walk, m/s²/√s.
     #[arg(long, default_value_t = 0.0)]
     accel_random_walk: f64,
+    /// Let the flicker and random walk run on from run to run over the session clock (the
+    /// bias wanders between runs as a real unit's does) instead of restarting in each run.
+    #[arg(long)]
+    carry_noise: bool,
     /// Make the --gyro-noise and --accel-noise first-order Gauss–Markov (AR(1)) with this
     /// correlation per sample, keeping their standard deviation (real sensors are rarely white).
     #[arg(long)]
@@ -150,6 +154,7 @@ impl Args {
             vrw_m_s_rt_h: self.vrw,
             accel_bias_instability_ug: self.accel_bias_instability,
             accel_random_walk: self.accel_random_walk,
+            carry_noise: self.carry_noise,
             ar1: self.ar1,
             quantize: self.quantize.as_ref().map(|l| match l.0.as_slice() {
                 [g, a] => [*g, *a],

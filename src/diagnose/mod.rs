@@ -27,6 +27,8 @@ pub mod protocol;
 pub mod report;
 pub mod select;
 pub mod separate;
+pub mod shape;
+pub mod slow;
 pub mod space;
 pub mod stand;
 mod stand_words;
@@ -113,6 +115,14 @@ pub struct NoiseReport {
     pub ar_order: usize,
     /// Variance of the noise over the variance of its one-step innovations (1 when white).
     pub colour: f64,
+    /// Slow wander of the noise (flicker): bias instability B, SI (0: none seen). Read off
+    /// the residual less its cone harmonics as `crosscal noise` reads it off a recording at
+    /// rest (Allan deviation flat at 0.664 B); a slow variation of this kind is noise.
+    #[serde(default)]
+    pub bias_instability: f64,
+    /// Slow wander of the noise: rate random walk K, SI per √s (0: none seen).
+    #[serde(default)]
+    pub random_walk: f64,
 }
 
 /// One candidate effect's score.
@@ -203,6 +213,14 @@ pub struct Diagnosis {
     pub warnings: Vec<String>,
     /// Fit of the model at the end of the ladder (see [`ladder_model`]).
     pub final_fit: Fit,
+    /// Where no catalogued effect brings a channel to the noise floor: the residual's shape
+    /// against what it could depend on, in words, plots and an effects-file entry.
+    #[serde(default)]
+    pub shapes: Vec<shape::Shape>,
+    /// Catalogued effects tried on a sensor none of them explains, with the residual each
+    /// left (none is reported as an addition).
+    #[serde(default)]
+    pub tried: Vec<String>,
     /// Coefficients whose single-run estimates disagree with the all-run fit (a sign that
     /// something depends on rate, direction, cone angle or mount).
     pub disagreements: Vec<Disagreement>,
@@ -240,13 +258,19 @@ fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotio
     let stats: Vec<space::RunNoiseStats> =
         (0..runs.len()).into_par_iter().map(|i| space::run_noise(&runs[i], motions[i], &residual(i))).collect();
     let pooled = space::pooled_noise(&stats);
+    let span_s: f64 = runs.iter().map(run_span).sum();
+    let slow = slow::session_slow_noise(&stats, &pooled, span_s);
     let grams: Vec<space::RunGram> = stats
         .into_par_iter()
         .enumerate()
-        .map(|(i, st)| space::run_gram(&universe, model, &base_fit, &runs[i], st, &pooled, &residual(i)))
+        .map(|(i, st)| {
+            space::run_gram(&universe, model, &base_fit, &runs[i], st, &pooled, &residual(i), (slow.as_slice(), span_s))
+        })
         .collect();
     let names = runs.iter().map(|r| r.name.to_string()).collect();
-    Analysis { base_fit, space: Space::new(universe, grams), names }
+    let mut space = Space::new(universe, grams);
+    space.slow = slow;
+    Analysis { base_fit, space, names }
 }
 
 /// The noise model per channel, pooled over runs.
@@ -271,6 +295,8 @@ fn noise_reports(space: &Space) -> Vec<NoiseReport> {
                 lag1: lag1 / n,
                 ar_order: order,
                 colour: if innov > 0.0 { var / innov } else { 1.0 },
+                bias_instability: space.slow.get(c).copied().flatten().map_or(0.0, |s| s.bias_instability),
+                random_walk: space.slow.get(c).copied().flatten().map_or(0.0, |s| s.random_walk),
             }
         })
         .collect()
@@ -391,26 +417,20 @@ fn conclude(
     }
     // Each temperature polynomial's degree, again with every effect found in the model.
     let mut changed = temperature::revisit_degrees(&a.space, &mut steps, &mut warnings);
-    // A sensor still systematic after its effects: only the first of them is the closest
-    // catalogued match; the later ones chased what no catalogued effect explains.
+    // A sensor still systematic after its effects: no catalogued effect brings it to the
+    // noise floor, so none is reported as an addition; they are listed as tried, with the
+    // residual each leaves, and the residual's shape is drawn instead (module `shape`).
+    let mut tried = Vec::new();
     if let Some(last) = steps.last() {
         let chasing: Vec<bool> = (0..2).map(|s| last.channels[3 * s..3 * s + 3].iter().any(|c| c.systematic)).collect();
-        let mut seen = [false; 2];
-        let mut dropped = Vec::new();
         steps.retain(|st| {
             let s = usize::from(st.score.sensor == SensorKind::Accel);
-            let keep = !(chasing[s] && seen[s]);
-            seen[s] = true;
-            if !keep {
-                dropped.push(st.effect.clone());
+            if chasing[s] {
+                tried.push(tried_line(&st.score));
             }
-            keep
+            !chasing[s]
         });
-        if !dropped.is_empty() {
-            warnings.push(format!(
-                "also tried and left out: {} (each reduced the residual a little, none explains it)",
-                dropped.join(", ")
-            ));
+        if !tried.is_empty() {
             changed = true;
         }
     }
@@ -453,12 +473,28 @@ fn conclude(
     };
     let mut unexplained: Vec<String> = remaining.iter().map(|c| describe_leftover(c)).collect();
     unexplained.extend(off_cone.iter().map(|l| l.describe()));
-    if verdict == Verdict::Unexplained && !steps.is_empty() {
-        warnings.push(format!(
-            "the effects added ({}) are the closest catalogued match, not a full explanation: a systematic residual remains",
-            steps.iter().map(|s| s.effect.as_str()).collect::<Vec<_>>().join(", ")
-        ));
-    }
+    let final_noise = noise_reports(&a.space);
+    let shapes = if remaining.is_empty() {
+        Vec::new()
+    } else {
+        let mut m = model.clone();
+        for st in &steps {
+            let _ = m.add_effect(&st.effect);
+        }
+        let span_s: f64 = runs.iter().map(run_span).sum();
+        let run_s = span_s / runs.len().max(1) as f64;
+        remaining
+            .iter()
+            .map(|ch| {
+                let c = 3 * usize::from(ch.sensor == SensorKind::Accel)
+                    + AXES.iter().position(|&x| x == ch.axis).unwrap_or(0);
+                let n = &final_noise[c];
+                let scale =
+                    shape::NoiseScale::new(n.sigma, n.lag1, a.space.slow.get(c).copied().flatten(), span_s, run_s);
+                shape::shape_of(&m, &a.base_fit, runs, motions, c, scale)
+            })
+            .collect()
+    };
     let unidentifiable = unidentifiable(&final_fit, &first_round);
     let stand = with_stand::findings(stand_check, model, &steps, &final_fit, runs, &a);
     // The stand explains what the unit does not need to: nothing left is "explained".
@@ -468,7 +504,9 @@ fn conclude(
     Ok(Some(Diagnosis {
         model: model.name.clone(),
         channels,
-        noise: noise_reports(&a.space),
+        noise: final_noise,
+        shapes,
+        tried,
         lines: found,
         candidates: first_round,
         steps,
@@ -665,6 +703,14 @@ fn aliases(
         .filter(|o| gain_after(&o.1, &best.1) < SHARED_FEATURE * best.0.evidence.delta_q)
         .map(|o| o.0.effect.clone())
         .collect()
+}
+
+/// A catalogued effect tried on a sensor it does not explain, with what it left.
+fn tried_line(c: &Candidate) -> String {
+    format!(
+        "{}: left the {} residual's whitened χ² at {:.0} (from {:.0}), still systematic",
+        c.effect, c.sensor, c.rss_after, c.rss_before
+    )
 }
 
 fn describe_leftover(c: &ChannelReport) -> String {

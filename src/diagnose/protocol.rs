@@ -72,6 +72,10 @@ pub struct ProtocolDiagnosis {
     /// Candidates that remove exactly as much as the proposal: these poses cannot tell them
     /// apart (e.g. quadratic and scale asymmetry on six faces at ±g).
     pub indistinguishable: Vec<String>,
+    /// Earth's rotation seen on the poses (its vertical part follows gravity like an
+    /// isotropic g-sensitivity), when significant and not declared in the manifest.
+    #[serde(default)]
+    pub earth_rotation: Option<String>,
 }
 
 fn rss(f: &SensorFit) -> (f64, usize, usize) {
@@ -136,6 +140,7 @@ pub fn diagnose_protocol_with(
             fittable: can_fit(session, &m),
         });
     }
+    let earth = earth_rotation(session, model, &base, &runs, &mut candidates, &opts);
     candidates.sort_by(|a, b| a.p_value.total_cmp(&b.p_value));
     let proposal = candidates.first().filter(|c| c.p_value < P_PROPOSE).map(|c| c.effect.clone());
     let indistinguishable = match candidates.first().filter(|_| proposal.is_some()) {
@@ -190,7 +195,103 @@ pub fn diagnose_protocol_with(
         candidates,
         proposal,
         indistinguishable,
+        earth_rotation: earth,
     })
+}
+
+/// Earth's rotation, 15.04 °/h, on static poses: its vertical part Ω_v (Ω_E sin latitude)
+/// adds Ω_v a/|a| to the rates at rest — it follows gravity exactly like an isotropic
+/// g-sensitivity — and its horizontal part depends on the heading of each pose. Unless the
+/// manifest declares it, the vertical part is estimated on the poses (one coefficient
+/// shared by the three gyro channels, beside the fitted biases), and every gyro candidate
+/// is scored against the model *with* it: ΔRSS over the residual of candidate + Earth
+/// (`F = ((RSS_E − RSS_{c+E})/Δp) / (RSS_{c+E}/(n − p_c − 1))`), so that no unit effect is
+/// named for what the Earth does. Returns the finding in words when Ω_v is significant.
+fn earth_rotation(
+    session: &Session,
+    model: &Model,
+    base: &Fit,
+    runs: &[FitRun<'_>],
+    candidates: &mut [PoseCandidate],
+    opts: &FitOptions,
+) -> Option<String> {
+    let declared = session.runs.iter().any(|r| {
+        matches!(r.spec.motion, crate::session::MotionSpec::Static { earth_rate_rad_s, .. } if earth_rate_rad_s != [0.0; 3])
+    });
+    if declared || runs.len() < 4 {
+        return None;
+    }
+    let up: Vec<[f64; 3]> = runs
+        .iter()
+        .map(|r| {
+            let a = r.state(0).a;
+            let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt().max(f64::MIN_POSITIVE);
+            a.map(|v| v / n)
+        })
+        .collect();
+    // The regressor with each channel's mean over the poses removed (the biases are fitted).
+    let mean: Vec<f64> = (0..3).map(|i| up.iter().map(|u| u[i]).sum::<f64>() / up.len() as f64).collect();
+    let x: Vec<[f64; 3]> = up.iter().map(|u| [u[0] - mean[0], u[1] - mean[1], u[2] - mean[2]]).collect();
+    let sxx: f64 = x.iter().flat_map(|v| v.iter()).map(|v| v * v).sum();
+    if sxx <= 0.0 {
+        return None;
+    }
+    let reduction = |m: &Model, f: &Fit| -> (f64, f64) {
+        let sxe: f64 = runs
+            .iter()
+            .zip(&x)
+            .map(|(r, xv)| {
+                let res = super::picture::run_residual(m, f, r).0;
+                (0..3).map(|i| xv[i] * res[i].first().copied().unwrap_or(0.0)).sum::<f64>()
+            })
+            .sum();
+        (sxe * sxe / sxx, sxe / sxx)
+    };
+    let (r0, n, p0) = rss(base.sensor(SensorKind::Gyro));
+    let (red0, omega) = reduction(model, base);
+    let r0e = (r0 - red0).max(f64::MIN_POSITIVE);
+    if n <= p0 + 1 {
+        return None;
+    }
+    let s2 = r0e / (n - p0 - 1) as f64;
+    let se = (s2 / sxx).sqrt();
+    let f = red0 / s2;
+    let p = FisherSnedecor::new(1.0, (n - p0 - 1) as f64).map_or(1.0, |d| d.sf(f));
+    for c in candidates.iter_mut().filter(|c| c.sensor == SensorKind::Gyro) {
+        let mut m = model.clone();
+        if m.add_effect(&c.effect).is_err() {
+            continue;
+        }
+        let Ok(with) = refit(&m, runs, opts) else { continue };
+        let (red1, _) = reduction(&m, &with);
+        let r1e = (c.rss_after - red1).max(f64::MIN_POSITIVE);
+        let p1 = p0 + c.added_params;
+        if n <= p1 + 1 {
+            continue;
+        }
+        let (d1, d2) = (c.added_params as f64, (n - p1 - 1) as f64);
+        let fc = ((r0e - r1e).max(0.0) / d1) / (r1e / d2);
+        c.p_value = c.p_value.max(FisherSnedecor::new(d1, d2).map_or(1.0, |d| d.sf(fc)));
+    }
+    if p >= P_PROPOSE {
+        return None;
+    }
+    let deg_h = 180.0 / std::f64::consts::PI * 3600.0;
+    let earth = 15.041;
+    let (w, e) = (omega * deg_h, se * deg_h);
+    let lat = if w.abs() <= earth {
+        format!(", latitude ≈ {:.0}°", (w / earth).asin().to_degrees())
+    } else {
+        String::new()
+    };
+    let verdict = if w.abs() <= earth + 3.0 * e {
+        "Earth's rotation, not the unit: declare it in the manifest (earth_rate) or keep it out of the gyro model"
+    } else {
+        "larger than Earth's rotation can be (15.04 °/h): a g-sensitivity of the unit, or poses that were not still"
+    };
+    Some(format!(
+        "the rates at rest follow gravity with a vertical rate of {w:+.1} ± {e:.1} °/h (p = {p:.1e}; Earth: 15.04 °/h × sin latitude{lat}): {verdict}; gyro candidates are scored with it in the model"
+    ))
 }
 
 /// Residuals larger than the noise explains, as a whole: the rates at rest and |a| − g of

@@ -185,6 +185,38 @@ pub fn html(
         }
         s.push_str("</table>");
     }
+    if d.noise.iter().any(|n| n.bias_instability > 0.0 || n.random_walk > 0.0) {
+        s.push_str("<h3>slow wander (noise, not a systematic residual)</h3><table><tr><th>channel</th><th>bias instability</th><th>random walk (per √s)</th></tr>");
+        for (i, n) in d.noise.iter().enumerate() {
+            let (u, k) = unit(i);
+            let _ = write!(
+                s,
+                "<tr><td>{}</td><td>{:.3e} {u}</td><td>{:.3e} {u}</td></tr>",
+                CHANNELS[i.min(5)],
+                n.bias_instability * k,
+                n.random_walk * k
+            );
+        }
+        s.push_str("</table>");
+    }
+    if !d.tried.is_empty() {
+        s.push_str(
+            "<h3>catalogued effects tried (none brings the residual to the noise floor, none is proposed)</h3><ul>",
+        );
+        for t in &d.tried {
+            let _ = write!(s, "<li>{}</li>", esc(t));
+        }
+        s.push_str("</ul>");
+    }
+    for sh in &d.shapes {
+        let _ = write!(s, "<h3>shape: {}</h3>", esc(&sh.words));
+        if let Some(t) = &sh.effect_toml {
+            let _ = write!(s, "<p>as your own effect (paste into an effects file):</p><pre>{}</pre>", esc(t));
+        }
+        for f in shape_figures(sh) {
+            s.push_str(&f.svg);
+        }
+    }
     if !d.lines.is_empty() {
         s.push_str("<h3>narrow lines in the residual spectrum</h3><ul>");
         for l in &d.lines {
@@ -206,6 +238,38 @@ pub fn html(
     }
     s.push_str("</body></html>\n");
     s
+}
+
+/// The partial-residual plots of a shape (the three most departing variables): bin means
+/// and the band of ±2 standard errors around zero.
+pub fn shape_figures(sh: &super::shape::Shape) -> Vec<Figure> {
+    let (u, k) = sh.sensor.display_unit();
+    sh.plots
+        .iter()
+        .take(3)
+        .map(|p| {
+            let kx = match p.variable.as_str() {
+                v if v.contains("^2") => (180.0 / std::f64::consts::PI).powi(2),
+                v if v.contains("w_") => 180.0 / std::f64::consts::PI,
+                v if v.contains("a_") => 1.0 / 9.80665,
+                "cone phase" => 180.0 / std::f64::consts::PI,
+                _ => 1.0,
+            };
+            let mean: Vec<(f64, f64)> = p.bins.iter().map(|b| (b.x * kx, b.mean * k)).collect();
+            let hi: Vec<(f64, f64)> = p.bins.iter().map(|b| (b.x * kx, 2.0 * b.se * k)).collect();
+            let lo: Vec<(f64, f64)> = p.bins.iter().map(|b| (b.x * kx, -2.0 * b.se * k)).collect();
+            let name = format!("{} {}", sh.sensor, sh.axis);
+            Figure {
+                stem: format!("{}-shape-{}", slug(&name), slug(&p.variable)),
+                svg: lines(
+                    &format!("{name}: residual against {} (bin means)", p.label),
+                    &p.label,
+                    &format!("residual ({u})"),
+                    &[("bin mean".to_string(), mean), ("+2 SE".to_string(), hi), ("−2 SE".to_string(), lo)],
+                ),
+            }
+        })
+        .collect()
 }
 
 /// The report's plots, four per channel in channel order (gyro x … accel z): residual

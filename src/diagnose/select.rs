@@ -140,6 +140,9 @@ pub struct Space {
     total: System,
     /// Per channel, all runs.
     channel_total: Vec<System>,
+    /// Per channel: the slow noise (flicker, random walk) the runs' Grams carry as a random
+    /// effect on their bases ([`super::slow`]).
+    pub slow: Vec<Option<crate::estimate::slow::SlowNoise>>,
 }
 
 impl Space {
@@ -160,7 +163,7 @@ impl Space {
             total.add(&fold);
             folds.push(fold);
         }
-        Self { universe, runs, folds, total, channel_total }
+        Self { universe, runs, folds, total, channel_total, slow: Vec::new() }
     }
 
     /// The same runs around a model whose coefficients `shift` moves ((global index, new
@@ -178,6 +181,7 @@ impl Space {
             folds: self.folds.iter().map(mv).collect(),
             total: mv(&self.total),
             channel_total: self.channel_total.iter().map(mv).collect(),
+            slow: self.slow.clone(),
         }
     }
 
@@ -354,13 +358,19 @@ impl Space {
                     let g = &rg.gram[c];
                     let nb = rg.basis;
                     let m = g.nrows();
-                    let bb = g.view((w, w), (nb, nb)).into_owned();
+                    let gbb = g.view((w, w), (nb, nb)).into_owned();
                     let z = DVector::from_fn(nb, |i, _| {
                         g[(w + i, m - 1)] - (0..w).map(|j| g[(w + i, j)] * beta[j]).sum::<f64>()
                     });
+                    // The cross products' covariance: AR noise, plus the slow noise's random
+                    // effect on the basis (super::slow).
+                    let bb = match rg.slow.get(c) {
+                        Some(d) => super::slow::basis_metric(&gbb, d),
+                        None => gbb.clone(),
+                    };
                     let (pinv, rank) = pinv_sym(&bb);
-                    let coef = &pinv * &z;
-                    out.chi2 += z.dot(&coef);
+                    let coef = pinv_sym(&gbb).0 * &z;
+                    out.chi2 += z.dot(&(&pinv * &z));
                     out.dof += rank;
                     let n = rg.noise[c].n as f64;
                     out.n += n;
@@ -368,7 +378,7 @@ impl Space {
                     // over a run of one cone period).
                     let ms = coef.dot(&(&rg.basis_ms * &coef)).max(0.0);
                     out.ss += n * ms;
-                    let chi_full = z.dot(&coef);
+                    let chi_full = z.dot(&(&pinv * &z));
                     for (feature, cols, amp) in features(&coef, nb, rg.first_harmonic) {
                         // Where it sits: the feature whose removal from the basis loses the
                         // most χ² (the basis is not orthogonal over short runs).

@@ -18,6 +18,7 @@
 //! algebra on these Grams (generalised least squares, honest under coloured noise), with
 //! no further pass over the samples.
 
+use crate::estimate::slow::SlowNoise;
 use crate::estimate::{seen_tracks, CoefStatus, Fit, FitRun};
 use crate::model::{catalog, scale_matrix, CatalogEffect, Model, Role, State, TermRef};
 use crate::motion::{cone_phase, Track};
@@ -239,6 +240,9 @@ pub struct RunGram {
     /// BᵀB / n of the basis over the run (unwhitened): the mean square of a fitted curve
     /// with coefficients c is cᵀ (BᵀB/n) c.
     pub basis_ms: DMatrix<f64>,
+    /// Per channel: the covariance of the basis coefficients the slow noise makes (empty or
+    /// zero without slow noise, [`super::slow`]).
+    pub slow: Vec<DMatrix<f64>>,
 }
 
 /// The basis functions at one sample: Legendre P0…P3 of s ∈ [−1, 1], then cos hθ, sin hθ.
@@ -317,6 +321,13 @@ pub struct RunNoiseStats {
     pub lines: Vec<RunLine>,
     /// Mean square of each channel's recorded output.
     pub output_ms: [f64; 6],
+    /// Per channel: the residual less its cone harmonics (what slow noise and slow laws
+    /// leave), averaged over consecutive blocks of `fine_block` samples.
+    pub fine: Vec<Vec<f64>>,
+    /// Samples per fine block.
+    pub fine_block: usize,
+    /// Sampling interval, s.
+    pub dt_s: f64,
 }
 
 /// The first look at one run (module documentation, steps 1–2): `r` is the base residual
@@ -348,10 +359,21 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
     let mut acov = Vec::with_capacity(6);
     let mut found = Vec::new();
     let mut cleaned: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
+    let fine_block = super::slow::fine_block(n);
+    let mut fine: Vec<Vec<f64>> = (0..6).map(|_| Vec::with_capacity(n / fine_block + 1)).collect();
+    let mut acc = [0.0; 6];
     for k in 0..n {
         basis.row(t[k], &mut row);
         for (c, cl) in cleaned.iter_mut().enumerate() {
-            cl[k] = r[c][k] - (0..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
+            let slow: f64 = (0..nb.min(LEGENDRE)).map(|i| row[i] * coef[(i, c)]).sum();
+            cl[k] = r[c][k] - slow - (LEGENDRE..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
+            acc[c] += cl[k] + slow;
+        }
+        if (k + 1) % fine_block == 0 {
+            for c in 0..6 {
+                fine[c].push(acc[c] / fine_block as f64);
+                acc[c] = 0.0;
+            }
         }
     }
     for (c, mut clean) in cleaned.into_iter().enumerate() {
@@ -372,7 +394,7 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
             }
         }
     }
-    RunNoiseStats { basis, basis_ms, acov, n, lines: found, output_ms }
+    RunNoiseStats { basis, basis_ms, acov, n, lines: found, output_ms, fine, fine_block, dt_s: 1.0 / fs_hz }
 }
 
 /// One AR model per channel for the whole session (the noise of a channel is one process
@@ -417,7 +439,10 @@ fn long_run_variance(ar: &ArModel) -> f64 {
 }
 
 /// The whitened Grams of one run (module documentation, step 3) with the session's noise
-/// models; each run keeps its own innovation variance.
+/// models; each run keeps its own innovation variance. With slow noise (`slow`, per
+/// channel, over a session of `span_s`), the Grams are those of generalised least squares
+/// with it as a random effect on the run's basis ([`super::slow`]).
+#[allow(clippy::too_many_arguments)]
 pub fn run_gram(
     u: &Universe,
     base: &Model,
@@ -426,6 +451,7 @@ pub fn run_gram(
     stats: RunNoiseStats,
     pooled: &[ArModel],
     r: &[Vec<f64>],
+    slow: (&[Option<SlowNoise>], f64),
 ) -> RunGram {
     let n = run.len();
     let b = stats.basis;
@@ -444,12 +470,17 @@ pub fn run_gram(
         })
         .collect();
     let secants = Secants::new(u, base, fit, run);
-    let gram = channel_grams(u, run, &noise, &b, r, &secants);
+    let mut gram = channel_grams(u, run, &noise, &b, r, &secants);
+    let slow_cov = super::slow::basis_covariances(&b, &run.track.t_s[..n], &stats.basis_ms, slow.0, slow.1);
+    for (c, g) in gram.iter_mut().enumerate() {
+        super::slow::adjust_gram(g, u.width(c), b.size, &slow_cov[c]);
+    }
     RunGram {
         gram,
         basis: b.size,
         first_harmonic: b.first,
         noise,
+        slow: slow_cov,
         output_ms: stats.output_ms,
         // A line must also stand out of the noise model's spectrum: a steep continuum (AR
         // noise at low frequency) fools a running median, not the model.
@@ -492,6 +523,7 @@ pub fn design_gram(
         basis: b.size,
         first_harmonic: b.first,
         noise,
+        slow: Vec::new(),
         output_ms: [0.0; 6],
         lines: Vec::new(),
         cone_hz: b.cone_hz(),

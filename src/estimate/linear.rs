@@ -278,7 +278,50 @@ fn fit_core(
             }
         }
     }
+    if opts.slow_noise && !opts.screening && opts.known_sigma.is_none() {
+        slow_noise(&designs, &mut solved, sources, counts.iter().sum())?;
+    }
     Ok(designs.iter().zip(solved).map(|(d, sol)| finish(&d.terms, d.sensor, sol)).collect())
+}
+
+/// Adds the slow noise (flicker, bias random walk) to each channel's covariance
+/// ([`super::slow`]): one more pass per source for block sums.
+fn slow_noise(
+    designs: &[SensorDesign<'_>],
+    solved: &mut [Solved],
+    sources: &[&dyn Samples],
+    total: usize,
+) -> Result<(), crate::session::SessionError> {
+    use rayon::prelude::*;
+    let plans: Vec<Vec<super::slow::ChannelDesign>> = designs
+        .iter()
+        .zip(solved.iter())
+        .map(|(d, s)| super::slow::designs(&d.terms, &d.cols, &s.values, &s.status, &s.fitted_sets))
+        .collect();
+    let width: Vec<usize> = designs.iter().map(|d| d.cols.len()).collect();
+    // Blocks of several integral times of the short-lag colour, where it looks white.
+    let integral = solved.iter().flat_map(|s| s.channels.iter()).map(|c| c.coloured_inflation).fold(1.0, f64::max);
+    let per_block = super::slow::block_samples(total).max((5.0 * integral).ceil() as usize);
+    let fill = |s: usize, states: &[State], g: &[[f64; 3]], a: &[[f64; 3]], cols: &mut [f64]| {
+        let u = match designs[s].sensor {
+            SensorKind::Gyro => g,
+            SensorKind::Accel => a,
+        };
+        designs[s].cols.fill_block(&designs[s].terms, states, u, cols);
+    };
+    let blocks: Vec<super::slow::SourceBlocks> = sources
+        .par_iter()
+        .map(|src| super::slow::pass(*src, &plans, &width, per_block, &fill))
+        .collect::<Result<_, _>>()?;
+    for (di, sol) in solved.iter_mut().enumerate() {
+        for ch in 0..3 {
+            let c = &mut sol.channels[ch];
+            let measured = super::slow::inflate(&blocks, 3 * di + ch, c);
+            c.slow_noise = measured;
+            rescale(c, &sol.fitted_sets[ch], &mut sol.std_errors, 1.0);
+        }
+    }
+    Ok(())
 }
 
 /// Fits one sensor of a model to in-memory runs.
@@ -456,6 +499,7 @@ fn solve(
             covariance: cov,
             downweighted: 0,
             coloured_inflation: 1.0,
+            slow_noise: None,
             residual_lag1: 0.0,
         });
     }

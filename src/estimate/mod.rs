@@ -32,6 +32,7 @@ mod request;
 mod result;
 mod robust;
 pub(crate) mod runs;
+pub mod slow;
 mod stand;
 mod stream;
 
@@ -60,11 +61,15 @@ pub struct FitOptions {
     /// Screening (ranking candidates): nonlinear parameters get a coarse scan and a short
     /// simplex search, and the best point found is returned even if not converged.
     pub screening: bool,
+    /// Carry slow noise (flicker, bias random walk) in the covariance ([`slow`]): one more
+    /// pass over the samples for block sums; the standard errors then cover a bias that
+    /// wanders over the session (`fit --slow-noise`).
+    pub slow_noise: bool,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { chunk: 1024, rcond: 1e-9, robust: false, known_sigma: None, screening: false }
+        Self { chunk: 1024, rcond: 1e-9, robust: false, known_sigma: None, screening: false, slow_noise: false }
     }
 }
 

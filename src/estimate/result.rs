@@ -67,6 +67,10 @@ pub struct ChannelFit {
     /// Lag-1 autocorrelation of the residual (pooled over runs).
     #[serde(default)]
     pub residual_lag1: f64,
+    /// Slow noise (flicker, bias random walk) read off the residual; the covariance includes
+    /// its effect on the coefficients (the bias against its session average).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slow_noise: Option<super::slow::SlowNoise>,
 }
 
 fn one() -> f64 {

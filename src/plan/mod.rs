@@ -144,6 +144,7 @@ pub fn predict_config(model: &Model, cfg: &SimConfig, sigma: [f64; 6]) -> Result
         accel_process: Default::default(),
         realism: Default::default(),
         stand: Default::default(),
+        carry_noise: false,
         temp_reading: Default::default(),
         ..cfg.clone()
     };

@@ -180,6 +180,11 @@ pub struct SimConfig {
     pub realism: realism::Realism,
     /// How the stand really moved, unknown to the manifest written (a perfect stand by default).
     pub stand: stand::StandErrors,
+    /// The coloured noise (flicker, random walk, Gauss–Markov) runs on over the session
+    /// clock from run to run, as a real unit's bias wanders between runs (one generator for
+    /// the session, flicker time constants up to the session's length, advanced over the
+    /// pauses between runs); false: each run draws its own stationary stretch.
+    pub carry_noise: bool,
 }
 
 /// The cyclic mounts used for re-mounted runs: nominal, then x→y→z→x twice.
@@ -235,6 +240,7 @@ impl SimConfig {
             accel_process: Default::default(),
             realism: Default::default(),
             stand: Default::default(),
+            carry_noise: false,
         }
     }
 
@@ -277,6 +283,15 @@ impl SimConfig {
         let mut runs = Vec::with_capacity(self.runs.len());
         let total: f64 = self.runs.iter().map(|r| r.duration_s).sum::<f64>().max(f64::MIN_POSITIVE);
         let mut elapsed = 0.0;
+        // Slow noise carried over the session: one generator per channel for every run.
+        let gap_s = self.realism.session_clock_gap_s.unwrap_or(0.0);
+        let session_s = total + gap_s * self.runs.len().saturating_sub(1) as f64;
+        let dt = 1.0 / self.sample_rate_hz;
+        let mut carried: Vec<noise::NoiseGenerator> = (0..6)
+            .map(|c| if c < 3 { &self.gyro_process } else { &self.accel_process })
+            .map(|p| p.generator(dt, session_s))
+            .collect();
+        let mut crng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x5eed_ca77_1ed);
         for plan in &self.runs {
             let n = (plan.duration_s * self.sample_rate_hz).round().max(1.0) as usize;
             let t0 = if self.realism.session_clock_gap_s.is_some() { clock_s } else { 0.0 };
@@ -287,11 +302,16 @@ impl SimConfig {
             let (tg, ta) = (self.seen(&tr, SensorKind::Gyro), self.seen(&tr, SensorKind::Accel));
             // Coloured noise draws from its own stream, so sessions without it are unchanged.
             let mut prng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x5eed_c0105 ^ runs.len() as u64);
-            let dt = 1.0 / self.sample_rate_hz;
-            let mut gens: Vec<noise::NoiseGenerator> = (0..6)
+            let mut own: Vec<noise::NoiseGenerator> = (0..6)
                 .map(|c| if c < 3 { &self.gyro_process } else { &self.accel_process })
                 .map(|p| p.generator(dt, plan.duration_s))
                 .collect();
+            if self.carry_noise && !runs.is_empty() {
+                for g in &mut carried {
+                    g.pause(gap_s, dt, &mut crng);
+                }
+            }
+            let (gens, prng) = if self.carry_noise { (&mut carried, &mut crng) } else { (&mut own, &mut prng) };
             let coloured = !(self.gyro_process.is_zero() && self.accel_process.is_zero());
             rec.gyro.reserve(n);
             rec.accel.reserve(n);
@@ -318,8 +338,8 @@ impl SimConfig {
                 self.realism.disturb(rec.t_s[k], theta, conic_index, &mut g, &mut a);
                 if coloured {
                     for i in 0..3 {
-                        g[i] += gens[i].next_sample(&mut prng);
-                        a[i] += gens[3 + i].next_sample(&mut prng);
+                        g[i] += gens[i].next_sample(prng);
+                        a[i] += gens[3 + i].next_sample(prng);
                     }
                 }
                 rec.gyro.push(g);

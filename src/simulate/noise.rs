@@ -103,6 +103,27 @@ pub struct NoiseGenerator {
 }
 
 impl NoiseGenerator {
+    /// Lets `gap_s` pass without samples (a pause between runs on the session clock): each
+    /// Gauss–Markov state decays by φ^(gap/dt) and takes the innovation that keeps it
+    /// stationary, x ← e^{−g/T} x + σ √(1 − e^{−2g/T}) z; the random walk takes K √g z. The
+    /// white part has no memory. A sequence of runs generated with one generator and these
+    /// pauses is one continuous process on the session clock.
+    pub fn pause<R: Rng>(&mut self, gap_s: f64, dt_s: f64, rng: &mut R) {
+        if !(gap_s > 0.0 && dt_s > 0.0) {
+            return;
+        }
+        let steps = gap_s / dt_s;
+        if self.walk_sd > 0.0 {
+            let z: f64 = StandardNormal.sample(rng);
+            self.walk += self.walk_sd * steps.sqrt() * z;
+        }
+        for (x, p) in self.state.iter_mut().zip(&self.poles) {
+            let decay = p.0.powf(steps);
+            let z: f64 = StandardNormal.sample(rng);
+            *x = decay * *x + p.2 * (1.0 - decay * decay).max(0.0).sqrt() * z;
+        }
+    }
+
     /// The next sample.
     pub fn next_sample<R: Rng>(&mut self, rng: &mut R) -> f64 {
         if self.state.is_empty() && !self.poles.is_empty() {

@@ -38,6 +38,23 @@ pub enum Disturbance {
         /// Level L, SI.
         limit: f64,
     },
+    /// A knee on one output: u → u + slope · max(u − threshold, 0) (a scale factor that
+    /// changes above a level; a negative threshold with a negative slope acts below it).
+    Knee {
+        /// Output channel 0..6.
+        channel: usize,
+        /// Level above which the scale changes, SI.
+        threshold: f64,
+        /// Change of scale above it (0.03 = +3 %).
+        slope: f64,
+    },
+    /// A hard clip of one output at ±limit.
+    Clip {
+        /// Output channel 0..6.
+        channel: usize,
+        /// Limit, SI.
+        limit: f64,
+    },
 }
 
 fn channel_of(s: &str) -> Result<(usize, f64), String> {
@@ -66,9 +83,10 @@ fn number(s: &str, what: &str) -> Result<f64, String> {
 }
 
 impl Disturbance {
-    /// Parses `wobble:CHANNEL:HARMONIC:AMPLITUDE:EVERY`, `sine:CHANNEL:FREQ_HZ:AMPLITUDE` or
-    /// `saturate:SENSOR:LIMIT` (amplitudes and limits in deg/s for the gyro, g for the
-    /// accelerometer; channels like `gyro-y`).
+    /// Parses `wobble:CHANNEL:HARMONIC:AMPLITUDE:EVERY`, `sine:CHANNEL:FREQ_HZ:AMPLITUDE`,
+    /// `saturate:SENSOR:LIMIT`, `knee:CHANNEL:LEVEL:SLOPE` or `clip:CHANNEL:LIMIT`
+    /// (amplitudes, levels and limits in deg/s for the gyro, g for the accelerometer;
+    /// channels like `gyro-y`; a slope is relative, 0.03 = +3 %).
     pub fn parse(s: &str) -> Result<Self, String> {
         let parts: Vec<&str> = s.split(':').collect();
         match parts.as_slice() {
@@ -102,8 +120,20 @@ impl Disturbance {
                 }
                 Ok(Self::Saturation { sensor, limit })
             }
+            ["knee", ch, level, slope] => {
+                let (channel, k) = channel_of(ch)?;
+                Ok(Self::Knee { channel, threshold: number(level, "threshold")? * k, slope: number(slope, "slope")? })
+            }
+            ["clip", ch, l] => {
+                let (channel, k) = channel_of(ch)?;
+                let limit = number(l, "limit")? * k;
+                if limit <= 0.0 {
+                    return Err("clip: the limit must be positive".into());
+                }
+                Ok(Self::Clip { channel, limit })
+            }
             _ => Err(format!(
-                "'{s}': expected wobble:CHANNEL:HARMONIC:AMPLITUDE:EVERY, sine:CHANNEL:FREQ_HZ:AMPLITUDE or saturate:SENSOR:LIMIT"
+                "'{s}': expected wobble:CHANNEL:HARMONIC:AMPLITUDE:EVERY, sine:CHANNEL:FREQ_HZ:AMPLITUDE, saturate:SENSOR:LIMIT, knee:CHANNEL:LEVEL:SLOPE or clip:CHANNEL:LIMIT"
             )),
         }
     }
@@ -139,6 +169,14 @@ impl Realism {
                 }
                 Disturbance::Sine { channel, frequency_hz, amplitude } => {
                     add(channel, amplitude * (std::f64::consts::TAU * frequency_hz * t_s + 0.3).sin(), g, a);
+                }
+                Disturbance::Knee { channel, threshold, slope } => {
+                    let v = if channel < 3 { &mut g[channel] } else { &mut a[channel - 3] };
+                    *v += slope * if threshold >= 0.0 { (*v - threshold).max(0.0) } else { (*v - threshold).min(0.0) };
+                }
+                Disturbance::Clip { channel, limit } => {
+                    let v = if channel < 3 { &mut g[channel] } else { &mut a[channel - 3] };
+                    *v = v.clamp(-limit, limit);
                 }
                 Disturbance::Saturation { sensor, limit } => {
                     let v = if sensor == SensorKind::Gyro { &mut *g } else { &mut *a };

@@ -710,6 +710,7 @@ fn sensor_fit(
                 covariance,
                 downweighted: 0,
                 coloured_inflation: 1.0,
+                slow_noise: None,
                 residual_lag1: 0.0,
             }
         })

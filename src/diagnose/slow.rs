@@ -1,0 +1,159 @@
+//! Slow noise in the diagnosis: flicker and bias random walk as a random effect on each
+//! run's slow basis.
+//!
+//! The AR model of a run's noise is fitted to what the run's systematic basis leaves
+//! ([`super::space`]), so it never sees the noise's power below a few cycles per run. A
+//! wandering bias puts exactly there a different offset, slope and curvature in every run:
+//! "locked to nothing" (not to the cone phase, the rate, the direction of gravity, nor one
+//! law of the session clock or the temperature shared by the runs), it is noise, and the
+//! evidence must treat it as such.
+//!
+//! The fit measures the slow part of each channel's residual (white density, bias
+//! instability B, random walk K: [`crate::estimate::slow`]). Projected on a run's basis
+//! (ordinary least squares, P = (BᵀB)⁻¹Bᵀ, over pieces of the run), it gives the covariance
+//! D = P Σ_slow Pᵀ of the run's basis coefficients that the slow noise alone produces; for
+//! the random walk the variogram is centred on the session (the bias is fitted once, so a
+//! run's offset is measured against the session's average: + K² span/6).
+//!
+//! The noise of a run is then AR noise plus B c with c ~ (0, D): generalised least squares
+//! with that random effect (Woodbury) replaces the whitened Gram of the columns and the
+//! residual by G_xx − G_xb D (I + G_bb D)⁻¹ G_bx, and the systematic test measures the
+//! basis's cross products z = Bᵀ(r − Xβ) (whitened) in the metric of their covariance
+//! G_bb + G_bb D G_bb.
+
+use super::space::RunBasis;
+use crate::estimate::slow::SlowNoise;
+use nalgebra::DMatrix;
+
+/// Pieces a run is cut into for the projection (at most; at least 16 per cone cycle of the
+/// highest harmonic where the run is long).
+const MAX_PIECES: usize = 512;
+
+/// Per channel the covariance D of one run's basis coefficients under the slow noise
+/// `slow[c]` (None or no slow part: zero). `t` are the run's stamps, `basis_ms` = BᵀB/n,
+/// `span_s` the session's length.
+pub fn basis_covariances(
+    basis: &RunBasis,
+    t: &[f64],
+    basis_ms: &DMatrix<f64>,
+    slow: &[Option<SlowNoise>],
+    span_s: f64,
+) -> Vec<DMatrix<f64>> {
+    let nb = basis.size;
+    let zero = || DMatrix::<f64>::zeros(nb, nb);
+    let n = t.len();
+    if n < 2 || slow.iter().all(|s| s.is_none_or(|s| !s.is_slow())) {
+        return (0..slow.len()).map(|_| zero()).collect();
+    }
+    let cycles = basis.cone_hz().map_or(0.0, |f| f * (t[n - 1] - t[0]));
+    let pieces = ((16.0 * super::HARMONICS as f64 * cycles) as usize).clamp(32, MAX_PIECES).min(n);
+    // Per piece: centre, length, samples, and n_p × the basis at the centre.
+    let mut w = DMatrix::<f64>::zeros(nb, pieces);
+    let mut at = Vec::with_capacity(pieces);
+    let mut row = vec![0.0; nb];
+    for p in 0..pieces {
+        let (k0, k1) = (p * n / pieces, ((p + 1) * n / pieces).max(p * n / pieces + 1).min(n));
+        let m = k1 - k0;
+        let (a, b) = (t[k0], t[k1 - 1]);
+        let dt = if m > 1 { (b - a) / (m - 1) as f64 } else { (t[n - 1] - t[0]) / (n - 1) as f64 };
+        at.push((0.5 * (a + b), dt * m as f64));
+        // The basis averaged over the piece (its ends and middle, Simpson's rule).
+        for (wt, s) in [(1.0 / 6.0, a), (4.0 / 6.0, 0.5 * (a + b)), (1.0 / 6.0, b)] {
+            basis.row(s, &mut row);
+            for i in 0..nb {
+                w[(i, p)] += wt * m as f64 * row[i];
+            }
+        }
+    }
+    let btb = basis_ms * n as f64;
+    let Some(pinv) = btb.clone().try_inverse().or_else(|| btb.pseudo_inverse(1e-12).ok()) else {
+        return (0..slow.len()).map(|_| zero()).collect();
+    };
+    let proj = &pinv * &w;
+    slow.iter()
+        .map(|s| {
+            let Some(s) = s.filter(SlowNoise::is_slow) else { return zero() };
+            let kernel = s.kernel(span_s);
+            let centre = kernel.walk2() * span_s / 6.0;
+            let sigma = DMatrix::from_fn(pieces, pieces, |i, j| kernel.cov(at[i], at[j], i == j) + centre);
+            let d = &proj * sigma * proj.transpose();
+            0.5 * (&d + d.transpose())
+        })
+        .collect()
+}
+
+/// Replaces the columns' and residual's block of a run's channel Gram
+/// `[columns (width) | basis (nb) | r]` by its value under the random effect D on the basis
+/// (module documentation); the basis rows and columns are kept as they are.
+pub fn adjust_gram(g: &mut DMatrix<f64>, width: usize, nb: usize, d: &DMatrix<f64>) {
+    if nb == 0 || d.iter().all(|v| *v == 0.0) {
+        return;
+    }
+    let m = g.nrows();
+    let x: Vec<usize> = (0..width).chain(std::iter::once(m - 1)).collect();
+    let gbb = g.view((width, width), (nb, nb)).into_owned();
+    let Some(inv) = (DMatrix::identity(nb, nb) + &gbb * d).try_inverse() else { return };
+    let h = d * inv;
+    let gxb = DMatrix::from_fn(x.len(), nb, |i, j| g[(x[i], width + j)]);
+    let corr = &gxb * h * gxb.transpose();
+    for (i, &xi) in x.iter().enumerate() {
+        for (j, &xj) in x.iter().enumerate() {
+            g[(xi, xj)] -= corr[(i, j)];
+        }
+    }
+}
+
+/// The metric of a run's basis cross products under AR plus slow noise: G_bb + G_bb D G_bb.
+pub fn basis_metric(gbb: &DMatrix<f64>, d: &DMatrix<f64>) -> DMatrix<f64> {
+    gbb + gbb * d * gbb
+}
+
+/// Samples per fine block of a run of `n` samples (at least 4, at most 8192 blocks).
+pub fn fine_block(n: usize) -> usize {
+    n.div_ceil(8192).max(4)
+}
+
+/// Blocks of at least this many integral times of the AR noise: at that scale the AR part
+/// is white and only the slow part departs from N²/τ.
+const INTEGRAL_TIMES: f64 = 5.0;
+
+/// The slow noise of each channel, measured on the runs' residuals less their cone
+/// harmonics (so nothing locked to the cone is taken for noise): blocks of several integral
+/// times of the channel's AR noise (`pooled`), Allan variances within each run, fitted
+/// with white, flicker and random walk ([`crate::estimate::slow::fit_allan`]). `span_s` is
+/// the session's length. None where the runs are too short to tell.
+pub fn session_slow_noise(
+    stats: &[super::space::RunNoiseStats],
+    pooled: &[crate::stats::ArModel],
+    span_s: f64,
+) -> Vec<Option<SlowNoise>> {
+    (0..6)
+        .map(|c| {
+            let ar = &pooled[c];
+            let s = 1.0 - ar.phi.iter().sum::<f64>();
+            let integral = if s.abs() > 1e-6 && ar.marginal_var > 0.0 {
+                (ar.innovation_var / (s * s) / ar.marginal_var).max(1.0)
+            } else {
+                1e6
+            };
+            let mut points = Vec::new();
+            let mut block_s = f64::INFINITY;
+            for st in stats {
+                let want = (INTEGRAL_TIMES * integral).max(8.0);
+                let group = (want / st.fine_block as f64).ceil().max(1.0) as usize;
+                let coarse: Vec<f64> =
+                    st.fine[c].chunks_exact(group).map(|ch| ch.iter().sum::<f64>() / group as f64).collect();
+                let l = (group * st.fine_block) as f64 * st.dt_s;
+                let p = crate::estimate::slow::allan_points(&coarse, l);
+                if !p.is_empty() {
+                    block_s = block_s.min(l);
+                }
+                points.extend(p);
+            }
+            if !block_s.is_finite() {
+                return None;
+            }
+            Some(crate::estimate::slow::fit_allan(&points, block_s, span_s.max(block_s)))
+        })
+        .collect()
+}

@@ -1,0 +1,532 @@
+//! Slow noise in the fit's covariance: flicker (bias instability) and bias random walk.
+//!
+//! The white-noise covariance σ²(ΦᵀΦ)⁻¹, even inflated by the residual's short-lag long-run
+//! variance (Newey–West), misses noise whose correlation time is comparable to a run or to
+//! the session: a wandering bias moves every run's offset, and a coefficient whose
+//! regressor is nearly constant within a run (the accelerometer's K on gravity, a bias)
+//! is estimated from those offsets. This module measures the slow part and adds its
+//! contribution to the covariance.
+//!
+//! 1. **Measure.** The residual of each run is averaged over blocks of L seconds; the
+//!    Allan variance of the block means at τ = L, 2L, 4L … (up to a third of a run) is fitted
+//!    by non-negative least squares with σ²_A(τ) = N²/τ + B² a_F(τ) + K² τ/3 (IEEE 952
+//!    white, flicker, random walk; a_F the Allan variance of the unit flicker model below).
+//! 2. **Model.** Flicker is a sum of first-order Gauss–Markov processes with time constants
+//!    two per decade from L to the session's span, variances B² ln r/π each (their sum
+//!    approximates S(f) = B²/(πf)); the random walk has variogram K²|Δt|. Block means of
+//!    these have closed-form covariances: for a Gauss–Markov process of variance σ² and
+//!    time constant T, Var = 2σ²(T/L)²(L/T − 1 + e^{−L/T}) within a block and
+//!    σ² e^{−Δ/T} Π_b (T/L_b)(e^{L_b/2T} − e^{−L_b/2T}) between blocks Δ apart; for the
+//!    random walk −½K²|Δ| (−½K²L/3 within a block), a variogram: the constant it leaves
+//!    out is absorbed by the bias, which is judged against the session's average.
+//! 3. **Propagate.** With A = (ΦᵀΦ)⁻¹ and S_b the block sums of the regressors, the error
+//!    of the estimate is Σ_b d_b s̄_b with d_b = A S_b − e_bias n_b/N (the session-averaged
+//!    bias is the target), so the slow part adds Σ_{b,b'} d_b d_bᵀ' C(b, b') to the
+//!    covariance (sandwich form, Newey & West 1987 with a parametric kernel).
+//!
+//! The pass streams the samples once more in fixed memory (per block: q sums per channel).
+
+use super::channel::channel_plan;
+use super::channel::Columns;
+use super::linear::{Samples, BLOCK};
+use super::{ChannelFit, CoefStatus};
+use crate::model::TermRef;
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+/// The slow noise read off one channel's residual (SI units of the channel).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
+pub struct SlowNoise {
+    /// White density N, unit/√Hz (at the block scale).
+    pub white_density: f64,
+    /// Bias instability B (flicker), unit.
+    pub bias_instability: f64,
+    /// Rate random walk K, unit/√s.
+    pub random_walk: f64,
+    /// Standard-error inflation of the coefficients by the slow part: the largest ratio of
+    /// a standard error with it to the same without.
+    pub se_inflation: f64,
+    /// The block length the residual was averaged over, s (the shortest flicker time
+    /// constant modelled: faster noise is in the white and AR part).
+    #[serde(default)]
+    pub block_s: f64,
+}
+
+impl SlowNoise {
+    /// Whether it has a slow part at all.
+    pub fn is_slow(&self) -> bool {
+        self.bias_instability > 0.0 || self.random_walk > 0.0
+    }
+
+    /// Its covariance kernel over a session of `span_s`.
+    pub fn kernel(&self, span_s: f64) -> SlowKernel {
+        SlowKernel {
+            poles: poles(self.block_s.max(f64::MIN_POSITIVE), span_s),
+            b2: self.bias_instability.powi(2),
+            k2: self.random_walk.powi(2),
+        }
+    }
+}
+
+/// The covariance of block means of a slow noise (module documentation, step 2).
+#[derive(Debug, Clone)]
+pub struct SlowKernel {
+    poles: Vec<(f64, f64)>,
+    b2: f64,
+    k2: f64,
+}
+
+impl SlowKernel {
+    /// Covariance of the means over blocks `a` and `b`, each (centre s, length s); `same`
+    /// when they are one block. The random walk in variogram form (−½K²|Δ|), to which a
+    /// caller adds the constant its question needs.
+    pub fn cov(&self, a: (f64, f64), b: (f64, f64), same: bool) -> f64 {
+        block_cov(&self.poles, self.b2, self.k2, a, b, same)
+    }
+
+    /// K², unit²/s.
+    pub fn walk2(&self) -> f64 {
+        self.k2
+    }
+}
+
+/// Blocks a session is cut into at most (the covariance sum is quadratic in them).
+const MAX_BLOCKS: usize = 1500;
+/// Ratio of neighbouring flicker time constants (two per decade).
+const RATIO: f64 = 3.162_277_660_168_379_5;
+
+/// One channel's block statistics from a source.
+#[derive(Debug, Clone, Default)]
+struct ChannelBlocks {
+    /// Per block: sums of each fitted coefficient's column.
+    sums: Vec<Vec<f64>>,
+    /// Per block: mean residual.
+    mean: Vec<f64>,
+}
+
+/// The blocks of one source (a run): centre times, lengths, and per sensor channel the sums.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct SourceBlocks {
+    centre_s: Vec<f64>,
+    length_s: Vec<f64>,
+    count: Vec<usize>,
+    channels: Vec<ChannelBlocks>,
+    /// ΦᵀΦ per channel (plan columns).
+    gram: Vec<DMatrix<f64>>,
+}
+
+/// A channel's fitted plan as the pass needs it: per fitted coefficient its (design column,
+/// weight) pairs; the prediction as (column, weight) pairs.
+pub(crate) struct ChannelDesign {
+    columns: Vec<Vec<(usize, f64)>>,
+    predict: Vec<(usize, f64)>,
+}
+
+/// The plans of the three channels of a sensor at its solution.
+pub(crate) fn designs(
+    terms: &[TermRef<'_>],
+    cols: &Columns,
+    values: &[f64],
+    status: &[CoefStatus],
+    fitted: &[Vec<usize>],
+) -> Vec<ChannelDesign> {
+    let pred = super::channel::prediction(terms, cols, values);
+    (0..3)
+        .map(|ch| {
+            let plan = channel_plan(terms, cols, values, status, &fitted[ch], ch);
+            ChannelDesign {
+                columns: plan.columns,
+                predict: pred.iter().filter(|p| p.0 == ch).map(|p| (p.1, p.2)).collect(),
+            }
+        })
+        .collect()
+}
+
+/// Samples per block for a session of `total` samples.
+pub(crate) fn block_samples(total: usize) -> usize {
+    total.div_ceil(MAX_BLOCKS).max(8)
+}
+
+/// A block being filled.
+struct Open {
+    t0: f64,
+    t1: f64,
+    n: usize,
+    sums: Vec<Vec<f64>>,
+    rsum: Vec<f64>,
+}
+
+impl SourceBlocks {
+    fn close(&mut self, o: &mut Open) {
+        if o.n == 0 {
+            return;
+        }
+        let dt = if o.n > 1 { (o.t1 - o.t0) / (o.n - 1) as f64 } else { 0.0 };
+        self.centre_s.push(0.5 * (o.t0 + o.t1));
+        self.length_s.push(dt * o.n as f64);
+        self.count.push(o.n);
+        for (c, cb) in self.channels.iter_mut().enumerate() {
+            cb.sums.push(std::mem::take(&mut o.sums[c]));
+            cb.mean.push(o.rsum[c] / o.n as f64);
+            o.sums[c] = vec![0.0; cb.sums.last().map_or(0, Vec::len)];
+            o.rsum[c] = 0.0;
+        }
+        o.n = 0;
+    }
+}
+
+/// The block pass over one source for every sensor: `fill(sensor index, states, gyro,
+/// accel, cols)` fills the sensor's design columns of a block (stride [`BLOCK`]);
+/// `designs[s]` are its channels' plans, `width[s]` its number of design columns. Blocks
+/// hold `per_block` consecutive samples (the last of a source fewer).
+pub(crate) fn pass(
+    src: &dyn Samples,
+    designs: &[Vec<ChannelDesign>],
+    width: &[usize],
+    per_block: usize,
+    fill: &(dyn Fn(usize, &[crate::model::State], &[[f64; 3]], &[[f64; 3]], &mut [f64]) + Sync),
+) -> Result<SourceBlocks, crate::session::SessionError> {
+    let sensors = designs.len();
+    let q = |c: usize| designs[c / 3][c % 3].columns.len();
+    let mut out = SourceBlocks {
+        channels: vec![ChannelBlocks::default(); 3 * sensors],
+        gram: (0..3 * sensors).map(|c| DMatrix::zeros(q(c), q(c))).collect(),
+        ..Default::default()
+    };
+    let mut open = Open {
+        t0: 0.0,
+        t1: 0.0,
+        n: 0,
+        sums: (0..3 * sensors).map(|c| vec![0.0; q(c)]).collect(),
+        rsum: vec![0.0; 3 * sensors],
+    };
+    let mut cols: Vec<Vec<f64>> = width.iter().map(|w| vec![0.0; (w + 3) * BLOCK]).collect();
+    let mut x = Vec::new();
+    src.for_each_block(&mut |states, g, a| {
+        for (s, c) in cols.iter_mut().enumerate() {
+            fill(s, states, g, a, c);
+        }
+        for (k, st) in states.iter().enumerate() {
+            if open.n == 0 {
+                open.t0 = st.t_session_s;
+            }
+            open.t1 = st.t_session_s;
+            open.n += 1;
+            for s in 0..sensors {
+                let c = &cols[s];
+                for (ch, d) in designs[s].iter().enumerate() {
+                    let i = 3 * s + ch;
+                    x.clear();
+                    x.extend(d.columns.iter().map(|col| col.iter().map(|&(j, wt)| wt * c[j * BLOCK + k]).sum::<f64>()));
+                    for (acc, v) in open.sums[i].iter_mut().zip(&x) {
+                        *acc += v;
+                    }
+                    let pred: f64 = d.predict.iter().map(|&(j, wt)| wt * c[j * BLOCK + k]).sum();
+                    open.rsum[i] += c[(width[s] + ch) * BLOCK + k] - pred;
+                    let gram = &mut out.gram[i];
+                    for a in 0..x.len() {
+                        for b in 0..=a {
+                            gram[(a, b)] += x[a] * x[b];
+                        }
+                    }
+                }
+            }
+            if open.n == per_block {
+                out.close(&mut open);
+            }
+        }
+    })?;
+    out.close(&mut open);
+    for g in &mut out.gram {
+        g.fill_upper_triangle_with_lower_triangle();
+    }
+    Ok(out)
+}
+
+/// Allan variance of a series of equal block means (overlapping estimator) at cluster size
+/// m: (value, terms averaged).
+fn allan(means: &[f64], m: usize) -> Option<(f64, usize)> {
+    if means.len() < 2 * m {
+        return None;
+    }
+    let mut prefix = vec![0.0; means.len() + 1];
+    for (i, v) in means.iter().enumerate() {
+        prefix[i + 1] = prefix[i] + v;
+    }
+    let avg = |i: usize| (prefix[i + m] - prefix[i]) / m as f64;
+    let terms = means.len() + 1 - 2 * m;
+    let s: f64 = (0..terms).map(|i| (avg(i + m) - avg(i)).powi(2)).sum();
+    Some((0.5 * s / terms as f64, terms))
+}
+
+/// The flicker poles (time constant, variance per unit B²) from `t_min` to `span`.
+fn poles(t_min: f64, span: f64) -> Vec<(f64, f64)> {
+    let var = RATIO.ln() / std::f64::consts::PI;
+    let mut out = Vec::new();
+    let mut t = t_min.max(f64::MIN_POSITIVE);
+    while t <= span.max(t_min) * RATIO {
+        out.push((t, var));
+        t *= RATIO;
+    }
+    out
+}
+
+/// Allan variance of a Gauss–Markov process (σ², T) at τ.
+fn gm_allan(var: f64, t: f64, tau: f64) -> f64 {
+    let x = tau / t;
+    var * (t / tau).powi(2) * (2.0 * x - 3.0 + 4.0 * (-x).exp() - (-2.0 * x).exp())
+}
+
+/// Non-negative least squares of a tiny problem (≤ 3 unknowns) by trying every active set.
+fn nnls(a: &[[f64; 3]], y: &[f64], w: &[f64]) -> [f64; 3] {
+    let mut best = ([0.0; 3], f64::INFINITY);
+    for mask in 1u8..8 {
+        let idx: Vec<usize> = (0..3).filter(|i| mask & (1 << i) != 0).collect();
+        let k = idx.len();
+        let m = DMatrix::from_fn(k, k, |i, j| (0..y.len()).map(|r| w[r] * a[r][idx[i]] * a[r][idx[j]]).sum::<f64>());
+        let b = DVector::from_fn(k, |i, _| (0..y.len()).map(|r| w[r] * a[r][idx[i]] * y[r]).sum::<f64>());
+        let Some(sol) = m.lu().solve(&b) else { continue };
+        if sol.iter().any(|v| *v < 0.0 || !v.is_finite()) {
+            continue;
+        }
+        let mut x = [0.0; 3];
+        for (i, &j) in idx.iter().enumerate() {
+            x[j] = sol[i];
+        }
+        let cost: f64 = (0..y.len()).map(|r| w[r] * (y[r] - (0..3).map(|j| a[r][j] * x[j]).sum::<f64>()).powi(2)).sum();
+        if cost < best.1 {
+            best = (x, cost);
+        }
+    }
+    best.0
+}
+
+/// One Allan variance of block means: (τ s, value, weight = terms/m/value²).
+pub type AllanPoint = (f64, f64, f64);
+
+/// The Allan variances of one run's block means (blocks of `block_s`) at τ = L, 2L, 4L, …
+/// while at least three differences remain.
+pub fn allan_points(means: &[f64], block_s: f64) -> Vec<AllanPoint> {
+    let mut out = Vec::new();
+    let mut m = 1;
+    while let Some((v, terms)) = allan(means, m) {
+        if terms < 3 || !(block_s > 0.0) {
+            break;
+        }
+        // Each Allan variance is known to about 1/√(terms/m) of itself.
+        out.push((block_s * m as f64, v, terms as f64 / m as f64 / v.max(f64::MIN_POSITIVE).powi(2)));
+        m *= 2;
+    }
+    out
+}
+
+/// White density, bias instability and random walk fitted (non-negative least squares) to
+/// Allan variances: σ²_A(τ) = N²/τ + B² a_F(τ) + K² τ/3, the flicker modelled from
+/// `block_s` to `span_s`.
+pub fn fit_allan(points: &[AllanPoint], block_s: f64, span_s: f64) -> SlowNoise {
+    let flick = poles(block_s, span_s);
+    let rows: Vec<[f64; 3]> = points
+        .iter()
+        .map(|&(tau, _, _)| [1.0 / tau, flick.iter().map(|&(t, var)| gm_allan(var, t, tau)).sum(), tau / 3.0])
+        .collect();
+    let ys: Vec<f64> = points.iter().map(|p| p.1).collect();
+    let ws: Vec<f64> = points.iter().map(|p| p.2).collect();
+    let distinct = {
+        let mut t: Vec<f64> = points.iter().map(|p| p.0).collect();
+        t.sort_by(f64::total_cmp);
+        t.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * b.abs());
+        t.len()
+    };
+    let [n2, b2, k2] = if distinct < 3 { [0.0; 3] } else { nnls(&rows, &ys, &ws) };
+    SlowNoise {
+        white_density: n2.sqrt(),
+        bias_instability: b2.sqrt(),
+        random_walk: k2.sqrt(),
+        se_inflation: 1.0,
+        block_s,
+    }
+}
+
+/// Fits (N², B², K²) to the Allan variances of one channel's block means over its runs.
+fn measure(sources: &[SourceBlocks], c: usize, t_min: f64, span: f64) -> [f64; 3] {
+    let mut points = Vec::new();
+    for s in sources {
+        let means = &s.channels[c].mean;
+        // Blocks of one length only (a run's last, shorter block is left out).
+        let full = s.count.iter().take_while(|&&n| n == s.count[0]).count().min(means.len());
+        if let Some(&l) = s.length_s.first() {
+            points.extend(allan_points(&means[..full], l));
+        }
+    }
+    let f = fit_allan(&points, t_min, span);
+    [f.white_density.powi(2), f.bias_instability.powi(2), f.random_walk.powi(2)]
+}
+
+/// Covariance of the block means b, b' of the slow part (flicker poles at B² = `b2`, random
+/// walk K² = `k2`), in variogram form for the walk.
+fn block_cov(flick: &[(f64, f64)], b2: f64, k2: f64, tb: (f64, f64), tc: (f64, f64), same: bool) -> f64 {
+    let mut v = 0.0;
+    if same {
+        let l = tb.1.max(f64::MIN_POSITIVE);
+        for &(t, var) in flick {
+            let x = l / t;
+            v += b2 * var * 2.0 * (t / l).powi(2) * (x - 1.0 + (-x).exp());
+        }
+        v -= 0.5 * k2 * l / 3.0;
+    } else {
+        let d = (tb.0 - tc.0).abs();
+        let f = |t: f64, l: f64| if l > 0.0 { (t / l) * (1.0 - (-l / t).exp()) } else { 1.0 };
+        for &(t, var) in flick {
+            let e = -(d - 0.5 * tb.1 - 0.5 * tc.1) / t;
+            v += b2 * var * e.exp() * f(t, tb.1) * f(t, tc.1);
+        }
+        v -= 0.5 * k2 * d;
+    }
+    v
+}
+
+/// The random walk K² read off the runs' mean residuals (method of moments): with the
+/// residual r = (I − H) ε at the level of blocks, q = Σ_r (Σ_{b∈r} n_b r̄_b)²/n_r has the
+/// expectation Σ_r v_rᵀ C v_r / n_r, v_r = w_r − S A T_r (w_r the block counts of run r,
+/// S the block sums of the regressors, T_r their sum over run r, A = (ΦᵀΦ)⁻¹), linear in
+/// the white, flicker and walk parts of C; what white and flicker (known from inside the
+/// runs) do not explain is the walk's. Blocks are merged to at most 16 per run here.
+fn session_walk(
+    sources: &[SourceBlocks],
+    c: usize,
+    ainv: &DMatrix<f64>,
+    offsets: &[f64],
+    (n2, b2): (f64, f64),
+    flick: &[(f64, f64)],
+) -> f64 {
+    let q = ainv.nrows();
+    if sources.len() < q + 2 {
+        return 0.0;
+    }
+    // Coarse blocks: (run, centre, length, count, sums, mean residual).
+    let mut blocks: Vec<(usize, f64, f64, f64, DVector<f64>, f64)> = Vec::new();
+    for (si, s) in sources.iter().enumerate() {
+        let nb = s.count.len();
+        let group = nb.div_ceil(16).max(1);
+        for g in (0..nb).step_by(group) {
+            let idx = g..(g + group).min(nb);
+            let n: f64 = idx.clone().map(|b| s.count[b] as f64).sum();
+            let t0 = s.centre_s[idx.start] - 0.5 * s.length_s[idx.start];
+            let t1 = s.centre_s[idx.end - 1] + 0.5 * s.length_s[idx.end - 1];
+            let mut sums = DVector::<f64>::zeros(q);
+            let mut r = 0.0;
+            for b in idx {
+                sums += DVector::from_column_slice(&s.channels[c].sums[b]);
+                r += s.channels[c].mean[b] * s.count[b] as f64;
+            }
+            blocks.push((si, 0.5 * (t0 + t1) + offsets[si], t1 - t0, n, sums, r / n.max(1.0)));
+        }
+    }
+    let (mut q_obs, mut e) = (0.0, [0.0; 3]);
+    for (si, _) in sources.iter().enumerate() {
+        let mine: Vec<usize> = (0..blocks.len()).filter(|&b| blocks[b].0 == si).collect();
+        let n_r: f64 = mine.iter().map(|&b| blocks[b].3).sum();
+        if n_r <= 0.0 {
+            continue;
+        }
+        q_obs += mine.iter().map(|&b| blocks[b].3 * blocks[b].5).sum::<f64>().powi(2) / n_r;
+        let t_r = mine.iter().fold(DVector::<f64>::zeros(q), |acc, &b| acc + &blocks[b].4);
+        let at = ainv * t_r;
+        let v: Vec<f64> = blocks.iter().map(|blk| if blk.0 == si { blk.3 } else { 0.0 } - blk.4.dot(&at)).collect();
+        for (i, bi) in blocks.iter().enumerate() {
+            e[0] += v[i] * v[i] / bi.2.max(f64::MIN_POSITIVE) / n_r;
+            for (j, bj) in blocks.iter().enumerate() {
+                let same = i == j;
+                let w = v[i] * v[j] / n_r;
+                e[1] += w * block_cov(flick, 1.0, 0.0, (bi.1, bi.2), (bj.1, bj.2), same);
+                e[2] += w * block_cov(&[], 0.0, 1.0, (bi.1, bi.2), (bj.1, bj.2), same);
+            }
+        }
+    }
+    if e[2] <= 0.0 {
+        return 0.0;
+    }
+    ((q_obs - n2 * e[0] - b2 * e[1]) / e[2]).max(0.0)
+}
+
+/// Adds the slow part to channel `c`'s covariance (module documentation) and returns what
+/// was measured; the caller updates the standard errors from the covariance.
+pub(crate) fn inflate(sources: &[SourceBlocks], c: usize, ch: &mut ChannelFit) -> Option<SlowNoise> {
+    let q = ch.covariance.len();
+    if q == 0 || sources.is_empty() {
+        return None;
+    }
+    let t_min = sources.iter().flat_map(|s| s.length_s.first()).copied().fold(f64::INFINITY, f64::min);
+    if !(t_min.is_finite() && t_min > 0.0) {
+        return None;
+    }
+    let mut gram = DMatrix::<f64>::zeros(q, q);
+    let mut total = 0usize;
+    for s in sources {
+        gram += &s.gram[c];
+        total += s.count.iter().sum::<usize>();
+    }
+    let ainv = gram.clone().try_inverse().or_else(|| gram.clone().pseudo_inverse(1e-12).ok())?;
+    // Runs whose clocks restart (each from 0) are laid end to end on one session clock.
+    let mut offsets = Vec::with_capacity(sources.len());
+    let mut end = f64::NEG_INFINITY;
+    for s in sources {
+        let (a, b) = (s.centre_s.first().copied().unwrap_or(0.0), s.centre_s.last().copied().unwrap_or(0.0));
+        let off = if a < end { end - a + s.length_s.first().copied().unwrap_or(0.0) } else { 0.0 };
+        offsets.push(off);
+        end = b + off;
+    }
+    // The constant column (the bias), if fitted: its block sums are the block counts.
+    let bias = (0..q).find(|&a| {
+        sources
+            .iter()
+            .all(|s| s.channels[c].sums.iter().zip(&s.count).all(|(v, &n)| (v[a] - n as f64).abs() <= 1e-9 * n as f64))
+    });
+    let t0 = sources.first().and_then(|s| s.centre_s.first()).copied().unwrap_or(0.0);
+    let span = (end - t0).max(t_min);
+    let [n2, b2, k2] = measure(sources, c, t_min, span);
+    // A random walk shows at the session's scale, between the runs, more than inside them.
+    let k2 = k2.max(session_walk(sources, c, &ainv, &offsets, (n2, b2), &poles(t_min, span)));
+    if b2 == 0.0 && k2 == 0.0 {
+        return Some(SlowNoise { white_density: n2.sqrt(), se_inflation: 1.0, block_s: t_min, ..Default::default() });
+    }
+    let flick = poles(t_min, span);
+    // d_b per block, with the session's time of each block.
+    let mut d: Vec<(DVector<f64>, (f64, f64))> = Vec::new();
+    for (si, s) in sources.iter().enumerate() {
+        for (b, sums) in s.channels[c].sums.iter().enumerate() {
+            let mut v = &ainv * DVector::from_column_slice(sums);
+            if let Some(i) = bias {
+                v[i] -= s.count[b] as f64 / total.max(1) as f64;
+            }
+            d.push((v, (s.centre_s[b] + offsets[si], s.length_s[b])));
+        }
+    }
+    let mut add = DMatrix::<f64>::zeros(q, q);
+    let mut cd = DVector::<f64>::zeros(q);
+    for (i, (_, ti)) in d.iter().enumerate() {
+        cd.fill(0.0);
+        for (j, (vj, tj)) in d.iter().enumerate() {
+            cd.axpy(block_cov(&flick, b2, k2, *ti, *tj, i == j), vj, 1.0);
+        }
+        add += &d[i].0 * cd.transpose();
+    }
+    add = 0.5 * (&add + add.transpose());
+    let mut worst: f64 = 1.0;
+    for a in 0..q {
+        let before = ch.covariance[a][a];
+        for b in 0..q {
+            ch.covariance[a][b] += add[(a, b)];
+        }
+        if before > 0.0 {
+            worst = worst.max((ch.covariance[a][a].max(0.0) / before).sqrt());
+        }
+    }
+    Some(SlowNoise {
+        white_density: n2.sqrt(),
+        bias_instability: b2.sqrt(),
+        random_walk: k2.sqrt(),
+        se_inflation: worst,
+        block_s: t_min,
+    })
+}

@@ -1,0 +1,224 @@
+//! Slow noise as noise (issue 36, part 3): white + flicker + bias random walk of MEMS-like
+//! size running on over the session clock from run to run. The fit's 95 % intervals must
+//! hold the truth 93–97 % of the time pooled and at least 90 % in every coefficient group
+//! (biases against the bias averaged over the session: the part of the wander a session
+//! cannot tell from its bias), and `diagnose` must call a clean unit under this noise
+//! adequate.
+
+use crate::common::fit_session;
+use crosscal::estimate::{CoefStatus, Fit, FitOptions};
+use crosscal::model::Model;
+use crosscal::simulate::noise::NoiseProcess;
+use crosscal::simulate::{conic_plan, cyclic_mounts, SimConfig};
+use std::collections::BTreeMap;
+
+const DEG: f64 = std::f64::consts::PI / 180.0;
+const G: f64 = 9.80665;
+
+/// MEMS-like gyro noise (SI): ARW 0.3 °/√h, bias instability 8 °/h, rate random walk
+/// 60 °/h/√h.
+pub fn mems_gyro() -> NoiseProcess {
+    NoiseProcess {
+        white_density: 0.3 * DEG / 60.0,
+        bias_instability: 8.0 * DEG / 3600.0,
+        random_walk: 60.0 * DEG / 3600.0 / 60.0,
+        ar1: None,
+    }
+}
+
+/// MEMS-like accelerometer noise (SI): VRW 0.06 m/s/√h, bias instability 60 µg, random
+/// walk 2e-5 m/s²/√s.
+pub fn mems_accel() -> NoiseProcess {
+    NoiseProcess { white_density: 0.06 / 60.0, bias_instability: 60e-6 * G, random_walk: 2e-5, ar1: None }
+}
+
+/// Nine conic runs of 20 s at 25 Hz on one session clock (5 s pauses), the slow noise
+/// carried from run to run.
+pub fn session(seed: u64) -> SimConfig {
+    let mut c = SimConfig::paper();
+    c.runs = conic_plan(&[10.0, -10.0, 20.0], &[10.0], &cyclic_mounts(3), 20.0);
+    c.sample_rate_hz = 25.0;
+    c.seed = seed;
+    c.gyro_process = mems_gyro();
+    c.accel_process = mems_accel();
+    c.carry_noise = true;
+    c.realism.session_clock_gap_s = Some(5.0);
+    c
+}
+
+/// The session average of the noise added to each output channel (gyro x..z, accel x..z),
+/// SI: the noisy session minus the same session without noise.
+fn noise_means(cfg: &SimConfig) -> [f64; 6] {
+    let noisy = cfg.generate();
+    let clean =
+        SimConfig { gyro_process: NoiseProcess::default(), accel_process: NoiseProcess::default(), ..cfg.clone() }
+            .generate();
+    let mut sum = [0.0; 6];
+    let mut n = 0.0;
+    for (a, b) in noisy.runs.iter().zip(&clean.runs) {
+        for k in 0..a.rec.gyro.len() {
+            for i in 0..3 {
+                // Sessions in memory are SI, as the reader converts them.
+                sum[i] += a.rec.gyro[k][i] - b.rec.gyro[k][i];
+                sum[3 + i] += a.rec.accel[k][i] - b.rec.accel[k][i];
+            }
+            n += 1.0;
+        }
+    }
+    sum.map(|s| s / n)
+}
+
+/// The group of a coefficient: sensor and letter (`gyro.c`, `gyro.e`, `gyro.b`, `accel.k`, …).
+fn group(name: &str) -> String {
+    let (s, rest) = name.split_once('.').unwrap_or(("", name));
+    format!("{s}.{}", rest.split('_').next().unwrap_or(""))
+}
+
+/// Per group (inside, total) of 95 % intervals holding the truth, and the Monte-Carlo
+/// variance over the mean reported SE² per group.
+fn coverage(fits: &[(SimConfig, [f64; 6], Fit)]) -> BTreeMap<String, (usize, usize, f64, f64)> {
+    let mut out: BTreeMap<String, (usize, usize, f64, f64)> = BTreeMap::new();
+    for (cfg, means, f) in fits {
+        for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients) {
+            assert_eq!(c.status, CoefStatus::Fitted, "{}", c.name);
+            let mut truth = cfg.truth.value(&c.name).unwrap();
+            if let Some(axis) = c.name.strip_prefix("gyro.b_").or_else(|| c.name.strip_prefix("accel.b_")) {
+                let i = "xyz".find(axis).unwrap() + if c.name.starts_with("gyro") { 0 } else { 3 };
+                truth += means[i];
+            }
+            let se = c.std_error.unwrap();
+            let e = out.entry(group(&c.name)).or_default();
+            e.0 += usize::from((c.value - truth).abs() <= 1.959964 * se);
+            e.1 += 1;
+            e.2 += ((c.value - truth) / se).powi(2);
+            e.3 += 1.0;
+        }
+    }
+    out
+}
+
+#[test]
+fn fit_intervals_cover_under_flicker_and_random_walk_on_the_session_clock() {
+    let seeds: Vec<u64> = (0..240).map(|s| 36_000 + s).collect();
+    let model = Model::default_model();
+    let fits = crate::common::par_map(&seeds, |&seed| {
+        let cfg = session(seed);
+        let means = noise_means(&cfg);
+        let opts = FitOptions { slow_noise: true, ..FitOptions::default() };
+        let f = fit_session(&cfg.generate(), &model, &opts).unwrap();
+        (cfg, means, f)
+    });
+    let groups = coverage(&fits);
+    let (mut inside, mut total) = (0, 0);
+    for (g, (i, t, z2, n)) in &groups {
+        println!("{g}: coverage {:.3} ({i}/{t}), mean (error/SE)² {:.2}", *i as f64 / *t as f64, z2 / n);
+        inside += i;
+        total += t;
+    }
+    let pooled = inside as f64 / total as f64;
+    println!("pooled coverage {pooled:.4}");
+    assert!((0.93..=0.97).contains(&pooled), "pooled coverage {pooled}");
+    for (g, (i, t, _, _)) in &groups {
+        assert!(*i as f64 / *t as f64 >= 0.90, "{g}: coverage {}", *i as f64 / *t as f64);
+    }
+}
+
+#[test]
+fn clean_units_under_flicker_and_random_walk_are_adequate_on_ten_seeds() {
+    let seeds: Vec<u64> = (0..10).map(|s| 36_100 + s).collect();
+    let out = crate::common::par_map(&seeds, |&seed| {
+        let mut c = SimConfig::paper();
+        c.runs = conic_plan(&[10.0, -10.0, 20.0], &[10.0, 20.0], &cyclic_mounts(3), 30.0);
+        c.sample_rate_hz = 50.0;
+        c.seed = seed;
+        c.gyro_process = mems_gyro();
+        c.accel_process = mems_accel();
+        c.carry_noise = true;
+        c.realism.session_clock_gap_s = Some(5.0);
+        let d = crate::diagnose::run_diagnose(&c.generate());
+        let steps: Vec<String> = d.steps.iter().map(|s| s.effect.clone()).collect();
+        (seed, d.verdict, steps, d.unexplained.clone(), d.noise.clone())
+    });
+    let mut bad = Vec::new();
+    for (seed, verdict, steps, unexplained, noise) in &out {
+        println!("seed {seed}: {verdict:?} {steps:?} {unexplained:?}");
+        for n in noise {
+            println!("  {} {}: B {:.3e} K {:.3e}", n.sensor, n.axis, n.bias_instability, n.random_walk);
+        }
+        if *verdict != crosscal::diagnose::Verdict::Adequate {
+            bad.push(format!("seed {seed}: {verdict:?} {steps:?} {unexplained:?}"));
+        }
+    }
+    // The slow wander is reported as noise, near what was simulated.
+    let b: Vec<f64> = out.iter().map(|o| o.4[0].bias_instability).collect();
+    println!("gyro x bias instability read: {b:?} (simulated {:.3e})", mems_gyro().bias_instability);
+    assert!(bad.is_empty(), "{bad:#?}");
+}
+
+/// A session with rates up to 40 °/s on cones of 15° and 30°, white noise, 50 Hz.
+fn wide(seed: u64) -> SimConfig {
+    let mut c = SimConfig::paper();
+    c.runs = conic_plan(&[20.0, -20.0, 40.0, -40.0], &[15.0, 30.0], &cyclic_mounts(3), 20.0);
+    c.sample_rate_hz = 50.0;
+    c.seed = seed;
+    c.gyro_noise_deg_s = 0.002;
+    c.accel_noise_g = 2e-5;
+    c
+}
+
+#[test]
+fn a_knee_and_a_hard_clip_are_described_by_their_shape_not_by_a_catalogue_effect() {
+    use crosscal::simulate::realism::Disturbance;
+    let cases = [
+        ("knee", Disturbance::Knee { channel: 0, threshold: 4.0 * DEG, slope: 0.03 }),
+        ("clip", Disturbance::Clip { channel: 0, limit: 6.0 * DEG }),
+    ];
+    for (name, dist) in cases {
+        let mut c = wide(36_200);
+        c.realism.disturbances = vec![dist];
+        let d = crate::diagnose::run_diagnose(&c.generate());
+        let steps: Vec<String> = d.steps.iter().map(|s| s.effect.clone()).collect();
+        println!("{name}: {:?} steps {steps:?} tried {:?}", d.verdict, d.tried);
+        for sh in &d.shapes {
+            println!("  {} [{}]\n{}", sh.words, sh.kind, sh.effect_toml.clone().unwrap_or_default());
+            for p in sh.plots.iter().take(2) {
+                println!("   {} z {:.1}", p.label, p.z);
+            }
+        }
+        assert_eq!(d.verdict, crosscal::diagnose::Verdict::Unexplained, "{name}");
+        assert!(steps.iter().all(|s| !s.starts_with("gyro")), "{name}: a catalogue effect added: {steps:?}");
+        assert!(d.proposal.is_empty(), "{name}: {:?}", d.proposal);
+        let sh = d.shapes.iter().find(|s| s.axis == 'x' && s.sensor == crosscal::units::SensorKind::Gyro);
+        let sh = sh.unwrap_or_else(|| panic!("{name}: no shape for gyro x: {:?}", d.shapes));
+        match name {
+            "knee" => {
+                assert_eq!(sh.kind, "knee", "{}", sh.words);
+                assert!(sh.words.contains("a knee"), "{}", sh.words);
+                let toml = sh.effect_toml.as_deref().unwrap_or("");
+                assert!(toml.contains("expr = \"k * max(w_x - w0, 0)\""), "{toml}");
+                let w0 = toml_param(toml, "w0");
+                assert!((w0 - 4.0 * DEG).abs() < 0.5 * DEG, "w0 = {} deg/s", w0 / DEG);
+                let pct = percent_in(&sh.words);
+                assert!((pct - 3.0).abs() < 0.5, "{}", sh.words);
+            }
+            _ => {
+                assert_eq!(sh.kind, "saturation", "{}", sh.words);
+                assert!(sh.words.contains("flat top at ±"), "{}", sh.words);
+                let toml = sh.effect_toml.as_deref().unwrap_or("");
+                let w0 = toml_param(toml, "w0");
+                assert!((w0 - 6.0 * DEG).abs() < 0.5 * DEG, "w0 = {} deg/s", w0 / DEG);
+            }
+        }
+    }
+}
+
+fn toml_param(toml: &str, name: &str) -> f64 {
+    let i = toml.find(&format!("{name} = ")).unwrap_or_else(|| panic!("{name} not in {toml}"));
+    let rest = &toml[i + name.len() + 3..];
+    rest.split([' ', ',', '}']).next().unwrap().parse().unwrap()
+}
+
+fn percent_in(words: &str) -> f64 {
+    let i = words.find(" %").unwrap();
+    words[..i].rsplit(' ').next().unwrap().parse().unwrap()
+}
