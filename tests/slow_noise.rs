@@ -46,10 +46,15 @@ pub fn session(seed: u64) -> SimConfig {
     c
 }
 
-/// The session average of the noise added to each output channel (gyro x..z, accel x..z),
-/// SI: the noisy session minus the same session without noise.
+/// The session average of the slow noise (flicker and random walk) added to each output
+/// channel (gyro x..z, accel x..z), SI: the session with its white part scaled to nothing
+/// (the same random draws) minus the same session without noise. The white part's mean is
+/// estimation error, which the standard error covers; the slow part's is bias instability.
 fn noise_means(cfg: &SimConfig) -> [f64; 6] {
-    let noisy = cfg.generate();
+    let mut slow = cfg.clone();
+    slow.gyro_process.white_density = f64::MIN_POSITIVE;
+    slow.accel_process.white_density = f64::MIN_POSITIVE;
+    let noisy = slow.generate();
     let clean =
         SimConfig { gyro_process: NoiseProcess::default(), accel_process: NoiseProcess::default(), ..cfg.clone() }
             .generate();
@@ -221,4 +226,25 @@ fn toml_param(toml: &str, name: &str) -> f64 {
 fn percent_in(words: &str) -> f64 {
     let i = words.find(" %").unwrap();
     words[..i].rsplit(' ').next().unwrap().parse().unwrap()
+}
+
+#[test]
+#[ignore]
+fn debug_slow_estimates() {
+    let seeds: Vec<u64> = (0..24).map(|s| 36_000 + s).collect();
+    let model = Model::default_model();
+    let out = crate::common::par_map(&seeds, |&seed| {
+        let cfg = session(seed);
+        let opts = FitOptions { slow_noise: true, ..FitOptions::default() };
+        let f = fit_session(&cfg.generate(), &model, &opts).unwrap();
+        let g: Vec<_> = f.gyro.channels.iter().chain(&f.accel.channels).map(|c| c.slow_noise.unwrap_or_default()).collect();
+        let infl: Vec<f64> = f.gyro.channels.iter().chain(&f.accel.channels).map(|c| c.coloured_inflation).collect();
+        (g, infl)
+    });
+    let (gp, ap) = (mems_gyro(), mems_accel());
+    println!("sim gyro N {:.3e} B {:.3e} K {:.3e}; accel N {:.3e} B {:.3e} K {:.3e}", gp.white_density, gp.bias_instability, gp.random_walk, ap.white_density, ap.bias_instability, ap.random_walk);
+    for (g, infl) in &out {
+        let s: Vec<String> = g.iter().zip(infl).map(|(s, i)| format!("N{:.2e} B{:.2e} K{:.2e} x{:.2}/{:.2}", s.white_density, s.bias_instability, s.random_walk, s.se_inflation, i)).collect();
+        println!("{}", s.join(" | "));
+    }
 }

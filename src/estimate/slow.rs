@@ -385,68 +385,113 @@ fn block_cov(flick: &[(f64, f64)], b2: f64, k2: f64, tb: (f64, f64), tc: (f64, f
     v
 }
 
-/// The random walk K² read off the runs' mean residuals (method of moments): with the
-/// residual r = (I − H) ε at the level of blocks, q = Σ_r (Σ_{b∈r} n_b r̄_b)²/n_r has the
-/// expectation Σ_r v_rᵀ C v_r / n_r, v_r = w_r − S A T_r (w_r the block counts of run r,
-/// S the block sums of the regressors, T_r their sum over run r, A = (ΦᵀΦ)⁻¹), linear in
-/// the white, flicker and walk parts of C; what white and flicker (known from inside the
-/// runs) do not explain is the walk's. Blocks are merged to at most 16 per run here.
-fn session_walk(
-    sources: &[SourceBlocks],
-    c: usize,
-    ainv: &DMatrix<f64>,
-    offsets: &[f64],
-    (n2, b2): (f64, f64),
-    flick: &[(f64, f64)],
-) -> f64 {
-    let q = ainv.nrows();
-    if sources.len() < q + 2 {
-        return 0.0;
-    }
-    // Coarse blocks: (run, centre, length, count, sums, mean residual).
-    let mut blocks: Vec<(usize, f64, f64, f64, DVector<f64>, f64)> = Vec::new();
+/// Coarse blocks a channel's REML fit uses at most (its cost is cubic in them).
+const REML_BLOCKS: usize = 144;
+
+/// One coarse block of a channel: session-clock centre and length (s), samples, the
+/// block-level design row (block sums of the regressors over the count) and mean residual.
+struct Coarse {
+    centre: f64,
+    len: f64,
+    n: f64,
+    x: DVector<f64>,
+    r: f64,
+}
+
+/// The channel's fine blocks merged to at most [`REML_BLOCKS`] over the session, on the
+/// session clock (`offsets` per source; times from the session's start `t0`).
+fn coarse_blocks(sources: &[SourceBlocks], c: usize, offsets: &[f64], t0: f64, q: usize) -> Vec<Coarse> {
+    let per_run = (REML_BLOCKS / sources.len().max(1)).max(4);
+    let mut out = Vec::new();
     for (si, s) in sources.iter().enumerate() {
         let nb = s.count.len();
-        let group = nb.div_ceil(16).max(1);
+        let group = nb.div_ceil(per_run).max(1);
         for g in (0..nb).step_by(group) {
             let idx = g..(g + group).min(nb);
             let n: f64 = idx.clone().map(|b| s.count[b] as f64).sum();
-            let t0 = s.centre_s[idx.start] - 0.5 * s.length_s[idx.start];
-            let t1 = s.centre_s[idx.end - 1] + 0.5 * s.length_s[idx.end - 1];
-            let mut sums = DVector::<f64>::zeros(q);
+            let a = s.centre_s[idx.start] - 0.5 * s.length_s[idx.start];
+            let b = s.centre_s[idx.end - 1] + 0.5 * s.length_s[idx.end - 1];
+            let mut x = DVector::<f64>::zeros(q);
             let mut r = 0.0;
-            for b in idx {
-                sums += DVector::from_column_slice(&s.channels[c].sums[b]);
-                r += s.channels[c].mean[b] * s.count[b] as f64;
+            for k in idx {
+                x += DVector::from_column_slice(&s.channels[c].sums[k]);
+                r += s.channels[c].mean[k] * s.count[k] as f64;
             }
-            blocks.push((si, 0.5 * (t0 + t1) + offsets[si], t1 - t0, n, sums, r / n.max(1.0)));
-        }
-    }
-    let (mut q_obs, mut e) = (0.0, [0.0; 3]);
-    for (si, _) in sources.iter().enumerate() {
-        let mine: Vec<usize> = (0..blocks.len()).filter(|&b| blocks[b].0 == si).collect();
-        let n_r: f64 = mine.iter().map(|&b| blocks[b].3).sum();
-        if n_r <= 0.0 {
-            continue;
-        }
-        q_obs += mine.iter().map(|&b| blocks[b].3 * blocks[b].5).sum::<f64>().powi(2) / n_r;
-        let t_r = mine.iter().fold(DVector::<f64>::zeros(q), |acc, &b| acc + &blocks[b].4);
-        let at = ainv * t_r;
-        let v: Vec<f64> = blocks.iter().map(|blk| if blk.0 == si { blk.3 } else { 0.0 } - blk.4.dot(&at)).collect();
-        for (i, bi) in blocks.iter().enumerate() {
-            e[0] += v[i] * v[i] / bi.2.max(f64::MIN_POSITIVE) / n_r;
-            for (j, bj) in blocks.iter().enumerate() {
-                let same = i == j;
-                let w = v[i] * v[j] / n_r;
-                e[1] += w * block_cov(flick, 1.0, 0.0, (bi.1, bi.2), (bj.1, bj.2), same);
-                e[2] += w * block_cov(&[], 0.0, 1.0, (bi.1, bi.2), (bj.1, bj.2), same);
+            if n > 0.0 {
+                out.push(Coarse { centre: 0.5 * (a + b) + offsets[si] - t0, len: b - a, n, x: x / n, r: r / n });
             }
         }
     }
-    if e[2] <= 0.0 {
-        return 0.0;
+    out
+}
+
+/// White density², B² and K² of a channel by restricted maximum likelihood on its coarse
+/// block means (Patterson & Thompson 1971; Fisher scoring, Harville 1977 eq. 4.7).
+///
+/// Block means of the data follow the block-level regression ȳ_b = x_bᵀβ + ε̄_b exactly
+/// (x_b the block's mean regressors), so the residual's projection P r̄ = P ε̄ with
+/// P = V⁻¹ − V⁻¹X(XᵀV⁻¹X)⁻¹XᵀV⁻¹ does not depend on β. V = N² V_w + B² V_F + K² V_K: white
+/// (diag 1/L_b), the flicker poles, and the random walk W(t) from the session's start
+/// (block means: min of the centres between blocks, start + L/3 within one). Unlike an
+/// Allan fit inside runs, the likelihood weighs the runs' offsets against each other, which
+/// is where a session shows its flicker and walk. Components are kept non-negative (a
+/// component with a negative step at zero stays there). `start` seeds the iteration.
+fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<[f64; 3]> {
+    let m = blocks.len();
+    let q = blocks.first()?.x.len();
+    if m < q + 6 {
+        return None;
     }
-    ((q_obs - n2 * e[0] - b2 * e[1]) / e[2]).max(0.0)
+    let x = DMatrix::from_fn(m, q, |b, j| blocks[b].x[j]);
+    let y = DVector::from_fn(m, |b, _| blocks[b].r);
+    let comps = [
+        DMatrix::from_fn(m, m, |a, b| if a == b { 1.0 / blocks[a].len.max(f64::MIN_POSITIVE) } else { 0.0 }),
+        DMatrix::from_fn(m, m, |a, b| {
+            let (ba, bb) = (&blocks[a], &blocks[b]);
+            block_cov(flick, 1.0, 0.0, (ba.centre, ba.len), (bb.centre, bb.len), a == b)
+        }),
+        DMatrix::from_fn(m, m, |a, b| {
+            let (ba, bb) = (&blocks[a], &blocks[b]);
+            if a == b {
+                ba.centre - ba.len / 6.0
+            } else {
+                ba.centre.min(bb.centre)
+            }
+        }),
+    ];
+    // A white level from the residual itself when the start has none.
+    let mut theta = start;
+    if theta[0] <= 0.0 {
+        let v: f64 = blocks.iter().map(|b| b.r * b.r * b.len).sum::<f64>() / m as f64;
+        theta[0] = v.max(f64::MIN_POSITIVE);
+    }
+    for _ in 0..60 {
+        let v = &comps[0] * theta[0] + &comps[1] * theta[1] + &comps[2] * theta[2];
+        let vinv = v.cholesky()?.inverse();
+        let vx = &vinv * &x;
+        let xvx = (x.transpose() * &vx).try_inverse()?;
+        let p = &vinv - &vx * xvx * vx.transpose();
+        let py = &p * &y;
+        let pv: Vec<DMatrix<f64>> = comps.iter().map(|c| &p * c).collect();
+        let score: Vec<f64> =
+            (0..3).map(|i| 0.5 * ((py.transpose() * &comps[i] * &py)[(0, 0)] - pv[i].trace())).collect();
+        // Components at zero whose score points below zero stay at zero.
+        let free: Vec<usize> = (0..3).filter(|&i| i == 0 || theta[i] > 0.0 || score[i] > 0.0).collect();
+        let info = DMatrix::from_fn(free.len(), free.len(), |a, b| {
+            0.5 * pv[free[a]].component_mul(&pv[free[b]].transpose()).sum()
+        });
+        let step = info.try_inverse()? * DVector::from_iterator(free.len(), free.iter().map(|&i| score[i]));
+        let mut moved: f64 = 0.0;
+        for (k, &i) in free.iter().enumerate() {
+            let new = if i == 0 { (theta[i] + step[k]).max(0.1 * theta[i]) } else { (theta[i] + step[k]).max(0.0) };
+            moved = moved.max((new - theta[i]).abs() / (new.abs() + theta[i].abs() + 1e-300));
+            theta[i] = new;
+        }
+        if moved < 1e-4 {
+            break;
+        }
+    }
+    theta.iter().all(|v| v.is_finite()).then_some(theta)
 }
 
 /// Adds the slow part to channel `c`'s covariance (module documentation) and returns what
@@ -484,13 +529,14 @@ pub(crate) fn inflate(sources: &[SourceBlocks], c: usize, ch: &mut ChannelFit) -
     });
     let t0 = sources.first().and_then(|s| s.centre_s.first()).copied().unwrap_or(0.0);
     let span = (end - t0).max(t_min);
-    let [n2, b2, k2] = measure(sources, c, t_min, span);
-    // A random walk shows at the session's scale, between the runs, more than inside them.
-    let k2 = k2.max(session_walk(sources, c, &ainv, &offsets, (n2, b2), &poles(t_min, span)));
+    let flick = poles(t_min, span);
+    let start = measure(sources, c, t_min, span);
+    let t_first = sources.iter().zip(&offsets).flat_map(|(s, o)| s.centre_s.first().zip(s.length_s.first()).map(|(c, l)| c - 0.5 * l + o)).fold(f64::INFINITY, f64::min);
+    let blocks = coarse_blocks(sources, c, &offsets, t_first, q);
+    let [n2, b2, k2] = reml(&blocks, &flick, start).unwrap_or(start);
     if b2 == 0.0 && k2 == 0.0 {
         return Some(SlowNoise { white_density: n2.sqrt(), se_inflation: 1.0, block_s: t_min, ..Default::default() });
     }
-    let flick = poles(t_min, span);
     // d_b per block, with the session's time of each block.
     let mut d: Vec<(DVector<f64>, (f64, f64))> = Vec::new();
     for (si, s) in sources.iter().enumerate() {
