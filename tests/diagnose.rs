@@ -32,10 +32,15 @@ pub fn hidden(effect: &str, values: &[(&str, f64)], seed: u64) -> (SimConfig, Se
 }
 
 pub fn run_diagnose(s: &Session) -> Diagnosis {
+    run_diagnose_with(s, &FitOptions::default())
+}
+
+/// Diagnoses a session from the default model with these fit options.
+pub fn run_diagnose_with(s: &Session, opts: &FitOptions) -> Diagnosis {
     let tr = tracks(s, &DerivativeConfig::default());
     let runs = fit_runs(s, &tr);
     let motions: Vec<&MotionSpec> = s.runs.iter().map(|r| &r.spec.motion).collect();
-    diagnose(&Model::default_model(), &runs, &motions, &FitOptions::default()).unwrap()
+    diagnose(&Model::default_model(), &runs, &motions, opts).unwrap()
 }
 
 /// Runs the discovery acceptance for one hidden effect.

@@ -130,7 +130,9 @@ fn fit_intervals_cover_under_flicker_and_random_walk_on_the_session_clock() {
 
 #[test]
 fn clean_units_under_flicker_and_random_walk_are_adequate_on_ten_seeds() {
-    let seeds: Vec<u64> = (0..10).map(|s| 36_100 + s).collect();
+    let seeds: Vec<u64> = std::env::var("SEEDS")
+        .map(|v| v.split(',').map(|x| x.parse().unwrap()).collect())
+        .unwrap_or_else(|_| (0..10).map(|s| 36_100 + s).collect());
     let out = crate::common::par_map(&seeds, |&seed| {
         let mut c = SimConfig::paper();
         c.runs = conic_plan(&[10.0, -10.0, 20.0], &[10.0, 20.0], &cyclic_mounts(3), 30.0);
@@ -140,8 +142,10 @@ fn clean_units_under_flicker_and_random_walk_are_adequate_on_ten_seeds() {
         c.accel_process = mems_accel();
         c.carry_noise = true;
         c.realism.session_clock_gap_s = Some(5.0);
-        let d = crate::diagnose::run_diagnose(&c.generate());
-        let steps: Vec<String> = d.steps.iter().map(|s| s.effect.clone()).collect();
+        let opts = FitOptions { slow_noise: true, ..FitOptions::default() };
+        let d = crate::diagnose::run_diagnose_with(&c.generate(), &opts);
+        let mut steps: Vec<String> = d.steps.iter().map(|s| s.effect.clone()).collect();
+        steps.extend(d.stand.iter().map(|s| s.message.clone()));
         (seed, d.verdict, steps, d.unexplained.clone(), d.noise.clone())
     });
     let mut bad = Vec::new();
@@ -226,25 +230,4 @@ fn toml_param(toml: &str, name: &str) -> f64 {
 fn percent_in(words: &str) -> f64 {
     let i = words.find(" %").unwrap();
     words[..i].rsplit(' ').next().unwrap().parse().unwrap()
-}
-
-#[test]
-#[ignore]
-fn debug_slow_estimates() {
-    let seeds: Vec<u64> = (0..24).map(|s| 36_000 + s).collect();
-    let model = Model::default_model();
-    let out = crate::common::par_map(&seeds, |&seed| {
-        let cfg = session(seed);
-        let opts = FitOptions { slow_noise: true, ..FitOptions::default() };
-        let f = fit_session(&cfg.generate(), &model, &opts).unwrap();
-        let g: Vec<_> = f.gyro.channels.iter().chain(&f.accel.channels).map(|c| c.slow_noise.unwrap_or_default()).collect();
-        let infl: Vec<f64> = f.gyro.channels.iter().chain(&f.accel.channels).map(|c| c.coloured_inflation).collect();
-        (g, infl)
-    });
-    let (gp, ap) = (mems_gyro(), mems_accel());
-    println!("sim gyro N {:.3e} B {:.3e} K {:.3e}; accel N {:.3e} B {:.3e} K {:.3e}", gp.white_density, gp.bias_instability, gp.random_walk, ap.white_density, ap.bias_instability, ap.random_walk);
-    for (g, infl) in &out {
-        let s: Vec<String> = g.iter().zip(infl).map(|(s, i)| format!("N{:.2e} B{:.2e} K{:.2e} x{:.2}/{:.2}", s.white_density, s.bias_instability, s.random_walk, s.se_inflation, i)).collect();
-        println!("{}", s.join(" | "));
-    }
 }

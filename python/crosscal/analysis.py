@@ -36,6 +36,7 @@ def fit(
     stream: bool = False,
     noise: Optional["AllanResult"] = None,
     effects_file: Optional[PathLike] = None,
+    slow_noise: bool = False,
     effect_definitions: Optional[str] = None,
 ) -> Profile:
     """Fit a calibration profile to a session (``crosscal fit``).
@@ -72,6 +73,9 @@ def fit(
         ``crosscal fit --effects-file F --effect ID`` (see ``docs/your-own-effect.md``).
     effect_definitions : str, optional
         The same ``[[effect]]`` tables given as TOML text instead of a file.
+    slow_noise : bool
+        As ``--slow-noise``: standard errors that also cover flicker and bias random walk
+        (the bias judged against its average over the session).
 
     Returns
     -------
@@ -89,7 +93,7 @@ def fit(
     noise_json = None if noise is None else noise.to_json()
     text, samples, streamed, warnings, validation = _crosscal.fit(
         s._native, model, list(effects), list(disable), robust, strict, list(holdout), stand,
-        classic_six_position, trim_rest, stream, noise_json,
+        classic_six_position, trim_rest, stream, noise_json, slow_noise,
     )
     return Profile(text, samples=samples, streamed=streamed, warnings=warnings,
                    validation=None if validation is None else json.loads(validation))
@@ -293,6 +297,7 @@ def diagnose(
     *,
     profile: Optional[Union[Profile, PathLike]] = None,
     trim_rest: bool = False,
+    slow_noise: bool = False,
 ) -> Diagnosis:
     """Compare model and measurement (``crosscal diagnose``): where the model fails and
     which physical effect is missing.
@@ -301,10 +306,12 @@ def diagnose(
     tries every catalogue effect on the residual under a noise model estimated from it: an
     effect is proposed only on evidence from runs left out of the fit, with one size in
     every run; otherwise the verdict says the model is adequate or what stays unexplained.
+    ``slow_noise=True`` is ``--slow-noise``: flicker and bias random walk are measured and
+    treated as noise, not as a systematic residual.
     """
     s = _session(session)
     text = None if profile is None else _profile_json(profile)
-    return Diagnosis(_crosscal.diagnose(s._native, model, list(effects), text, trim_rest))
+    return Diagnosis(_crosscal.diagnose(s._native, model, list(effects), text, trim_rest, slow_noise))
 
 
 class AllanResult:

@@ -259,7 +259,7 @@ type FitOut = (String, usize, bool, Vec<String>, Option<String>);
 
 /// Fits a profile: (profile JSON, samples, streamed, warnings, validation JSON or None).
 #[pyfunction]
-#[pyo3(signature = (session, preset, effects, disable, robust, strict, holdout, stand, classic_six_position, trim_rest, stream, noise_json))]
+#[pyo3(signature = (session, preset, effects, disable, robust, strict, holdout, stand, classic_six_position, trim_rest, stream, noise_json, slow_noise=false))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -275,6 +275,7 @@ fn fit(
     trim_rest: bool,
     stream: bool,
     noise_json: Option<String>,
+    slow_noise: bool,
 ) -> PyResult<FitOut> {
     use crosscal::estimate::{FitData, FitRequest, ModelChoice, StreamPolicy};
     let spec = model_spec(py, preset, effects, disable)?;
@@ -290,6 +291,7 @@ fn fit(
     };
     let mut req = FitRequest::new(data, ModelChoice::Spec(&spec));
     req.options.robust = robust;
+    req.options.slow_noise = slow_noise;
     req.strict = strict;
     req.stand = stand;
     req.holdout = holdout;
@@ -656,7 +658,7 @@ impl Diagnosis {
 
 /// Diagnoses a session from a model (or a profile held as fitted).
 #[pyfunction]
-#[pyo3(signature = (session, preset, effects, profile_json, trim_rest))]
+#[pyo3(signature = (session, preset, effects, profile_json, trim_rest, slow_noise=false))]
 fn diagnose(
     py: Python<'_>,
     session: &Session,
@@ -664,6 +666,7 @@ fn diagnose(
     effects: Vec<String>,
     profile_json: Option<&str>,
     trim_rest: bool,
+    slow_noise: bool,
 ) -> PyResult<Diagnosis> {
     let spec = model_spec(py, preset, effects, Vec::new())?;
     let profile = match profile_json {
@@ -674,7 +677,7 @@ fn diagnose(
     let model = crosscal::app::diagnose::start_model(s, &spec, profile.as_ref().map(|p| (Path::new("<profile>"), p)))
         .map_err(|e| err(py, e))?;
     let found =
-        py.detach(|| crosscal::app::diagnose::diagnose_session(s, &model, trim_rest)).map_err(|e| err(py, e))?;
+        py.detach(|| crosscal::app::diagnose::diagnose_session(s, &model, trim_rest, slow_noise)).map_err(|e| err(py, e))?;
     let temperature_note = profile.as_ref().and_then(|p| crosscal::app::diagnose::temperature_outside(p, s));
     Ok(Diagnosis { session: s.clone(), model, found, temperature_note })
 }

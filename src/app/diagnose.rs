@@ -54,8 +54,15 @@ pub fn start_model(
 }
 
 /// Diagnoses `session` from `model` (`trim_rest`: a multi-position session's initial rest
-/// is cut to its still part, as `fit --trim-rest`).
-pub fn diagnose_session(session: &Session, model: &Model, trim_rest: bool) -> Result<Diagnosed, AppError> {
+/// is cut to its still part, as `fit --trim-rest`; `slow_noise`: the fits measure each
+/// channel's flicker and bias random walk and the evidence treats them as noise, as
+/// `fit --slow-noise`).
+pub fn diagnose_session(
+    session: &Session,
+    model: &Model,
+    trim_rest: bool,
+    slow_noise: bool,
+) -> Result<Diagnosed, AppError> {
     let what = session.manifest_path.display().to_string();
     let fit_err = |source| AppError::Fit { what: what.clone(), source };
     if session.is_protocol() {
@@ -66,7 +73,8 @@ pub fn diagnose_session(session: &Session, model: &Model, trim_rest: bool) -> Re
     let tr = tracks(session, &DerivativeConfig::default());
     let runs = fit_runs(session, &tr);
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
-    let d = crate::diagnose::diagnose(model, &runs, &motions, &FitOptions::default()).map_err(fit_err)?;
+    let opts = FitOptions { slow_noise, ..FitOptions::default() };
+    let d = crate::diagnose::diagnose(model, &runs, &motions, &opts).map_err(fit_err)?;
     Ok(Diagnosed::Stand(Box::new(d)))
 }
 

@@ -38,6 +38,12 @@ pub struct Args {
     /// part (as `fit --trim-rest`).
     #[arg(long)]
     trim_rest: bool,
+    /// Treat slow noise as noise: the fits measure each channel's flicker (bias instability)
+    /// and bias random walk, and a slow variation of that size in a run is not called a
+    /// systematic residual (as `fit --slow-noise`; stand sessions). Use it on MEMS units whose
+    /// `crosscal noise` shows bias instability or rate random walk.
+    #[arg(long)]
+    slow_noise: bool,
     /// Replace output files that already exist (never a device, FIFO or folder).
     #[arg(long)]
     force: bool,
@@ -77,7 +83,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         None => None,
     };
     let model = start_model(&session, &a.model.spec(&[]), a.profile.as_deref().zip(profile.as_ref()))?;
-    let d = match diagnose_session(&session, &model, a.trim_rest)? {
+    let d = match diagnose_session(&session, &model, a.trim_rest, a.slow_noise)? {
         Diagnosed::Protocol(d) => return run_protocol(&a, &session, &d),
         Diagnosed::Stand(d) => d,
     };

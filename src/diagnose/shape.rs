@@ -396,12 +396,18 @@ fn describe(
     let id = |s: &str| format!("{}-{ax}-{s}", sensor.as_str());
     let tn = v.threshold_name();
     let show = |x: f64| format!("{:+.1} {u}", x * k);
-    let (bic, kind, mut x0, mut coef) = best;
+    let (bic, mut kind, mut x0, mut coef) = best;
     let fit_ok = bic < line - 10.0;
     // The threshold between bin centres, on the samples themselves.
     if matches!(kind, "knee+" | "knee-" | "sym") {
         let width = if xs.len() > 1 { (xs[xs.len() - 1] - xs[0]) / (xs.len() - 1) as f64 } else { 0.0 };
         (x0, coef) = refine(raw, kind, x0, width);
+    }
+    // Beside the line the fit absorbs, k·max(x − x₀, 0) and −k·min(x − x₀, 0) are one shape
+    // (they differ by k(x − x₀)): say it on the side away from zero, where it acts.
+    let away = if x0 >= 0.0 { "knee+" } else { "knee-" };
+    if matches!(kind, "knee+" | "knee-") && kind != away {
+        (kind, coef) = (away, -coef);
     }
     match (kind, expr) {
         (_, None) => (format!("follows the {} (see the plot)", v.label(false)), "cone-phase pattern".into(), None),

@@ -21,7 +21,6 @@
 //! basis's cross products z = Bᵀ(r − Xβ) (whitened) in the metric of their covariance
 //! G_bb + G_bb D G_bb.
 
-use super::space::RunBasis;
 use crate::estimate::slow::SlowNoise;
 use nalgebra::DMatrix;
 
@@ -29,11 +28,22 @@ use nalgebra::DMatrix;
 /// highest harmonic where the run is long).
 const MAX_PIECES: usize = 512;
 
+/// A run's basis functions as this module needs them (the diagnosis's run basis,
+/// [`super::space`], passed down).
+pub struct Basis<'a> {
+    /// Number of basis functions.
+    pub size: usize,
+    /// The cone frequency, Hz (None without cone harmonics).
+    pub cone_hz: Option<f64>,
+    /// The basis functions at a time, s.
+    pub row: &'a dyn Fn(f64, &mut [f64]),
+}
+
 /// Per channel the covariance D of one run's basis coefficients under the slow noise
 /// `slow[c]` (None or no slow part: zero). `t` are the run's stamps, `basis_ms` = BᵀB/n,
 /// `span_s` the session's length.
 pub fn basis_covariances(
-    basis: &RunBasis,
+    basis: &Basis<'_>,
     t: &[f64],
     basis_ms: &DMatrix<f64>,
     slow: &[Option<SlowNoise>],
@@ -45,7 +55,7 @@ pub fn basis_covariances(
     if n < 2 || slow.iter().all(|s| s.is_none_or(|s| !s.is_slow())) {
         return (0..slow.len()).map(|_| zero()).collect();
     }
-    let cycles = basis.cone_hz().map_or(0.0, |f| f * (t[n - 1] - t[0]));
+    let cycles = basis.cone_hz.map_or(0.0, |f| f * (t[n - 1] - t[0]));
     let pieces = ((16.0 * super::HARMONICS as f64 * cycles) as usize).clamp(32, MAX_PIECES).min(n);
     // Per piece: centre, length, samples, and n_p × the basis at the centre.
     let mut w = DMatrix::<f64>::zeros(nb, pieces);
@@ -59,7 +69,7 @@ pub fn basis_covariances(
         at.push((0.5 * (a + b), dt * m as f64));
         // The basis averaged over the piece (its ends and middle, Simpson's rule).
         for (wt, s) in [(1.0 / 6.0, a), (4.0 / 6.0, 0.5 * (a + b)), (1.0 / 6.0, b)] {
-            basis.row(s, &mut row);
+            (basis.row)(s, &mut row);
             for i in 0..nb {
                 w[(i, p)] += wt * m as f64 * row[i];
             }
@@ -106,54 +116,4 @@ pub fn adjust_gram(g: &mut DMatrix<f64>, width: usize, nb: usize, d: &DMatrix<f6
 /// The metric of a run's basis cross products under AR plus slow noise: G_bb + G_bb D G_bb.
 pub fn basis_metric(gbb: &DMatrix<f64>, d: &DMatrix<f64>) -> DMatrix<f64> {
     gbb + gbb * d * gbb
-}
-
-/// Samples per fine block of a run of `n` samples (at least 4, at most 8192 blocks).
-pub fn fine_block(n: usize) -> usize {
-    n.div_ceil(8192).max(4)
-}
-
-/// Blocks of at least this many integral times of the AR noise: at that scale the AR part
-/// is white and only the slow part departs from N²/τ.
-const INTEGRAL_TIMES: f64 = 5.0;
-
-/// The slow noise of each channel, measured on the runs' residuals less their cone
-/// harmonics (so nothing locked to the cone is taken for noise): blocks of several integral
-/// times of the channel's AR noise (`pooled`), Allan variances within each run, fitted
-/// with white, flicker and random walk ([`crate::estimate::slow::fit_allan`]). `span_s` is
-/// the session's length. None where the runs are too short to tell.
-pub fn session_slow_noise(
-    stats: &[super::space::RunNoiseStats],
-    pooled: &[crate::stats::ArModel],
-    span_s: f64,
-) -> Vec<Option<SlowNoise>> {
-    (0..6)
-        .map(|c| {
-            let ar = &pooled[c];
-            let s = 1.0 - ar.phi.iter().sum::<f64>();
-            let integral = if s.abs() > 1e-6 && ar.marginal_var > 0.0 {
-                (ar.innovation_var / (s * s) / ar.marginal_var).max(1.0)
-            } else {
-                1e6
-            };
-            let mut points = Vec::new();
-            let mut block_s = f64::INFINITY;
-            for st in stats {
-                let want = (INTEGRAL_TIMES * integral).max(8.0);
-                let group = (want / st.fine_block as f64).ceil().max(1.0) as usize;
-                let coarse: Vec<f64> =
-                    st.fine[c].chunks_exact(group).map(|ch| ch.iter().sum::<f64>() / group as f64).collect();
-                let l = (group * st.fine_block) as f64 * st.dt_s;
-                let p = crate::estimate::slow::allan_points(&coarse, l);
-                if !p.is_empty() {
-                    block_s = block_s.min(l);
-                }
-                points.extend(p);
-            }
-            if !block_s.is_finite() {
-                return None;
-            }
-            Some(crate::estimate::slow::fit_allan(&points, block_s, span_s.max(block_s)))
-        })
-        .collect()
 }

@@ -243,6 +243,8 @@ pub struct RunGram {
     /// Per channel: the covariance of the basis coefficients the slow noise makes (empty or
     /// zero without slow noise, [`super::slow`]).
     pub slow: Vec<DMatrix<f64>>,
+    /// The run's basis functions (for other Grams that carry the same random effect).
+    pub run_basis: RunBasis,
 }
 
 /// The basis functions at one sample: Legendre P0…P3 of s ∈ [−1, 1], then cos hθ, sin hθ.
@@ -321,13 +323,6 @@ pub struct RunNoiseStats {
     pub lines: Vec<RunLine>,
     /// Mean square of each channel's recorded output.
     pub output_ms: [f64; 6],
-    /// Per channel: the residual less its cone harmonics (what slow noise and slow laws
-    /// leave), averaged over consecutive blocks of `fine_block` samples.
-    pub fine: Vec<Vec<f64>>,
-    /// Samples per fine block.
-    pub fine_block: usize,
-    /// Sampling interval, s.
-    pub dt_s: f64,
 }
 
 /// The first look at one run (module documentation, steps 1–2): `r` is the base residual
@@ -359,21 +354,10 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
     let mut acov = Vec::with_capacity(6);
     let mut found = Vec::new();
     let mut cleaned: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
-    let fine_block = super::slow::fine_block(n);
-    let mut fine: Vec<Vec<f64>> = (0..6).map(|_| Vec::with_capacity(n / fine_block + 1)).collect();
-    let mut acc = [0.0; 6];
     for k in 0..n {
         basis.row(t[k], &mut row);
         for (c, cl) in cleaned.iter_mut().enumerate() {
-            let slow: f64 = (0..nb.min(LEGENDRE)).map(|i| row[i] * coef[(i, c)]).sum();
-            cl[k] = r[c][k] - slow - (LEGENDRE..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
-            acc[c] += cl[k] + slow;
-        }
-        if (k + 1) % fine_block == 0 {
-            for c in 0..6 {
-                fine[c].push(acc[c] / fine_block as f64);
-                acc[c] = 0.0;
-            }
+            cl[k] = r[c][k] - (0..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
         }
     }
     for (c, mut clean) in cleaned.into_iter().enumerate() {
@@ -394,7 +378,7 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
             }
         }
     }
-    RunNoiseStats { basis, basis_ms, acov, n, lines: found, output_ms, fine, fine_block, dt_s: 1.0 / fs_hz }
+    RunNoiseStats { basis, basis_ms, acov, n, lines: found, output_ms }
 }
 
 /// One AR model per channel for the whole session (the noise of a channel is one process
@@ -471,7 +455,8 @@ pub fn run_gram(
         .collect();
     let secants = Secants::new(u, base, fit, run);
     let mut gram = channel_grams(u, run, &noise, &b, r, &secants);
-    let slow_cov = super::slow::basis_covariances(&b, &run.track.t_s[..n], &stats.basis_ms, slow.0, slow.1);
+    let basis = super::slow::Basis { size: b.size, cone_hz: b.cone_hz(), row: &|t, out: &mut [f64]| b.row(t, out) };
+    let slow_cov = super::slow::basis_covariances(&basis, &run.track.t_s[..n], &stats.basis_ms, slow.0, slow.1);
     for (c, g) in gram.iter_mut().enumerate() {
         super::slow::adjust_gram(g, u.width(c), b.size, &slow_cov[c]);
     }
@@ -496,6 +481,7 @@ pub fn run_gram(
             .collect(),
         cone_hz: b.cone_hz(),
         basis_ms: stats.basis_ms,
+        run_basis: b,
     }
 }
 
@@ -527,6 +513,7 @@ pub fn design_gram(
         output_ms: [0.0; 6],
         lines: Vec::new(),
         cone_hz: b.cone_hz(),
+        run_basis: b,
         basis_ms: DMatrix::zeros(b.size, b.size),
     }
 }

@@ -50,6 +50,18 @@ const EARTH_RAD_S: f64 = 7.292_115e-5;
 
 pub use super::stand_words::{StandFinding, StandValue};
 
+/// A run's noise model as the stand's systems weigh it: the AR filter per channel, and the
+/// slow noise's random effect on the run's basis ([`super::slow`]; `slow[c]` empty or zero
+/// without one).
+pub struct RunNoiseModel {
+    /// Per channel AR model.
+    pub ar: Vec<ArModel>,
+    /// The run's basis functions.
+    pub basis: super::space::RunBasis,
+    /// Per channel the covariance of the basis coefficients under the slow noise.
+    pub slow: Vec<DMatrix<f64>>,
+}
+
 /// What the stand may be doing in one run (a few per session: the size difference between
 /// the variants does not matter).
 #[derive(Debug, Clone)]
@@ -268,7 +280,7 @@ impl Suspect {
 
     /// The whitened systems of every run around `model` and its fit, with the noise models
     /// `noise[run][channel]`.
-    pub fn systems(&self, model: &Model, fit: &Fit, runs: &[FitRun<'_>], noise: &[Vec<ArModel>]) -> Systems {
+    pub fn systems(&self, model: &Model, fit: &Fit, runs: &[FitRun<'_>], noise: &[RunNoiseModel]) -> Systems {
         let layout = BaseLayout::new(model, fit);
         let folds: Vec<Fold> = (0..runs.len())
             .into_par_iter()
@@ -293,7 +305,7 @@ impl Suspect {
         fit: &Fit,
         layout: &BaseLayout,
         run: &FitRun<'_>,
-        noise: &[ArModel],
+        noise: &RunNoiseModel,
     ) -> Fold {
         let p_all = layout.count + self.width;
         let n = run.len();
@@ -314,7 +326,12 @@ impl Suspect {
                 v
             })
             .collect();
-        let mut chans: Vec<Whitener> = (0..6).map(|c| Whitener::new(index[c].len() + 1, &noise[c])).collect();
+        // The slow noise as a random effect on the run's basis (super::slow), where it has one.
+        let slow = |c: usize| noise.slow.get(c).filter(|d| d.iter().any(|v| *v != 0.0));
+        let nb = |c: usize| if slow(c).is_some() { noise.basis.size } else { 0 };
+        let mut chans: Vec<Whitener> =
+            (0..6).map(|c| Whitener::new(index[c].len() + nb(c) + 1, &noise.ar[c])).collect();
+        let mut basis_row = vec![0.0; noise.basis.size];
         let predict = |s: &State| {
             let g = forward(&terms[0], &values[0], s);
             let a = forward(&terms[1], &values[1], s);
@@ -360,19 +377,23 @@ impl Suspect {
                 Some(t) => FitRun { track: t, ..*run }.state(k),
                 None => st,
             });
+            noise.basis.row(run.track.t_s[k], &mut basis_row);
             for c in 0..6 {
-                let (si, ch) = (c / 3, c % 3);
+                let si = c / 3;
                 row.clear();
                 row.extend(layout.channel[c].iter().map(|&(_, ti)| terms[si][ti].regressor(&states[si])));
-                let _ = ch;
                 row.extend(d.iter().map(|x| x[c]));
+                row.extend_from_slice(&basis_row[..nb(c)]);
                 row.push(resid[c][k]);
                 chans[c].push(&row);
             }
         }
         let mut fold = Fold { g: DMatrix::zeros(p_all, p_all), b: DVector::zeros(p_all), yy: 0.0 };
         for (c, w) in chans.into_iter().enumerate() {
-            let gm = w.finish();
+            let mut gm = w.finish();
+            if let Some(d) = slow(c) {
+                super::slow::adjust_gram(&mut gm, index[c].len(), nb(c), d);
+            }
             let m = gm.nrows();
             for (i, &gi) in index[c].iter().enumerate() {
                 for (j, &gj) in index[c].iter().enumerate() {
@@ -639,7 +660,7 @@ impl Suspect {
         pick: Pick,
         model: &Model,
         runs: &[FitRun<'_>],
-        noise: &[Vec<ArModel>],
+        noise: &[RunNoiseModel],
         opts: &FitOptions,
     ) -> Result<(), EstimateError> {
         // Every group found so far moves with the new one (joint Gauss–Newton): one at a

@@ -18,8 +18,16 @@ pub(super) struct StandCheck<'s, 'r, 'a> {
 }
 
 /// The noise model of every run and channel of an analysis.
-fn noise_models(space: &Space) -> Vec<Vec<crate::stats::ArModel>> {
-    space.runs.iter().map(|rg| rg.noise.iter().map(|n| n.ar.clone()).collect()).collect()
+fn noise_models(space: &Space) -> Vec<stand::RunNoiseModel> {
+    space
+        .runs
+        .iter()
+        .map(|rg| stand::RunNoiseModel {
+            ar: rg.noise.iter().map(|n| n.ar.clone()).collect(),
+            basis: rg.run_basis,
+            slow: rg.slow.clone(),
+        })
+        .collect()
 }
 
 impl StandCheck<'_, '_, '_> {

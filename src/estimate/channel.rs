@@ -16,7 +16,7 @@ use crate::model::{Role, State, TermRef};
 use crate::units::SensorKind;
 use faer::Mat;
 
-/// Samples per block handed to the estimator (`linear::Samples`).
+/// Samples per block handed to the estimator ([`Samples`]).
 pub(crate) const BLOCK: usize = 256;
 
 /// The columns of one channel's problem: per fitted coefficient (in `fitted` order) its
@@ -338,4 +338,33 @@ pub(crate) fn solve_reduced(
         }
     }
     (theta, cov, rss, sigma2)
+}
+
+/// The per-block callback of [`Samples`]: true states, gyro outputs, accelerometer
+/// outputs (equal lengths, 1 to [`BLOCK`] samples).
+pub(crate) type BlockFn<'f> = dyn FnMut(&[State], &[[f64; 3]], &[[f64; 3]]) + 'f;
+
+/// A sequence of samples for the linear estimator: the true state and both outputs of
+/// each, in order, in blocks. In memory ([`FitRun`]) or streamed from a file ([`stream`]);
+/// both go through the same arithmetic sample by sample (block boundaries change nothing),
+/// so their fits are identical.
+pub(crate) trait Samples: Sync {
+    /// Calls `f(states, gyro, accel)` for consecutive blocks of samples, in order.
+    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError>;
+}
+
+impl Samples for FitRun<'_> {
+    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError> {
+        let n = self.len();
+        let mut states = Vec::with_capacity(BLOCK.min(n));
+        let mut k0 = 0;
+        while k0 < n {
+            let k1 = (k0 + BLOCK).min(n);
+            states.clear();
+            states.extend((k0..k1).map(|k| self.state(k)));
+            f(&states, &self.gyro[k0..k1], &self.accel[k0..k1]);
+            k0 = k1;
+        }
+        Ok(())
+    }
 }

@@ -4,8 +4,8 @@
 //! ([`QrAccumulator`]) in one pass per source, each channel is solved from R (so the
 //! condition number is never squared), and a second pass gives the residual statistics.
 
-pub(crate) use super::channel::BLOCK;
 use super::channel::{channel_plan, plan_norm, prediction, reduce, solve_reduced, ChannelPlan, Columns};
+pub(crate) use super::channel::{BlockFn, Samples, BLOCK};
 use super::robust::robust_refit;
 use super::{identify, ChannelFit, CoefStatus, Coefficient, Correlation, EstimateError, Fit, FitOptions};
 use super::{FitRun, SensorFit, Unidentifiable};
@@ -31,35 +31,6 @@ pub(crate) fn fit_samples(
     let accel = v.pop().ok_or(EstimateError::NoData)?;
     let gyro = v.pop().ok_or(EstimateError::NoData)?;
     Ok(Fit { gyro, accel, nonlinear: Vec::new(), stand: Vec::new() })
-}
-
-/// The per-block callback of [`Samples`]: true states, gyro outputs, accelerometer
-/// outputs (equal lengths, 1 to [`BLOCK`] samples).
-pub(crate) type BlockFn<'f> = dyn FnMut(&[State], &[[f64; 3]], &[[f64; 3]]) + 'f;
-
-/// A sequence of samples for the linear estimator: the true state and both outputs of
-/// each, in order, in blocks. In memory ([`FitRun`]) or streamed from a file ([`stream`]);
-/// both go through the same arithmetic sample by sample (block boundaries change nothing),
-/// so their fits are identical.
-pub(crate) trait Samples: Sync {
-    /// Calls `f(states, gyro, accel)` for consecutive blocks of samples, in order.
-    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError>;
-}
-
-impl Samples for FitRun<'_> {
-    fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError> {
-        let n = self.len();
-        let mut states = Vec::with_capacity(BLOCK.min(n));
-        let mut k0 = 0;
-        while k0 < n {
-            let k1 = (k0 + BLOCK).min(n);
-            states.clear();
-            states.extend((k0..k1).map(|k| self.state(k)));
-            f(&states, &self.gyro[k0..k1], &self.accel[k0..k1]);
-            k0 = k1;
-        }
-        Ok(())
-    }
 }
 
 /// Failure of a fit over [`Samples`]: reading a streamed file, or the estimate itself.

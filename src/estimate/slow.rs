@@ -28,7 +28,7 @@
 
 use super::channel::channel_plan;
 use super::channel::Columns;
-use super::linear::{Samples, BLOCK};
+use super::channel::{Samples, BLOCK};
 use super::{ChannelFit, CoefStatus};
 use crate::model::TermRef;
 use nalgebra::{DMatrix, DVector};
@@ -393,7 +393,6 @@ const REML_BLOCKS: usize = 144;
 struct Coarse {
     centre: f64,
     len: f64,
-    n: f64,
     x: DVector<f64>,
     r: f64,
 }
@@ -418,7 +417,7 @@ fn coarse_blocks(sources: &[SourceBlocks], c: usize, offsets: &[f64], t0: f64, q
                 r += s.channels[c].mean[k] * s.count[k] as f64;
             }
             if n > 0.0 {
-                out.push(Coarse { centre: 0.5 * (a + b) + offsets[si] - t0, len: b - a, n, x: x / n, r: r / n });
+                out.push(Coarse { centre: 0.5 * (a + b) + offsets[si] - t0, len: b - a, x: x / n, r: r / n });
             }
         }
     }
@@ -426,7 +425,7 @@ fn coarse_blocks(sources: &[SourceBlocks], c: usize, offsets: &[f64], t0: f64, q
 }
 
 /// White density², B² and K² of a channel by restricted maximum likelihood on its coarse
-/// block means (Patterson & Thompson 1971; Fisher scoring, Harville 1977 eq. 4.7).
+/// block means (Patterson & Thompson 1971), by average-information Newton steps.
 ///
 /// Block means of the data follow the block-level regression ȳ_b = x_bᵀβ + ε̄_b exactly
 /// (x_b the block's mean regressors), so the residual's projection P r̄ = P ε̄ with
@@ -472,14 +471,14 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<[f64
         let xvx = (x.transpose() * &vx).try_inverse()?;
         let p = &vinv - &vx * xvx * vx.transpose();
         let py = &p * &y;
-        let pv: Vec<DMatrix<f64>> = comps.iter().map(|c| &p * c).collect();
-        let score: Vec<f64> =
-            (0..3).map(|i| 0.5 * ((py.transpose() * &comps[i] * &py)[(0, 0)] - pv[i].trace())).collect();
+        // Average information (Gilmour, Thompson & Cullis 1995): only products with P y, so
+        // no m³ product per component.
+        let u: Vec<DVector<f64>> = comps.iter().map(|c| c * &py).collect();
+        let pu: Vec<DVector<f64>> = u.iter().map(|v| &p * v).collect();
+        let score: Vec<f64> = (0..3).map(|i| 0.5 * (py.dot(&u[i]) - p.component_mul(&comps[i]).sum())).collect();
         // Components at zero whose score points below zero stay at zero.
         let free: Vec<usize> = (0..3).filter(|&i| i == 0 || theta[i] > 0.0 || score[i] > 0.0).collect();
-        let info = DMatrix::from_fn(free.len(), free.len(), |a, b| {
-            0.5 * pv[free[a]].component_mul(&pv[free[b]].transpose()).sum()
-        });
+        let info = DMatrix::from_fn(free.len(), free.len(), |a, b| 0.5 * u[free[a]].dot(&pu[free[b]]));
         let step = info.try_inverse()? * DVector::from_iterator(free.len(), free.iter().map(|&i| score[i]));
         let mut moved: f64 = 0.0;
         for (k, &i) in free.iter().enumerate() {
@@ -531,7 +530,11 @@ pub(crate) fn inflate(sources: &[SourceBlocks], c: usize, ch: &mut ChannelFit) -
     let span = (end - t0).max(t_min);
     let flick = poles(t_min, span);
     let start = measure(sources, c, t_min, span);
-    let t_first = sources.iter().zip(&offsets).flat_map(|(s, o)| s.centre_s.first().zip(s.length_s.first()).map(|(c, l)| c - 0.5 * l + o)).fold(f64::INFINITY, f64::min);
+    let t_first = sources
+        .iter()
+        .zip(&offsets)
+        .flat_map(|(s, o)| s.centre_s.first().zip(s.length_s.first()).map(|(c, l)| c - 0.5 * l + o))
+        .fold(f64::INFINITY, f64::min);
     let blocks = coarse_blocks(sources, c, &offsets, t_first, q);
     let [n2, b2, k2] = reml(&blocks, &flick, start).unwrap_or(start);
     if b2 == 0.0 && k2 == 0.0 {
