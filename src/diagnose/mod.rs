@@ -390,8 +390,6 @@ pub fn diagnose(
     with_stand::diagnose(suspect, model, runs, motions, opts, has_temp)
 }
 
-/// The diagnosis of an analysed session (None: the stand check corrected the motion and
-
 /// The shape of what no effect explains on each channel still systematic (module `shape`),
 /// around the model at the end of the ladder.
 fn draw_shapes(
@@ -424,6 +422,7 @@ fn draw_shapes(
         .collect()
 }
 
+/// The diagnosis of an analysed session (None: the stand check corrected the motion and
 /// the diagnosis starts again).
 fn conclude(
     a: Analysis,

@@ -216,7 +216,7 @@ fn earth_rotation(
     opts: &FitOptions,
 ) -> Option<String> {
     let declared = session.runs.iter().any(|r| {
-        matches!(r.spec.motion, crate::session::MotionSpec::Static { earth_rate_rad_s, .. } if earth_rate_rad_s != [0.0; 3])
+        matches!(r.spec.motion, crate::session::MotionSpec::Static { earth_rate_rad_s, .. } if earth_rate_rad_s.iter().any(|&x| x != 0.0))
     });
     if declared || runs.len() < 4 {
         return None;

@@ -276,7 +276,7 @@ fn named(mut p: PartialResidual, v: Var, own: bool) -> PartialResidual {
 fn binned(x: &[f64], r: &[f64], noise: NoiseScale, bins: usize) -> Option<PartialResidual> {
     let (lo, hi) =
         x.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| (a.0.min(v), a.1.max(v)));
-    if !(hi > lo) {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     let w = (hi - lo) / bins as f64;

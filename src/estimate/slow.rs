@@ -175,6 +175,9 @@ impl SourceBlocks {
     }
 }
 
+/// Fills a sensor's design columns of a block: (sensor index, states, gyro, accel, columns).
+pub(crate) type FillFn<'f> = dyn Fn(usize, &[crate::model::State], &[[f64; 3]], &[[f64; 3]], &mut [f64]) + Sync + 'f;
+
 /// The block pass over one source for every sensor: `fill(sensor index, states, gyro,
 /// accel, cols)` fills the sensor's design columns of a block (stride [`BLOCK`]);
 /// `designs[s]` are its channels' plans, `width[s]` its number of design columns. Blocks
@@ -184,7 +187,7 @@ pub(crate) fn pass(
     designs: &[Vec<ChannelDesign>],
     width: &[usize],
     per_block: usize,
-    fill: &(dyn Fn(usize, &[crate::model::State], &[[f64; 3]], &[[f64; 3]], &mut [f64]) + Sync),
+    fill: &FillFn<'_>,
 ) -> Result<SourceBlocks, crate::session::SessionError> {
     let sensors = designs.len();
     let q = |c: usize| designs[c / 3][c % 3].columns.len();
@@ -310,7 +313,7 @@ pub fn allan_points(means: &[f64], block_s: f64) -> Vec<AllanPoint> {
     let mut out = Vec::new();
     let mut m = 1;
     while let Some((v, terms)) = allan(means, m) {
-        if terms < 3 || !(block_s > 0.0) {
+        if terms < 3 || block_s.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             break;
         }
         // Each Allan variance is known to about 1/√(terms/m) of itself.

@@ -291,7 +291,7 @@ impl SimConfig {
             .map(|c| if c < 3 { &self.gyro_process } else { &self.accel_process })
             .map(|p| p.generator(dt, session_s))
             .collect();
-        let mut crng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x5eed_ca77_1ed);
+        let mut crng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x05ee_dca7_71ed);
         for plan in &self.runs {
             let n = (plan.duration_s * self.sample_rate_hz).round().max(1.0) as usize;
             let t0 = if self.realism.session_clock_gap_s.is_some() { clock_s } else { 0.0 };
