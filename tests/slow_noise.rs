@@ -231,3 +231,36 @@ fn percent_in(words: &str) -> f64 {
     let i = words.find(" %").unwrap();
     words[..i].rsplit(' ').next().unwrap().parse().unwrap()
 }
+
+/// Treating slow noise as noise must not hide physics: a drift on the session clock (one
+/// law shared by the runs), of the gyro or of the accelerometer, is still found under the
+/// same MEMS noise with `slow_noise`, and nothing else is added.
+#[test]
+fn physics_under_slow_noise_is_still_found() {
+    let cases: [(&str, Vec<(&str, f64)>); 2] = [
+        ("gyro-drift", vec![("gyro.d_x", 2e-6), ("gyro.d_y", -1.5e-6), ("gyro.d_z", 1e-6)]),
+        ("accel-drift", vec![("accel.d_x", 2e-5), ("accel.d_y", -1.5e-5), ("accel.d_z", 1e-5)]),
+    ];
+    let out = crate::common::par_map(&cases, |(effect, values)| {
+        let mut c = SimConfig::paper();
+        c.runs = conic_plan(&[10.0, -10.0, 20.0], &[10.0, 20.0], &cyclic_mounts(3), 30.0);
+        c.sample_rate_hz = 50.0;
+        c.seed = 36_300;
+        c.gyro_process = mems_gyro();
+        c.accel_process = mems_accel();
+        c.carry_noise = true;
+        c.realism.session_clock_gap_s = Some(5.0);
+        c.truth.model.add_effect(effect).unwrap();
+        for (n, v) in values {
+            c.truth.values.insert((*n).to_string(), *v);
+        }
+        let opts = FitOptions { slow_noise: true, ..FitOptions::default() };
+        let d = crate::diagnose::run_diagnose_with(&c.generate(), &opts);
+        let steps: Vec<String> = d.steps.iter().map(|s| s.effect.clone()).collect();
+        (effect.to_string(), d.verdict, steps)
+    });
+    for (effect, verdict, steps) in &out {
+        println!("{effect}: {verdict:?} {steps:?}");
+        assert_eq!(steps, &vec![effect.clone()], "{effect}: {verdict:?}");
+    }
+}

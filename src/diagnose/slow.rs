@@ -15,11 +15,18 @@
 //! the random walk the variogram is centred on the session (the bias is fitted once, so a
 //! run's offset is measured against the session's average: + K² span/6).
 //!
-//! The noise of a run is then AR noise plus B c with c ~ (0, D): generalised least squares
-//! with that random effect (Woodbury) replaces the whitened Gram of the columns and the
-//! residual by G_xx − G_xb D (I + G_bb D)⁻¹ G_bx, and the systematic test measures the
-//! basis's cross products z = Bᵀ(r − Xβ) (whitened) in the metric of their covariance
-//! G_bb + G_bb D G_bb.
+//! The noise of a run is then AR noise plus B c with c ~ (0, D). The systematic test (is
+//! anything left beyond the noise?) measures the basis's cross products z = Bᵀ(r − Xβ)
+//! (whitened) in the metric of their covariance G_bb + G_bb D G_bb. The stand's systems
+//! carry the random effect in their Grams (generalised least squares, Woodbury:
+//! G_xx − G_xb D (I + G_bb D)⁻¹ G_bx), so that a run's wandering offset is not taken for the
+//! Earth's rate or a tilt. Catalogue candidates keep the AR Grams: their own rules (gain on
+//! left-out runs, one size in every run) already refuse what wanders, and the slow noise is
+//! measured on the base model's residual, where a missing effect's per-run offsets would
+//! otherwise be taken for noise and hide it; each step's refit measures it again.
+//!
+//! Only with `FitOptions::slow_noise` (`diagnose --slow-noise`): without it the fit measures
+//! no slow noise and D is zero.
 
 use crate::estimate::slow::SlowNoise;
 use nalgebra::DMatrix;

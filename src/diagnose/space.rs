@@ -424,8 +424,8 @@ fn long_run_variance(ar: &ArModel) -> f64 {
 
 /// The whitened Grams of one run (module documentation, step 3) with the session's noise
 /// models; each run keeps its own innovation variance. With slow noise (`slow`, per
-/// channel, over a session of `span_s`), the Grams are those of generalised least squares
-/// with it as a random effect on the run's basis ([`super::slow`]).
+/// channel, over a session of `span_s`), the run keeps the covariance of its basis
+/// coefficients under it, for the systematic test ([`super::slow`]).
 #[allow(clippy::too_many_arguments)]
 pub fn run_gram(
     u: &Universe,
@@ -454,12 +454,9 @@ pub fn run_gram(
         })
         .collect();
     let secants = Secants::new(u, base, fit, run);
-    let mut gram = channel_grams(u, run, &noise, &b, r, &secants);
+    let gram = channel_grams(u, run, &noise, &b, r, &secants);
     let basis = super::slow::Basis { size: b.size, cone_hz: b.cone_hz(), row: &|t, out: &mut [f64]| b.row(t, out) };
     let slow_cov = super::slow::basis_covariances(&basis, &run.track.t_s[..n], &stats.basis_ms, slow.0, slow.1);
-    for (c, g) in gram.iter_mut().enumerate() {
-        super::slow::adjust_gram(g, u.width(c), b.size, &slow_cov[c]);
-    }
     RunGram {
         gram,
         basis: b.size,

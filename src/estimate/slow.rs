@@ -390,6 +390,8 @@ fn block_cov(flick: &[(f64, f64)], b2: f64, k2: f64, tb: (f64, f64), tc: (f64, f
 
 /// Coarse blocks a channel's REML fit uses at most (its cost is cubic in them).
 const REML_BLOCKS: usize = 144;
+/// Coarse blocks per run at least (the runs' own curvature tells flicker from walk).
+const REML_PER_RUN: usize = 16;
 
 /// One coarse block of a channel: session-clock centre and length (s), samples, the
 /// block-level design row (block sums of the regressors over the count) and mean residual.
@@ -403,7 +405,7 @@ struct Coarse {
 /// The channel's fine blocks merged to at most [`REML_BLOCKS`] over the session, on the
 /// session clock (`offsets` per source; times from the session's start `t0`).
 fn coarse_blocks(sources: &[SourceBlocks], c: usize, offsets: &[f64], t0: f64, q: usize) -> Vec<Coarse> {
-    let per_run = (REML_BLOCKS / sources.len().max(1)).max(4);
+    let per_run = (REML_BLOCKS / sources.len().max(1)).max(REML_PER_RUN);
     let mut out = Vec::new();
     for (si, s) in sources.iter().enumerate() {
         let nb = s.count.len();
@@ -462,18 +464,35 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<[f64
         }),
     ];
     // A white level from the residual itself when the start has none.
-    let mut theta = start;
-    if theta[0] <= 0.0 {
+    let mut first = start;
+    if first[0] <= 0.0 {
         let v: f64 = blocks.iter().map(|b| b.r * b.r * b.len).sum::<f64>() / m as f64;
-        theta[0] = v.max(f64::MIN_POSITIVE);
+        first[0] = v.max(f64::MIN_POSITIVE);
     }
+    reml_climb(&comps, &x, &y, first).map(|(t, _)| t).filter(|t| t.iter().all(|v| v.is_finite()))
+}
+
+/// One REML climb (average-information steps) from `theta`: the estimate and its
+/// restricted log-likelihood −½(ln|V| + ln|XᵀV⁻¹X| + yᵀPy).
+fn reml_climb(
+    comps: &[DMatrix<f64>; 3],
+    x: &DMatrix<f64>,
+    y: &DVector<f64>,
+    mut theta: [f64; 3],
+) -> Option<([f64; 3], f64)> {
+    let mut loglik = f64::NEG_INFINITY;
     for _ in 0..60 {
         let v = &comps[0] * theta[0] + &comps[1] * theta[1] + &comps[2] * theta[2];
-        let vinv = v.cholesky()?.inverse();
-        let vx = &vinv * &x;
-        let xvx = (x.transpose() * &vx).try_inverse()?;
+        let chol = v.cholesky()?;
+        let logdet_v: f64 = 2.0 * chol.l_dirty().diagonal().iter().map(|d| d.ln()).sum::<f64>();
+        let vinv = chol.inverse();
+        let vx = &vinv * x;
+        let xvx = x.transpose() * &vx;
+        let logdet_x = xvx.clone().cholesky()?.l_dirty().diagonal().iter().map(|d| 2.0 * d.ln()).sum::<f64>();
+        let xvx = xvx.try_inverse()?;
         let p = &vinv - &vx * xvx * vx.transpose();
-        let py = &p * &y;
+        let py = &p * y;
+        loglik = -0.5 * (logdet_v + logdet_x + y.dot(&py));
         // Average information (Gilmour, Thompson & Cullis 1995): only products with P y, so
         // no m³ product per component.
         let u: Vec<DVector<f64>> = comps.iter().map(|c| c * &py).collect();
@@ -493,7 +512,7 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<[f64
             break;
         }
     }
-    theta.iter().all(|v| v.is_finite()).then_some(theta)
+    Some((theta, loglik))
 }
 
 /// Adds the slow part to channel `c`'s covariance (module documentation) and returns what
