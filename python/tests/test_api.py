@@ -179,3 +179,20 @@ def test_long_calls_release_the_gil():
     # Released, the other thread counts through most of each call (two cores); held, it
     # could count for a switch interval at most, a few percent of a call this long.
     assert max(shares) > 0.5, shares
+
+
+def test_slow_noise_is_noise_in_the_fit_and_the_diagnosis():
+    # A MEMS-like unit whose bias wanders over the session clock (flicker and random walk
+    # carried from run to run): with slow_noise the diagnosis calls it adequate and the
+    # fit's bias standard errors widen to cover the wander.
+    s = crosscal.simulate(arw_deg_rt_h=0.3, gyro_bias_instability_deg_h=8.0, rrw_deg_h_rt_h=60.0,
+                          vrw_m_s_rt_h=0.06, accel_bias_instability_ug=60.0, accel_random_walk=2e-5,
+                          carry_noise=True, session_clock_s=5.0, rates_deg_s=[10.0, -10.0, 20.0],
+                          cone_angles_deg=[10.0, 20.0], mounts=3, duration_s=30.0, rate_hz=50.0,
+                          seed=36104)
+    d = crosscal.diagnose(s, slow_noise=True)
+    assert d.verdict == "adequate", d.verdict
+    plain = crosscal.fit(s).coefficients.set_index("name")["std_error"]
+    slow = crosscal.fit(s, slow_noise=True).coefficients.set_index("name")["std_error"]
+    for b in ("gyro.b_x", "gyro.b_y", "gyro.b_z", "accel.b_x", "accel.b_y", "accel.b_z"):
+        assert slow[b] > plain[b], (b, slow[b], plain[b])
