@@ -676,8 +676,9 @@ fn diagnose(
     let s = &session.inner;
     let model = crosscal::app::diagnose::start_model(s, &spec, profile.as_ref().map(|p| (Path::new("<profile>"), p)))
         .map_err(|e| err(py, e))?;
-    let found =
-        py.detach(|| crosscal::app::diagnose::diagnose_session(s, &model, trim_rest, slow_noise)).map_err(|e| err(py, e))?;
+    let found = py
+        .detach(|| crosscal::app::diagnose::diagnose_session(s, &model, trim_rest, slow_noise))
+        .map_err(|e| err(py, e))?;
     let temperature_note = profile.as_ref().and_then(|p| crosscal::app::diagnose::temperature_outside(p, s));
     Ok(Diagnosis { session: s.clone(), model, found, temperature_note })
 }
