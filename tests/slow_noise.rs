@@ -46,6 +46,15 @@ pub fn session(seed: u64) -> SimConfig {
     c
 }
 
+/// Eighteen conic runs of 30 s at 50 Hz (two cone angles) on one session clock, the slow
+/// noise carried from run to run.
+fn long_session(seed: u64) -> SimConfig {
+    let mut c = session(seed);
+    c.runs = conic_plan(&[10.0, -10.0, 20.0], &[10.0, 20.0], &cyclic_mounts(3), 30.0);
+    c.sample_rate_hz = 50.0;
+    c
+}
+
 /// The session average of the slow noise (flicker and random walk) added to each output
 /// channel (gyro x..z, accel x..z), SI: the session with its white part scaled to nothing
 /// (the same random draws) minus the same session without noise. The white part's mean is
@@ -134,14 +143,7 @@ fn clean_units_under_flicker_and_random_walk_are_adequate_on_ten_seeds() {
         .map(|v| v.split(',').map(|x| x.parse().unwrap()).collect())
         .unwrap_or_else(|_| (0..10).map(|s| 36_100 + s).collect());
     let out = crate::common::par_map(&seeds, |&seed| {
-        let mut c = SimConfig::paper();
-        c.runs = conic_plan(&[10.0, -10.0, 20.0], &[10.0, 20.0], &cyclic_mounts(3), 30.0);
-        c.sample_rate_hz = 50.0;
-        c.seed = seed;
-        c.gyro_process = mems_gyro();
-        c.accel_process = mems_accel();
-        c.carry_noise = true;
-        c.realism.session_clock_gap_s = Some(5.0);
+        let c = long_session(seed);
         let opts = FitOptions { slow_noise: true, ..FitOptions::default() };
         let d = crate::diagnose::run_diagnose_with(&c.generate(), &opts);
         let mut steps: Vec<String> = d.steps.iter().map(|s| s.effect.clone()).collect();
@@ -242,14 +244,7 @@ fn physics_under_slow_noise_is_still_found() {
         ("accel-drift", vec![("accel.d_x", 2e-5), ("accel.d_y", -1.5e-5), ("accel.d_z", 1e-5)]),
     ];
     let out = crate::common::par_map(&cases, |(effect, values)| {
-        let mut c = SimConfig::paper();
-        c.runs = conic_plan(&[10.0, -10.0, 20.0], &[10.0, 20.0], &cyclic_mounts(3), 30.0);
-        c.sample_rate_hz = 50.0;
-        c.seed = 36_300;
-        c.gyro_process = mems_gyro();
-        c.accel_process = mems_accel();
-        c.carry_noise = true;
-        c.realism.session_clock_gap_s = Some(5.0);
+        let mut c = long_session(36_300);
         c.truth.model.add_effect(effect).unwrap();
         for (n, v) in values {
             c.truth.values.insert((*n).to_string(), *v);
