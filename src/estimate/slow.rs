@@ -388,7 +388,8 @@ fn block_cov(flick: &[(f64, f64)], b2: f64, k2: f64, tb: (f64, f64), tc: (f64, f
     v
 }
 
-/// Coarse blocks a channel's REML fit uses at most (its cost is cubic in them).
+/// Coarse blocks a channel's REML fit aims at over the session (its cost is cubic in them;
+/// each run keeps at least [`REML_PER_RUN`]).
 const REML_BLOCKS: usize = 144;
 /// Coarse blocks per run at least (the runs' own curvature tells flicker from walk).
 const REML_PER_RUN: usize = 16;
@@ -402,7 +403,7 @@ struct Coarse {
     r: f64,
 }
 
-/// The channel's fine blocks merged to at most [`REML_BLOCKS`] over the session, on the
+/// The channel's fine blocks merged to about [`REML_BLOCKS`] over the session, on the
 /// session clock (`offsets` per source; times from the session's start `t0`).
 fn coarse_blocks(sources: &[SourceBlocks], c: usize, offsets: &[f64], t0: f64, q: usize) -> Vec<Coarse> {
     let per_run = (REML_BLOCKS / sources.len().max(1)).max(REML_PER_RUN);
@@ -469,30 +470,19 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<[f64
         let v: f64 = blocks.iter().map(|b| b.r * b.r * b.len).sum::<f64>() / m as f64;
         first[0] = v.max(f64::MIN_POSITIVE);
     }
-    reml_climb(&comps, &x, &y, first).map(|(t, _)| t).filter(|t| t.iter().all(|v| v.is_finite()))
+    reml_climb(&comps, &x, &y, first).filter(|t| t.iter().all(|v| v.is_finite()))
 }
 
-/// One REML climb (average-information steps) from `theta`: the estimate and its
-/// restricted log-likelihood −½(ln|V| + ln|XᵀV⁻¹X| + yᵀPy).
-fn reml_climb(
-    comps: &[DMatrix<f64>; 3],
-    x: &DMatrix<f64>,
-    y: &DVector<f64>,
-    mut theta: [f64; 3],
-) -> Option<([f64; 3], f64)> {
-    let mut loglik = f64::NEG_INFINITY;
+/// One REML climb from `theta`: average-information steps on the restricted
+/// log-likelihood −½(ln|V| + ln|XᵀV⁻¹X| + yᵀPy) until no component moves by 1e-4 of itself.
+fn reml_climb(comps: &[DMatrix<f64>; 3], x: &DMatrix<f64>, y: &DVector<f64>, mut theta: [f64; 3]) -> Option<[f64; 3]> {
     for _ in 0..60 {
         let v = &comps[0] * theta[0] + &comps[1] * theta[1] + &comps[2] * theta[2];
-        let chol = v.cholesky()?;
-        let logdet_v: f64 = 2.0 * chol.l_dirty().diagonal().iter().map(|d| d.ln()).sum::<f64>();
-        let vinv = chol.inverse();
+        let vinv = v.cholesky()?.inverse();
         let vx = &vinv * x;
-        let xvx = x.transpose() * &vx;
-        let logdet_x = xvx.clone().cholesky()?.l_dirty().diagonal().iter().map(|d| 2.0 * d.ln()).sum::<f64>();
-        let xvx = xvx.try_inverse()?;
+        let xvx = (x.transpose() * &vx).try_inverse()?;
         let p = &vinv - &vx * xvx * vx.transpose();
         let py = &p * y;
-        loglik = -0.5 * (logdet_v + logdet_x + y.dot(&py));
         // Average information (Gilmour, Thompson & Cullis 1995): only products with P y, so
         // no m³ product per component.
         let u: Vec<DVector<f64>> = comps.iter().map(|c| c * &py).collect();
@@ -512,7 +502,7 @@ fn reml_climb(
             break;
         }
     }
-    Some((theta, loglik))
+    Some(theta)
 }
 
 /// Adds the slow part to channel `c`'s covariance (module documentation) and returns what
