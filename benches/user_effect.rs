@@ -62,7 +62,7 @@ fn main() {
     for e in &loaded {
         mine.add_user(std::sync::Arc::clone(e));
     }
-    let reps = 5;
+    let reps = 15;
     let (t_cat, f_cat) = best_fit(&session, &catalogue, reps);
     let (t_user, f_user) = best_fit(&session, &mine, reps);
     let q_cat = f_cat.gyro.coefficients.iter().find(|c| c.name == "gyro.q_x").expect("q_x").value;

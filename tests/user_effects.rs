@@ -256,6 +256,8 @@ fn bad_effects_files_are_clear_errors_with_exit_25() {
     let (code, out, err) = run_in(dir, &["fit", "sim/session.json", "--effects-file", "bad.toml", "--effect", "e"]);
     assert_eq!(code, 25, "{out}{err}");
     assert!(err.contains("effect 'e': its expression is not finite"), "{err}");
+    // The linear fit finds it while filling its columns; the message still names the run.
+    assert!(err.contains("of run '") && !err.contains("(streamed)"), "{err}");
 }
 
 /// `crosscal effects --effects-file` lists the user effects after the catalogue.

@@ -351,9 +351,16 @@ pub(crate) type BlockFn<'f> = dyn FnMut(&[State], &[[f64; 3]], &[[f64; 3]]) + 'f
 pub(crate) trait Samples: Sync {
     /// Calls `f(states, gyro, accel)` for consecutive blocks of samples, in order.
     fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError>;
+
+    /// The run's name (for errors that point at a sample).
+    fn run_name(&self) -> &str;
 }
 
 impl Samples for FitRun<'_> {
+    fn run_name(&self) -> &str {
+        self.name
+    }
+
     fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), crate::session::SessionError> {
         let n = self.len();
         let mut states = Vec::with_capacity(BLOCK.min(n));

@@ -100,7 +100,7 @@ fn accumulate(
     if let Some((id, s)) = bad {
         return Err(EstimateError::UserEffect(crate::model::user::UserEffectError::NonFinite {
             id: id.to_string(),
-            run: "(streamed)".into(),
+            run: src.run_name().to_string(),
             t_s: s.t_session_s,
             state: format!("w = {:.4?} rad/s, a = {:.4?} m/s^2, T = {} C", s.w, s.a, s.temp_c),
         })

@@ -18,10 +18,11 @@ pub(crate) fn fit_in_memory(model: &Model, runs: &[FitRun<'_>], opts: &FitOption
             return Err(EstimateError::MissingTemperature { effect: e.id().to_string(), run: r.name.to_string() });
         }
     }
-    super::runs::check_user_effects(model, runs)?;
     if !model.nonlinear().is_empty() {
+        super::runs::check_user_effects(model, runs)?;
         return nonlinear::fit(model, runs, opts);
     }
     let sources: Vec<&dyn Samples> = runs.iter().map(|r| r as &dyn Samples).collect();
+    // The linear pass checks the user effects' columns as it fills them (no pass of its own).
     fit_samples(model, &sources, runs, opts).map_err(SamplesError::in_memory)
 }

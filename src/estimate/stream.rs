@@ -319,6 +319,10 @@ impl StreamRun<'_> {
 }
 
 impl Samples for StreamRun<'_> {
+    fn run_name(&self) -> &str {
+        &self.spec.name
+    }
+
     fn for_each_block(&self, f: &mut BlockFn<'_>) -> Result<(), SessionError> {
         let mut blocks = Blocks {
             reference: Reference::of(self.spec, self.manifest.g_m_s2),

@@ -293,6 +293,7 @@ pub(crate) fn compile(def: &UserEffectDef) -> Result<UserEffect, (Option<usize>,
         regs,
         terms,
         bound: def.parameters.iter().map(|p| p.start).collect(),
+        reg_extra: super::regressor_slots(def, &def.parameters.iter().map(|p| p.start).collect::<Vec<_>>()),
         inputs: inputs_of(&node),
     })
 }

@@ -102,6 +102,9 @@ pub struct UserEffect {
     terms: Vec<Term>,
     /// Parameter values the linear part is evaluated at.
     bound: Vec<f64>,
+    /// The regressors' slots after the variables: a zero per coefficient (the derivatives
+    /// do not read them), then `bound`.
+    reg_extra: Vec<f64>,
     inputs: Inputs,
 }
 
@@ -111,35 +114,26 @@ impl UserEffect {
         &self.def
     }
 
-    /// Number of leading slots (variables, then coefficients).
-    fn first_param_slot(&self) -> usize {
-        VARIABLES.len() + self.def.coefficients.len()
-    }
-
-    /// The slot values at a state with the bound parameters (coefficients `coef`).
+    /// The variable slots (see [`VARIABLES`]) of a state.
     #[inline]
-    fn slots(&self, s: &State, coef: &[f64], params: &[f64]) -> [f64; MAX_SLOTS] {
-        let mut v = [0.0; MAX_SLOTS];
-        v[..3].copy_from_slice(&s.w);
-        v[3..6].copy_from_slice(&s.e);
-        v[6..9].copy_from_slice(&s.a);
-        v[9] = s.temp_c;
-        v[10] = s.temp_rate_c_s;
-        v[11] = s.t_session_s;
-        let c0 = VARIABLES.len();
-        for (d, c) in v[c0..].iter_mut().zip(coef) {
-            *d = *c;
-        }
-        let p0 = self.first_param_slot();
-        for (d, p) in v[p0..].iter_mut().zip(params) {
-            *d = *p;
-        }
-        v
+    fn vars(s: &State) -> [f64; VARIABLES.len()] {
+        let [wx, wy, wz] = s.w;
+        let [ex, ey, ez] = s.e;
+        let [ax, ay, az] = s.a;
+        [wx, wy, wz, ex, ey, ez, ax, ay, az, s.temp_c, s.temp_rate_c_s, s.t_session_s]
     }
 
     /// The effect's value at a state for coefficients `coef` and parameters `params`.
     pub fn value_at(&self, s: &State, coef: &[f64], params: &[f64]) -> f64 {
-        self.value.eval(&self.slots(s, coef, params))
+        let mut extra = [0.0; MAX_SLOTS - VARIABLES.len()];
+        let nc = self.def.coefficients.len().min(extra.len());
+        for (d, c) in extra[..nc].iter_mut().zip(coef) {
+            *d = *c;
+        }
+        for (d, p) in extra[nc..].iter_mut().zip(params) {
+            *d = *p;
+        }
+        self.value.eval_parts(&Self::vars(s), &extra)
     }
 
     /// Where it acts.
@@ -186,6 +180,7 @@ impl UserEffect {
     fn bound_to(&self, p: &[f64]) -> Self {
         let mut e = self.clone();
         e.bound = p.to_vec();
+        e.reg_extra = regressor_slots(&self.def, p);
         e
     }
 
@@ -222,7 +217,7 @@ impl Effect for UserEffect {
     #[inline]
     fn regressor(&self, k: usize, s: &State) -> f64 {
         match self.regs.get(k) {
-            Some(p) => p.eval(&self.slots(s, &[], &self.bound)),
+            Some(p) => p.eval_parts(&Self::vars(s), &self.reg_extra),
             None => 0.0,
         }
     }
@@ -369,6 +364,11 @@ pub fn registered() -> Vec<Arc<UserEffect>> {
 /// A registered user effect by id.
 pub fn find_registered(id: &str) -> Option<Arc<UserEffect>> {
     registry().lock().unwrap_or_else(|e| e.into_inner()).iter().find(|e| e.id == id).cloned()
+}
+
+/// The slots after the variables for the regressors at parameters `bound`.
+fn regressor_slots(def: &UserEffectDef, bound: &[f64]) -> Vec<f64> {
+    std::iter::repeat_n(0.0, def.coefficients.len()).chain(bound.iter().copied()).collect()
 }
 
 /// The term of coefficient `j` of an output-side effect.
