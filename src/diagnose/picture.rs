@@ -59,8 +59,16 @@ pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotio
 }
 
 /// The six residual channels of one run (output − model, SI; gyro x, y, z, accel x, y, z)
-/// and each channel's sum of squared outputs.
+/// and each channel's sum of squared outputs. A user effect's linear part is evaluated at
+/// the parameters `f` estimated (a knee at its fitted rate, not its start value).
 pub fn run_residual(model: &Model, f: &Fit, run: &FitRun<'_>) -> (Vec<Vec<f64>>, [f64; 6]) {
+    let bound;
+    let model = if model.has_bound_parameters() {
+        bound = crate::estimate::bound_at_fit(model, f);
+        &bound
+    } else {
+        model
+    };
     let mut r: Vec<Vec<f64>> = (0..6).map(|_| Vec::with_capacity(run.len())).collect();
     let mut output_ss = [0.0; 6];
     for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {

@@ -281,6 +281,11 @@ impl Suspect {
     /// The whitened systems of every run around `model` and its fit, with the noise models
     /// `noise[run][channel]`.
     pub fn systems(&self, model: &Model, fit: &Fit, runs: &[FitRun<'_>], noise: &[RunNoiseModel]) -> Systems {
+        // The base model's columns at the parameters the fit estimated (a knee at its
+        // fitted rate): at their start values the residual would carry the knee's misfit,
+        // which a stand term (the Earth's vertical rate) could take.
+        let bound = crate::estimate::bound_at_fit(model, fit);
+        let model = &bound;
         let layout = BaseLayout::new(model, fit);
         let folds: Vec<Fold> = (0..runs.len())
             .into_par_iter()
