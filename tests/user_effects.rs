@@ -301,3 +301,97 @@ fn effects_lists_user_effects_with_the_catalogue() {
     }
     assert!(out.find("gyro-bias (").unwrap() < out.find("gyro-x-knee (").unwrap());
 }
+
+/// `batch` and `accept` take user effects like catalogue ones: a lot of three units with a
+/// hidden knee fails the `adequate` rule with the catalogue alone and passes with
+/// `--effects-file … --effect gyro-x-knee`; `accept` of such a profile needs no effects
+/// file (the profile carries the definition), and rejects the catalogue-only profile.
+#[test]
+fn a_lot_with_a_user_effect_is_batched_and_accepted() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    std::fs::write(dir.join("effects.toml"), EFFECTS).unwrap();
+    for i in 0..3 {
+        let (out, seed, serial) = (format!("lot/u{i}"), (10 + i).to_string(), format!("U{i}"));
+        ok(
+            dir,
+            &[
+                "simulate",
+                "--effects-file",
+                "effects.toml",
+                "-o",
+                &out,
+                "--duration",
+                "12",
+                "--rates",
+                "10,-10,20",
+                "--seed",
+                &seed,
+                "--gyro-noise",
+                "0.002",
+                "--accel-noise",
+                "2e-5",
+                "--hidden",
+                "gyro-x-knee",
+                "--set",
+                "gyro-x-knee.k=0.03",
+                "--set",
+                "gyro-x-knee.w0=0.0698",
+                "--serial",
+                &serial,
+            ],
+        );
+    }
+    let rules = r#"{"format":"crosscal-rules/1","rules":[{"kind":"adequate"},{"kind":"std_error","select":"gyro-x-knee.*","max":0.001}]}"#;
+    std::fs::write(dir.join("rules.json"), rules).unwrap();
+    let (code, out, err) = run_in(dir, &["batch", "lot", "--rules", "rules.json", "--out", "plain"]);
+    assert_eq!(code, 1, "catalogue only: {out}{err}");
+    assert_eq!(out.matches(": Fail").count() + err.matches(": Fail").count(), 3, "{out}{err}");
+    let (code, out, err) = run_in(
+        dir,
+        &[
+            "batch",
+            "lot",
+            "--rules",
+            "rules.json",
+            "--out",
+            "mine",
+            "--effects-file",
+            "effects.toml",
+            "--effect",
+            "gyro-x-knee",
+        ],
+    );
+    assert_eq!(code, 0, "with the user effect: {out}{err}");
+    assert!(out.contains("3 pass, 0 fail"), "{out}{err}");
+
+    std::fs::remove_file(dir.join("effects.toml")).unwrap();
+    let first = |store: &str| {
+        let unit = dir.join(store).join("U0");
+        let p = std::fs::read_dir(&unit)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.path())
+            .find(|p| p.extension().is_some_and(|x| x == "json"));
+        p.unwrap().display().to_string()
+    };
+    let args = |p: &str| {
+        vec![
+            "accept".to_string(),
+            p.to_string(),
+            "--rules".into(),
+            "rules.json".into(),
+            "--session".into(),
+            "lot/u0/session.json".into(),
+            "--diagnose".into(),
+        ]
+    };
+    let mine = args(&first("mine"));
+    let (code, out, err) = run_in(dir, &mine.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(code, 0, "accept from the profile alone: {out}{err}");
+    assert!(out.contains("ACCEPTED"), "{out}");
+    let plain = args(&first("plain"));
+    let (code, out, err) = run_in(dir, &plain.iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(code, 1, "the catalogue-only profile: {out}{err}");
+    assert!(out.contains("REJECTED") && out.contains("not adequate"), "{out}");
+}

@@ -196,3 +196,42 @@ def test_slow_noise_is_noise_in_the_fit_and_the_diagnosis():
     slow = crosscal.fit(s, slow_noise=True).coefficients.set_index("name")["std_error"]
     for b in ("gyro.b_x", "gyro.b_y", "gyro.b_z", "accel.b_x", "accel.b_y", "accel.b_z"):
         assert slow[b] > plain[b], (b, slow[b], plain[b])
+
+
+KNEE = """
+[[effect]]
+id = "py-gyro-x-knee"
+sensor = "gyro"
+output = "x"
+expr = "k * max(w_x - w0, 0)"
+coefficients = ["k"]
+parameters = { w0 = "3 deg" }
+description = "scale step above a rate"
+"""
+
+
+def test_user_effects_from_text_everywhere_and_bad_ones_raise():
+    assert crosscal.load_effects(text=KNEE) == ["py-gyro-x-knee"]
+    w0 = np.radians(4.0)
+    s = crosscal.simulate(gyro_noise_deg_s=0.002, accel_noise_g=2e-5, seed=5, duration_s=12,
+                          rates_deg_s=[10, -10, 20], hidden=["py-gyro-x-knee"],
+                          set={"py-gyro-x-knee.k": 0.03, "py-gyro-x-knee.w0": w0})
+    # The diagnosis tries it beside the catalogue and proposes it alone.
+    d = crosscal.diagnose(s)
+    assert d.verdict == "explained" and d.proposal == ["py-gyro-x-knee"], (d.verdict, d.proposal)
+    # The fit recovers it within 3 standard errors; the profile carries its definition.
+    p = crosscal.fit(s, effects=["py-gyro-x-knee"])
+    k = p.coefficients.set_index("name").loc["py-gyro-x-knee.k"]
+    assert abs(k["value"] - 0.03) < 3 * k["std_error"], k
+    w = next(c for c in p.data["nonlinear"] if c["name"] == "py-gyro-x-knee.w0")
+    assert abs(w["value"] - w0) < 3 * w["std_error"], w
+    assert p.data["user_effects"][0]["expr"] == "k * max(w_x - w0, 0)"
+    # Bad definitions raise the package's exception with the documented exit code (25).
+    for text, expected in [
+        (KNEE.replace("max(w_x", "max(w_q"), "unknown name 'w_q'"),
+        (KNEE.replace("k * max", "k * * max"), ":6:"),
+        (KNEE.replace('["k"]', '["k", "m"]'), "coefficient 'm' is never used"),
+    ]:
+        with pytest.raises(crosscal.errors.EffectsFileError) as e:
+            crosscal.load_effects(text=text)
+        assert e.value.exit_code == 25 and expected in str(e.value), str(e.value)

@@ -249,7 +249,12 @@ pub fn shape_of(
             let spread = spread(&p.bins);
             let (u, k) = sensor.display_unit();
             (
-                format!("a different offset in each run (spread {:.3e} {u}) — turn-on bias", spread * k),
+                format!(
+                    "a different offset in each run (spread {:.3e} {u}) — turn-on bias; no expression of the motion \
+                     models it (no effects-file entry): count it as noise (`--slow-noise`) or measure each run's \
+                     bias at rest before it",
+                    spread * k
+                ),
                 "turn-on bias".into(),
                 None,
             )

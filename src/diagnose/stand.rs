@@ -60,6 +60,12 @@ pub struct RunNoiseModel {
     pub basis: super::space::RunBasis,
     /// Per channel the covariance of the basis coefficients under the slow noise.
     pub slow: Vec<DMatrix<f64>>,
+    /// Per channel the dispersion φ ≥ 1: the residual's variance over the noise model's
+    /// (quasi-likelihood). A channel whose misfit nothing explains yet (a turn-on bias in
+    /// each run) is not held to its noise floor: its χ² counts 1/φ, so that a stand term
+    /// taking a sliver of a large unexplained misfit is not evidence, while one that
+    /// explains the misfit still is (its gain is most of φ·n).
+    pub dispersion: [f64; 6],
 }
 
 /// What the stand may be doing in one run (a few per session: the size difference between
@@ -121,6 +127,7 @@ enum Dir {
 }
 
 /// The whitened system of one run (global stand parameters after the model's).
+#[derive(Clone)]
 struct Fold {
     g: DMatrix<f64>,
     b: DVector<f64>,
@@ -131,6 +138,9 @@ struct Fold {
 pub struct Systems {
     folds: Vec<Fold>,
     total: Fold,
+    /// The total without the channels' dispersion: the scale the sensor candidates' ΔBIC
+    /// is on, for ranking a stand group against them.
+    raw: Fold,
     base: usize,
     samples: usize,
 }
@@ -287,19 +297,23 @@ impl Suspect {
         let bound = crate::estimate::bound_at_fit(model, fit);
         let model = &bound;
         let layout = BaseLayout::new(model, fit);
-        let folds: Vec<Fold> = (0..runs.len())
+        let (folds, raws): (Vec<Fold>, Vec<Fold>) = (0..runs.len())
             .into_par_iter()
             .map(|r| self.run_system(r, model, fit, &layout, &runs[r], &noise[r]))
-            .collect();
+            .unzip();
         let p = layout.count + self.width;
-        let mut total = Fold { g: DMatrix::zeros(p, p), b: DVector::zeros(p), yy: 0.0 };
-        for f in &folds {
-            total.g += &f.g;
-            total.b += &f.b;
-            total.yy += f.yy;
-        }
+        let sum = |fs: &[Fold]| {
+            let mut total = Fold { g: DMatrix::zeros(p, p), b: DVector::zeros(p), yy: 0.0 };
+            for f in fs {
+                total.g += &f.g;
+                total.b += &f.b;
+                total.yy += f.yy;
+            }
+            total
+        };
+        let (total, raw) = (sum(&folds), sum(&raws));
         let samples = runs.iter().map(|r| 6 * r.len()).sum();
-        Systems { folds, total, base: layout.count, samples }
+        Systems { folds, total, raw, base: layout.count, samples }
     }
 
     #[allow(clippy::too_many_lines)]
@@ -311,7 +325,7 @@ impl Suspect {
         layout: &BaseLayout,
         run: &FitRun<'_>,
         noise: &RunNoiseModel,
-    ) -> Fold {
+    ) -> (Fold, Fold) {
         let p_all = layout.count + self.width;
         let n = run.len();
         let locals = &self.locals[r];
@@ -394,21 +408,25 @@ impl Suspect {
             }
         }
         let mut fold = Fold { g: DMatrix::zeros(p_all, p_all), b: DVector::zeros(p_all), yy: 0.0 };
+        let mut raw = fold.clone();
         for (c, w) in chans.into_iter().enumerate() {
             let mut gm = w.finish();
             if let Some(d) = slow(c) {
                 super::slow::adjust_gram(&mut gm, index[c].len(), nb(c), d);
             }
+            let phi = noise.dispersion[c].max(1.0);
             let m = gm.nrows();
-            for (i, &gi) in index[c].iter().enumerate() {
-                for (j, &gj) in index[c].iter().enumerate() {
-                    fold.g[(gi, gj)] += gm[(i, j)];
+            for (f, scale) in [(&mut raw, 1.0), (&mut fold, 1.0 / phi)] {
+                for (i, &gi) in index[c].iter().enumerate() {
+                    for (j, &gj) in index[c].iter().enumerate() {
+                        f.g[(gi, gj)] += scale * gm[(i, j)];
+                    }
+                    f.b[gi] += scale * gm[(i, m - 1)];
                 }
-                fold.b[gi] += gm[(i, m - 1)];
+                f.yy += scale * gm[(m - 1, m - 1)];
             }
-            fold.yy += gm[(m - 1, m - 1)];
         }
-        fold
+        (fold, raw)
     }
 }
 
@@ -531,13 +549,21 @@ fn reduce(s: &Fold, base: usize, group: &[Combo]) -> (DMatrix<f64>, DVector<f64>
 }
 
 impl Systems {
-    /// The evidence for a group and its values and standard errors (all-run GLS).
-    fn evidence(&self, group: &[Combo]) -> (Evidence, Vec<(f64, f64)>) {
+    /// The evidence for a group (channels weighed by their dispersion), its values and
+    /// standard errors (all-run GLS), and its ΔBIC without the dispersion (the sensor
+    /// candidates' scale, for ranking against them).
+    fn evidence(&self, group: &[Combo]) -> (Evidence, Vec<(f64, f64)>, f64) {
         let (g, b) = reduce(&self.total, self.base, group);
         let base_set: Vec<usize> = (0..self.base).collect();
         let all: Vec<usize> = (0..g.nrows()).collect();
         let l0 = Lsq::solve(&g, &b, self.total.yy, &base_set);
         let l1 = Lsq::solve(&g, &b, self.total.yy, &all);
+        let raw_bic = {
+            let (g, b) = reduce(&self.raw, self.base, group);
+            let (q0, q1) = (Lsq::solve(&g, &b, self.raw.yy, &base_set).q, Lsq::solve(&g, &b, self.raw.yy, &all).q);
+            let added = l1.rank.saturating_sub(l0.rank);
+            -(q0 - q1).max(0.0) + added as f64 * (self.samples.max(2) as f64).ln()
+        };
         let delta_q = (l0.q - l1.q).max(0.0);
         let added = l1.rank.saturating_sub(l0.rank);
         let p_value = if added == 0 {
@@ -563,7 +589,7 @@ impl Systems {
             delta_q_sensor: [0.0; 2],
             nonlinear: false,
         };
-        (ev, values)
+        (ev, values, raw_bic)
     }
 
     /// Σ over left-out runs of the χ² reduction: the model's coefficients and the group's
@@ -606,6 +632,8 @@ impl Systems {
 pub struct Pick {
     group: usize,
     evidence: Evidence,
+    /// ΔBIC without the channels' dispersion (ranked against the sensor candidates).
+    raw_bic: f64,
 }
 
 impl Suspect {
@@ -615,13 +643,13 @@ impl Suspect {
         let mut best: Option<Pick> = None;
         let mut passed: Vec<&str> = Vec::new();
         for (gi, g) in self.groups.iter().enumerate() {
-            let (ev, values) = sys.evidence(&g.params);
+            let (ev, values, raw_bic) = sys.evidence(&g.params);
             if ev.rejection().is_some() || !self.plausible(g.id, &values) {
                 continue;
             }
             passed.push(g.id);
-            if best.as_ref().is_none_or(|b| ev.delta_bic < b.evidence.delta_bic) {
-                best = Some(Pick { group: gi, evidence: ev });
+            if best.as_ref().is_none_or(|b| raw_bic < b.raw_bic) {
+                best = Some(Pick { group: gi, evidence: ev, raw_bic });
             }
         }
         // One value for every run before one per run: the common group first when it passes
@@ -631,13 +659,13 @@ impl Suspect {
             if let Some(common) = self.groups[b.group].id.strip_suffix("-per-run") {
                 if passed.contains(&common) {
                     if let Some(ci) = self.groups.iter().position(|g| g.id == common) {
-                        b.group = ci;
-                        b.evidence = sys.evidence(&self.groups[ci].params).0;
+                        let (ev, _, raw_bic) = sys.evidence(&self.groups[ci].params);
+                        *b = Pick { group: ci, evidence: ev, raw_bic };
                     }
                 }
             }
         }
-        best.filter(|b| sensor_bic.is_none_or(|s| b.evidence.delta_bic < s))
+        best.filter(|b| sensor_bic.is_none_or(|s| b.raw_bic < s))
     }
 
     /// Whether a group's estimate is something a stand does (within its limits).
@@ -680,7 +708,7 @@ impl Suspect {
             let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
             let fit = crate::estimate::fit(&FitRequest::runs(model, &moved).options(*opts))?.fit;
             let sys = self.systems(model, &fit, &moved, noise);
-            let (_, values) = sys.evidence(&params);
+            let (_, values, _) = sys.evidence(&params);
             let mut worst = 0.0f64;
             for (combo, (v, se)) in params.iter().zip(&values) {
                 for &(gi, w) in combo {

@@ -17,8 +17,21 @@ pub(super) struct StandCheck<'s, 'r, 'a> {
     declared: &'r [FitRun<'a>],
 }
 
-/// The noise model of every run and channel of an analysis.
-fn noise_models(space: &Space) -> Vec<stand::RunNoiseModel> {
+/// The noise model of every run and channel of an analysis, with each channel's dispersion
+/// (its residual's mean square over the noise model's variance, at least 1).
+fn noise_models(a: &Analysis) -> Vec<stand::RunNoiseModel> {
+    let space: &Space = &a.space;
+    let floor = super::noise_reports(space);
+    let dispersion: [f64; 6] = std::array::from_fn(|c| {
+        let sensor = crate::units::SensorKind::BOTH[c / 3];
+        let rms = a.base_fit.sensor(sensor).channels.get(c % 3).map_or(0.0, |ch| ch.residual_rms);
+        let sigma = floor[c].sigma;
+        if sigma > 0.0 && rms.is_finite() {
+            (rms / sigma).powi(2).max(1.0)
+        } else {
+            1.0
+        }
+    });
     space
         .runs
         .iter()
@@ -26,6 +39,7 @@ fn noise_models(space: &Space) -> Vec<stand::RunNoiseModel> {
             ar: rg.noise.iter().map(|n| n.ar.clone()).collect(),
             basis: rg.run_basis,
             slow: rg.slow.clone(),
+            dispersion,
         })
         .collect()
 }
@@ -42,11 +56,15 @@ impl StandCheck<'_, '_, '_> {
         sensor_bic: Option<f64>,
         opts: &FitOptions,
     ) -> Result<bool, EstimateError> {
-        let noise = noise_models(&a.space);
+        let noise = noise_models(a);
         let sys = self.suspect.systems(current, &a.base_fit, runs, &noise);
         match self.suspect.pick(&sys, sensor_bic) {
             Some(pick) => {
-                self.suspect.accept(pick, current, self.declared, &noise, opts)?;
+                // The dispersion decides whether a group is evidence; the estimate weighs each
+                // channel by its noise model alone (the misfit it had is what the group removes).
+                let plain: Vec<stand::RunNoiseModel> =
+                    noise.into_iter().map(|n| stand::RunNoiseModel { dispersion: [1.0; 6], ..n }).collect();
+                self.suspect.accept(pick, current, self.declared, &plain, opts)?;
                 Ok(true)
             }
             None => Ok(false),
@@ -70,7 +88,7 @@ pub(super) fn findings(
             for s in steps {
                 let _ = m.add_effect(&s.effect);
             }
-            let sys = sc.suspect.systems(&m, final_fit, runs, &noise_models(&a.space));
+            let sys = sc.suspect.systems(&m, final_fit, runs, &noise_models(a));
             sc.suspect.findings(&sys, &a.names)
         }
         _ => Vec::new(),

@@ -292,7 +292,7 @@ impl SimConfig {
             .map(|p| p.generator(dt, session_s))
             .collect();
         let mut crng = ChaCha8Rng::seed_from_u64(self.seed ^ 0x05ee_dca7_71ed);
-        for plan in &self.runs {
+        for (run_index, plan) in self.runs.iter().enumerate() {
             let n = (plan.duration_s * self.sample_rate_hz).round().max(1.0) as usize;
             let t0 = if self.realism.session_clock_gap_s.is_some() { clock_s } else { 0.0 };
             let t_s: Vec<f64> = (0..n).map(|k| t0 + k as f64 / self.sample_rate_hz).collect();
@@ -335,7 +335,7 @@ impl SimConfig {
                     a[i] = (ua[i] / self.g_m_s2 + na) * ka;
                 }
                 let theta = crate::motion::cone_phase(&plan.motion).map(|p| p.theta(rec.t_s[k]));
-                self.realism.disturb(rec.t_s[k], theta, conic_index, &mut g, &mut a);
+                self.realism.disturb(rec.t_s[k], theta, (conic_index, run_index), &mut g, &mut a);
                 if coloured {
                     for i in 0..3 {
                         g[i] += gens[i].next_sample(prng);

@@ -48,6 +48,15 @@ pub enum Disturbance {
         /// Change of scale above it (0.03 = +3 %).
         slope: f64,
     },
+    /// A turn-on bias: a different constant offset on one output in each run, drawn once per
+    /// run (standard deviation `sigma`, SI) from a fixed sequence, so that every session
+    /// with the same runs gets the same offsets.
+    TurnOn {
+        /// Output channel 0..6.
+        channel: usize,
+        /// Standard deviation of the offsets, SI.
+        sigma: f64,
+    },
     /// A hard clip of one output at ±limit.
     Clip {
         /// Output channel 0..6.
@@ -55,6 +64,20 @@ pub enum Disturbance {
         /// Limit, SI.
         limit: f64,
     },
+}
+
+/// The `i`-th draw of a fixed standard normal sequence (SplitMix64 to two uniforms, then
+/// Box–Muller): the same offsets for the same run on every call.
+fn standard_normal(i: usize) -> f64 {
+    let mix = |mut z: u64| {
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    };
+    let seed = (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15).wrapping_add(0x2545_f491_4f6c_dd1d);
+    let uniform = |z: u64| ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+    let (u1, u2) = (uniform(mix(seed)), uniform(mix(seed ^ 0x5851_f42d_4c95_7f2d)));
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 fn channel_of(s: &str) -> Result<(usize, f64), String> {
@@ -84,7 +107,8 @@ fn number(s: &str, what: &str) -> Result<f64, String> {
 
 impl Disturbance {
     /// Parses `wobble:CHANNEL:HARMONIC:AMPLITUDE:EVERY`, `sine:CHANNEL:FREQ_HZ:AMPLITUDE`,
-    /// `saturate:SENSOR:LIMIT`, `knee:CHANNEL:LEVEL:SLOPE` or `clip:CHANNEL:LIMIT`
+    /// `saturate:SENSOR:LIMIT`, `knee:CHANNEL:LEVEL:SLOPE`, `turnon:CHANNEL:SIGMA` or
+    /// `clip:CHANNEL:LIMIT`
     /// (amplitudes, levels and limits in deg/s for the gyro, g for the accelerometer;
     /// channels like `gyro-y`; a slope is relative, 0.03 = +3 %).
     pub fn parse(s: &str) -> Result<Self, String> {
@@ -124,6 +148,14 @@ impl Disturbance {
                 let (channel, k) = channel_of(ch)?;
                 Ok(Self::Knee { channel, threshold: number(level, "threshold")? * k, slope: number(slope, "slope")? })
             }
+            ["turnon", ch, sd] => {
+                let (channel, k) = channel_of(ch)?;
+                let sigma = number(sd, "sigma")? * k;
+                if sigma <= 0.0 {
+                    return Err("turnon: the standard deviation must be positive".into());
+                }
+                Ok(Self::TurnOn { channel, sigma })
+            }
             ["clip", ch, l] => {
                 let (channel, k) = channel_of(ch)?;
                 let limit = number(l, "limit")? * k;
@@ -133,7 +165,7 @@ impl Disturbance {
                 Ok(Self::Clip { channel, limit })
             }
             _ => Err(format!(
-                "'{s}': expected wobble:CHANNEL:HARMONIC:AMPLITUDE:EVERY, sine:CHANNEL:FREQ_HZ:AMPLITUDE, saturate:SENSOR:LIMIT, knee:CHANNEL:LEVEL:SLOPE or clip:CHANNEL:LIMIT"
+                "'{s}': expected wobble:CHANNEL:HARMONIC:AMPLITUDE:EVERY, sine:CHANNEL:FREQ_HZ:AMPLITUDE, saturate:SENSOR:LIMIT, knee:CHANNEL:LEVEL:SLOPE, turnon:CHANNEL:SIGMA or clip:CHANNEL:LIMIT"
             )),
         }
     }
@@ -158,8 +190,16 @@ pub struct Realism {
 
 impl Realism {
     /// Applies the disturbances to one sample's outputs (SI): `theta` is the cone phase
-    /// (None for non-conic runs), `conic_index` the run's index among the conic runs.
-    pub fn disturb(&self, t_s: f64, theta: Option<f64>, conic_index: usize, g: &mut [f64; 3], a: &mut [f64; 3]) {
+    /// (None for non-conic runs), `conic_index` the run's index among the conic runs and
+    /// `run_index` among all runs.
+    pub fn disturb(
+        &self,
+        t_s: f64,
+        theta: Option<f64>,
+        (conic_index, run_index): (usize, usize),
+        g: &mut [f64; 3],
+        a: &mut [f64; 3],
+    ) {
         for d in &self.disturbances {
             match *d {
                 Disturbance::Wobble { channel, harmonic, amplitude, every } => {
@@ -174,6 +214,7 @@ impl Realism {
                     let v = if channel < 3 { &mut g[channel] } else { &mut a[channel - 3] };
                     *v += slope * if threshold >= 0.0 { (*v - threshold).max(0.0) } else { (*v - threshold).min(0.0) };
                 }
+                Disturbance::TurnOn { channel, sigma } => add(channel, sigma * standard_normal(run_index), g, a),
                 Disturbance::Clip { channel, limit } => {
                     let v = if channel < 3 { &mut g[channel] } else { &mut a[channel - 3] };
                     *v = v.clamp(-limit, limit);
