@@ -45,7 +45,8 @@ fn ok(dir: &Path, args: &[&str]) -> String {
     out
 }
 
-fn simulate(dir: &Path, out: &str, seed: &str, rates: &str, hidden: &str, sets: &[&str]) {
+/// `crosscal simulate` of a 12 s session with `hidden` set by `sets`, then `extra` flags.
+fn simulate(dir: &Path, out: &str, seed: &str, rates: &str, hidden: &str, sets: &[&str], extra: &[&str]) {
     let mut args = vec![
         "simulate",
         "--effects-file",
@@ -68,6 +69,7 @@ fn simulate(dir: &Path, out: &str, seed: &str, rates: &str, hidden: &str, sets: 
     for s in sets {
         args.extend(["--set", s]);
     }
+    args.extend_from_slice(extra);
     ok(dir, &args);
 }
 
@@ -127,8 +129,8 @@ fn scenario(c: &Case<'_>) {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
     std::fs::write(dir.join("effects.toml"), EFFECTS).unwrap();
-    simulate(dir, "sim", "1", "10,-10,20", c.id, c.sets);
-    simulate(dir, "held", "2", "15,-15", c.id, c.sets);
+    simulate(dir, "sim", "1", "10,-10,20", c.id, c.sets, &[]);
+    simulate(dir, "held", "2", "15,-15", c.id, c.sets, &[]);
 
     // The catalogue alone leaves the residual systematic on the effect's channel.
     let (_, catalogue) = fit(dir, &[]);
@@ -223,7 +225,7 @@ fn a_knee_is_the_only_finding_on_six_seeds() {
     for seed in 1..=6 {
         let out = format!("s{seed}");
         let sets = ["gyro-x-knee.k=0.03", "gyro-x-knee.w0=0.06981317007977318"];
-        simulate(dir, &out, &seed.to_string(), "10,-10,20", "gyro-x-knee", &sets);
+        simulate(dir, &out, &seed.to_string(), "10,-10,20", "gyro-x-knee", &sets, &[]);
         let session = format!("{out}/session.json");
         let json = ok(dir, &["diagnose", &session, "--effects-file", "effects.toml", "--json"]);
         let d: serde_json::Value = serde_json::from_str(&json).unwrap();
@@ -313,34 +315,8 @@ fn a_lot_with_a_user_effect_is_batched_and_accepted() {
     std::fs::write(dir.join("effects.toml"), EFFECTS).unwrap();
     for i in 0..3 {
         let (out, seed, serial) = (format!("lot/u{i}"), (10 + i).to_string(), format!("U{i}"));
-        ok(
-            dir,
-            &[
-                "simulate",
-                "--effects-file",
-                "effects.toml",
-                "-o",
-                &out,
-                "--duration",
-                "12",
-                "--rates",
-                "10,-10,20",
-                "--seed",
-                &seed,
-                "--gyro-noise",
-                "0.002",
-                "--accel-noise",
-                "2e-5",
-                "--hidden",
-                "gyro-x-knee",
-                "--set",
-                "gyro-x-knee.k=0.03",
-                "--set",
-                "gyro-x-knee.w0=0.0698",
-                "--serial",
-                &serial,
-            ],
-        );
+        let sets = ["gyro-x-knee.k=0.03", "gyro-x-knee.w0=0.0698"];
+        simulate(dir, &out, &seed, "10,-10,20", "gyro-x-knee", &sets, &["--serial", &serial]);
     }
     let rules = r#"{"format":"crosscal-rules/1","rules":[{"kind":"adequate"},{"kind":"std_error","select":"gyro-x-knee.*","max":0.001}]}"#;
     std::fs::write(dir.join("rules.json"), rules).unwrap();

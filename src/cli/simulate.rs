@@ -105,7 +105,9 @@ pub struct Args {
     #[arg(long)]
     si_units: bool,
     /// A disturbance outside the catalogue (repeatable): wobble:CHANNEL:HARMONIC:AMPLITUDE:EVERY,
-    /// sine:CHANNEL:FREQ_HZ:AMPLITUDE or saturate:SENSOR:LIMIT (deg/s or g; channels gyro-y …).
+    /// sine:CHANNEL:FREQ_HZ:AMPLITUDE, saturate:SENSOR:LIMIT, knee:CHANNEL:LEVEL:SLOPE,
+    /// clip:CHANNEL:LIMIT or turnon:CHANNEL:SIGMA (a different offset in each run) (deg/s or g;
+    /// channels gyro-y …).
     #[arg(long = "disturb", value_parser = crosscal::simulate::realism::Disturbance::parse)]
     disturb: Vec<crosscal::simulate::realism::Disturbance>,
     /// The stand moved otherwise than the manifest says (repeatable, KEY=VALUE): cone=DEG
