@@ -402,3 +402,31 @@ fn inputs_of(node: &expr::Node) -> Inputs {
 fn axis_of(s: &str) -> Option<usize> {
     AXES.iter().position(|a| a.to_string() == s)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const INPUT: &str = "[[effect]]\nid = \"in-x\"\nsensor = \"gyro\"\noutput = \"x\"\nside = \"input\"\nexpr = \"s * w_x\"\nparameters = { s = 0.5 }\n";
+
+    /// The input side's inverse solves z = x + s·x by fixed point: it converges for
+    /// |s| < 1 (x = z / (1 + s), no flag) and is flagged (bit of its axis, value zeroed)
+    /// where the iteration diverges.
+    #[test]
+    #[allow(clippy::float_cmp)] // untouched values are compared bit for bit on purpose
+    fn the_input_side_inverse_converges_or_flags_the_sample() {
+        let e = load_str("t.toml", INPUT).unwrap().remove(0);
+        let nl = UserNonlinear(e);
+        let mut z = [0.3, -0.2, 0.1];
+        assert_eq!(nl.invert_sample(&[0.5], SensorKind::Gyro, &mut z, &[0.0; 3]), 0);
+        assert!((z[0] - 0.3 / 1.5).abs() < 1e-12 && z[1] == -0.2 && z[2] == 0.1, "{z:?}");
+        // The accelerometer is not its sensor: untouched.
+        let mut a = [1.0, 2.0, 3.0];
+        assert_eq!(nl.invert_sample(&[0.5], SensorKind::Accel, &mut a, &[0.0; 3]), 0);
+        assert_eq!(a, [1.0, 2.0, 3.0]);
+        // s = 2: x ← z − 2x diverges; the sample is flagged on x.
+        let mut z = [0.3, -0.2, 0.1];
+        assert_eq!(nl.invert_sample(&[2.0], SensorKind::Gyro, &mut z, &[0.0; 3]), 1);
+        assert_eq!(z[0], 0.0);
+    }
+}
