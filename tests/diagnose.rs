@@ -1,6 +1,6 @@
 //! Discovery: a session with one effect the model lacks; `diagnose` must name it.
 
-use crosscal::diagnose::{channel_reports, diagnose, residuals, Diagnosis, Verdict};
+use crosscal::diagnose::{channel_reports, diagnose_with_mode, residuals, Diagnosis, SlowNoiseMode, Verdict};
 use crosscal::estimate::FitOptions;
 use crosscal::estimate::{fit_runs, tracks};
 use crosscal::model::Model;
@@ -31,16 +31,25 @@ pub fn hidden(effect: &str, values: &[(&str, f64)], seed: u64) -> (SimConfig, Se
     (cfg, s)
 }
 
+/// Diagnoses a session from the default model as `crosscal diagnose` does (slow noise
+/// `auto`).
 pub fn run_diagnose(s: &Session) -> Diagnosis {
-    run_diagnose_with(s, &FitOptions::default())
+    run_diagnose_mode(s, &FitOptions::default(), SlowNoiseMode::Auto)
 }
 
-/// Diagnoses a session from the default model with these fit options.
+/// Diagnoses a session from the default model with these fit options (slow noise `on`
+/// or `off` as `opts.slow_noise` says).
 pub fn run_diagnose_with(s: &Session, opts: &FitOptions) -> Diagnosis {
+    let mode = if opts.slow_noise { SlowNoiseMode::On } else { SlowNoiseMode::Off };
+    run_diagnose_mode(s, opts, mode)
+}
+
+/// Diagnoses a session from the default model with these fit options and slow-noise mode.
+pub fn run_diagnose_mode(s: &Session, opts: &FitOptions, mode: SlowNoiseMode) -> Diagnosis {
     let tr = tracks(s, &DerivativeConfig::default());
     let runs = fit_runs(s, &tr);
     let motions: Vec<&MotionSpec> = s.runs.iter().map(|r| &r.spec.motion).collect();
-    diagnose(&Model::default_model(), &runs, &motions, opts).unwrap()
+    diagnose_with_mode(&Model::default_model(), &runs, &motions, opts, mode).unwrap()
 }
 
 /// Runs the discovery acceptance for one hidden effect.

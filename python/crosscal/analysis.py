@@ -297,7 +297,7 @@ def diagnose(
     *,
     profile: Optional[Union[Profile, PathLike]] = None,
     trim_rest: bool = False,
-    slow_noise: bool = False,
+    slow_noise: Optional[bool] = None,
 ) -> Diagnosis:
     """Compare model and measurement (``crosscal diagnose``): where the model fails and
     which physical effect is missing.
@@ -306,8 +306,10 @@ def diagnose(
     tries every catalogue effect on the residual under a noise model estimated from it: an
     effect is proposed only on evidence from runs left out of the fit, with one size in
     every run; otherwise the verdict says the model is adequate or what stays unexplained.
-    ``slow_noise=True`` is ``--slow-noise``: flicker and bias random walk are measured and
-    treated as noise, not as a systematic residual.
+    ``slow_noise=True`` is ``--slow-noise on``: flicker and bias random walk are measured
+    and treated as noise, not as a systematic residual; ``False`` is ``--slow-noise off``
+    (the AR noise model only); ``None`` (default) is ``auto``: slow noise is taken as noise
+    when the session's slow variation wanders like it and hides no effect found without it.
     """
     s = _session(session)
     text = None if profile is None else _profile_json(profile)

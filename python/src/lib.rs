@@ -658,7 +658,7 @@ impl Diagnosis {
 
 /// Diagnoses a session from a model (or a profile held as fitted).
 #[pyfunction]
-#[pyo3(signature = (session, preset, effects, profile_json, trim_rest, slow_noise=false))]
+#[pyo3(signature = (session, preset, effects, profile_json, trim_rest, slow_noise=None))]
 fn diagnose(
     py: Python<'_>,
     session: &Session,
@@ -666,8 +666,14 @@ fn diagnose(
     effects: Vec<String>,
     profile_json: Option<&str>,
     trim_rest: bool,
-    slow_noise: bool,
+    slow_noise: Option<bool>,
 ) -> PyResult<Diagnosis> {
+    use crosscal::diagnose::SlowNoiseMode;
+    let slow_noise = match slow_noise {
+        None => SlowNoiseMode::Auto,
+        Some(true) => SlowNoiseMode::On,
+        Some(false) => SlowNoiseMode::Off,
+    };
     let spec = model_spec(py, preset, effects, Vec::new())?;
     let profile = match profile_json {
         Some(j) => Some(profile_of(py, j, "<profile>")?),

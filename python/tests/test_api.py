@@ -192,6 +192,10 @@ def test_slow_noise_is_noise_in_the_fit_and_the_diagnosis():
                           seed=36104)
     d = crosscal.diagnose(s, slow_noise=True)
     assert d.verdict == "adequate", d.verdict
+    # The default (automatic) choice takes the wander for noise too; the AR model alone
+    # does not.
+    assert crosscal.diagnose(s).verdict == "adequate"
+    assert crosscal.diagnose(s, slow_noise=False).verdict == "unexplained"
     plain = crosscal.fit(s).coefficients.set_index("name")["std_error"]
     slow = crosscal.fit(s, slow_noise=True).coefficients.set_index("name")["std_error"]
     for b in ("gyro.b_x", "gyro.b_y", "gyro.b_z", "accel.b_x", "accel.b_y", "accel.b_z"):

@@ -58,7 +58,8 @@ pub fn acceptance(
         let tr = tracks(session, &DerivativeConfig::default());
         let runs = fit_runs(session, &tr);
         let motions: Vec<&crate::session::MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
-        let d = crate::diagnose::diagnose(&model, &runs, &motions, &FitOptions::default())
+        let mode = crate::diagnose::SlowNoiseMode::Auto;
+        let d = crate::diagnose::diagnose_with_mode(&model, &runs, &motions, &FitOptions::default(), mode)
             .map_err(|source| AppError::Fit { what: what.clone(), source })?;
         let ok = d.verdict == crate::diagnose::Verdict::Adequate;
         let mut why = d.unexplained.clone();

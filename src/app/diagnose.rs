@@ -54,14 +54,15 @@ pub fn start_model(
 }
 
 /// Diagnoses `session` from `model` (`trim_rest`: a multi-position session's initial rest
-/// is cut to its still part, as `fit --trim-rest`; `slow_noise`: the fits measure each
-/// channel's flicker and bias random walk and the evidence treats them as noise, as
-/// `fit --slow-noise`).
+/// is cut to its still part, as `fit --trim-rest`; `slow_noise`: whether the fits measure
+/// each channel's flicker and bias random walk and the evidence treats them as noise, as
+/// `fit --slow-noise` — always, never, or when the session's slow variation wanders like
+/// noise, [`crate::diagnose::SlowNoiseMode`]; stand sessions).
 pub fn diagnose_session(
     session: &Session,
     model: &Model,
     trim_rest: bool,
-    slow_noise: bool,
+    slow_noise: crate::diagnose::SlowNoiseMode,
 ) -> Result<Diagnosed, AppError> {
     let what = session.manifest_path.display().to_string();
     let fit_err = |source| AppError::Fit { what: what.clone(), source };
@@ -73,8 +74,8 @@ pub fn diagnose_session(
     let tr = tracks(session, &DerivativeConfig::default());
     let runs = fit_runs(session, &tr);
     let motions: Vec<&MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
-    let opts = FitOptions { slow_noise, ..FitOptions::default() };
-    let d = crate::diagnose::diagnose(model, &runs, &motions, &opts).map_err(fit_err)?;
+    let d = crate::diagnose::diagnose_with_mode(model, &runs, &motions, &FitOptions::default(), slow_noise)
+        .map_err(fit_err)?;
     Ok(Diagnosed::Stand(Box::new(d)))
 }
 

@@ -6,7 +6,7 @@ use crate::{out, outln};
 use anyhow::Context;
 use crosscal::app::diagnose::{diagnose_session, start_model, Diagnosed};
 use crosscal::diagnose::protocol::ProtocolDiagnosis;
-use crosscal::diagnose::{ChannelReport, Verdict};
+use crosscal::diagnose::{ChannelReport, SlowNoiseMode, Verdict};
 use crosscal::session::Session;
 use std::path::PathBuf;
 
@@ -38,15 +38,35 @@ pub struct Args {
     /// part (as `fit --trim-rest`).
     #[arg(long)]
     trim_rest: bool,
-    /// Treat slow noise as noise: the fits measure each channel's flicker (bias instability)
-    /// and bias random walk, and a slow variation of that size in a run is not called a
-    /// systematic residual (as `fit --slow-noise`; stand sessions). Use it on MEMS units whose
-    /// `crosscal noise` shows bias instability or rate random walk.
-    #[arg(long)]
-    slow_noise: bool,
+    /// Slow noise (flicker, bias random walk) as noise: `on` measures each channel's bias
+    /// instability and random walk and does not call a slow variation of that size a
+    /// systematic residual (as `fit --slow-noise`); `off` keeps the AR noise model only;
+    /// `auto` (default) diagnoses with `off` and, when that leaves a systematic residual,
+    /// takes `on` if it keeps every effect found, clears channels and none of them jumps
+    /// between runs like a turn-on bias. Stand sessions. `--slow-noise` alone means `on`.
+    #[arg(long, value_enum, default_value = "auto", num_args = 0..=1, default_missing_value = "on")]
+    slow_noise: SlowNoiseArg,
     /// Replace output files that already exist (never a device, FIFO or folder).
     #[arg(long)]
     force: bool,
+}
+
+/// `--slow-noise` values.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum SlowNoiseArg {
+    Auto,
+    On,
+    Off,
+}
+
+impl From<SlowNoiseArg> for SlowNoiseMode {
+    fn from(a: SlowNoiseArg) -> Self {
+        match a {
+            SlowNoiseArg::Auto => SlowNoiseMode::Auto,
+            SlowNoiseArg::On => SlowNoiseMode::On,
+            SlowNoiseArg::Off => SlowNoiseMode::Off,
+        }
+    }
 }
 
 fn channel_table(c: &[ChannelReport]) -> String {
@@ -83,7 +103,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         None => None,
     };
     let model = start_model(&session, &a.model.spec(&[]), a.profile.as_deref().zip(profile.as_ref()))?;
-    let d = match diagnose_session(&session, &model, a.trim_rest, a.slow_noise)? {
+    let d = match diagnose_session(&session, &model, a.trim_rest, a.slow_noise.into())? {
         Diagnosed::Protocol(d) => return run_protocol(&a, &session, &d),
         Diagnosed::Stand(d) => d,
     };

@@ -50,12 +50,30 @@ pub struct SlowNoise {
     /// constant modelled: faster noise is in the white and AR part).
     #[serde(default)]
     pub block_s: f64,
+    /// Log-likelihood ratio (restricted, on the same block means) of a different constant
+    /// offset in each run (a turn-on bias: white within runs, jumps between them) over the
+    /// flicker and walk: above [`TURN_ON_EVIDENCE`] the runs' offsets jump rather than
+    /// wander, a pattern a wandering bias does not make (it moves within runs too and
+    /// carries from one run into the next), and no slow part is modelled (B = K = 0).
+    #[serde(default)]
+    pub turn_on_log_lr: f64,
 }
+
+/// Log-likelihood ratio above which a channel's run offsets are a turn-on bias rather than
+/// slow noise (e⁵ ≈ 150 times likelier; the alternatives have two and three variances; clean
+/// sessions under MEMS wander read below 2.5).
+pub const TURN_ON_EVIDENCE: f64 = 5.0;
 
 impl SlowNoise {
     /// Whether it has a slow part at all.
     pub fn is_slow(&self) -> bool {
         self.bias_instability > 0.0 || self.random_walk > 0.0
+    }
+
+    /// Whether the runs' offsets are better told as a turn-on bias than as this wander
+    /// ([`SlowNoise::turn_on_log_lr`]).
+    pub fn jumps_between_runs(&self) -> bool {
+        self.turn_on_log_lr > TURN_ON_EVIDENCE
     }
 
     /// Its covariance kernel over a session of `span_s`.
@@ -347,6 +365,7 @@ pub fn fit_allan(points: &[AllanPoint], block_s: f64, span_s: f64) -> SlowNoise 
         random_walk: k2.sqrt(),
         se_inflation: 1.0,
         block_s,
+        turn_on_log_lr: 0.0,
     }
 }
 
@@ -397,6 +416,7 @@ const REML_PER_RUN: usize = 16;
 /// One coarse block of a channel: session-clock centre and length (s), samples, the
 /// block-level design row (block sums of the regressors over the count) and mean residual.
 struct Coarse {
+    source: usize,
     centre: f64,
     len: f64,
     x: DVector<f64>,
@@ -423,7 +443,13 @@ fn coarse_blocks(sources: &[SourceBlocks], c: usize, offsets: &[f64], t0: f64, q
                 r += s.channels[c].mean[k] * s.count[k] as f64;
             }
             if n > 0.0 {
-                out.push(Coarse { centre: 0.5 * (a + b) + offsets[si] - t0, len: b - a, x: x / n, r: r / n });
+                out.push(Coarse {
+                    source: si,
+                    centre: 0.5 * (a + b) + offsets[si] - t0,
+                    len: b - a,
+                    x: x / n,
+                    r: r / n,
+                });
             }
         }
     }
@@ -441,7 +467,7 @@ fn coarse_blocks(sources: &[SourceBlocks], c: usize, offsets: &[f64], t0: f64, q
 /// Allan fit inside runs, the likelihood weighs the runs' offsets against each other, which
 /// is where a session shows its flicker and walk. Components are kept non-negative (a
 /// component with a negative step at zero stays there). `start` seeds the iteration.
-fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<[f64; 3]> {
+fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<([f64; 3], f64)> {
     let m = blocks.len();
     let q = blocks.first()?.x.len();
     if m < q + 6 {
@@ -450,7 +476,7 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<[f64
     let x = DMatrix::from_fn(m, q, |b, j| blocks[b].x[j]);
     let y = DVector::from_fn(m, |b, _| blocks[b].r);
     let comps = [
-        DMatrix::from_fn(m, m, |a, b| if a == b { 1.0 / blocks[a].len.max(f64::MIN_POSITIVE) } else { 0.0 }),
+        white_component(blocks),
         DMatrix::from_fn(m, m, |a, b| {
             let (ba, bb) = (&blocks[a], &blocks[b]);
             block_cov(flick, 1.0, 0.0, (ba.centre, ba.len), (bb.centre, bb.len), a == b)
@@ -470,14 +496,50 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<[f64
         let v: f64 = blocks.iter().map(|b| b.r * b.r * b.len).sum::<f64>() / m as f64;
         first[0] = v.max(f64::MIN_POSITIVE);
     }
-    reml_climb(&comps, &x, &y, first).filter(|t| t.iter().all(|v| v.is_finite()))
+    let (theta, ll) = reml_climb(&comps, &x, &y, first.to_vec())?;
+    let theta = [theta[0], theta[1], theta[2]];
+    theta.iter().all(|v| v.is_finite()).then_some((theta, ll))
 }
 
-/// One REML climb from `theta`: average-information steps on the restricted
-/// log-likelihood −½(ln|V| + ln|XᵀV⁻¹X| + yᵀPy) until no component moves by 1e-4 of itself.
-fn reml_climb(comps: &[DMatrix<f64>; 3], x: &DMatrix<f64>, y: &DVector<f64>, mut theta: [f64; 3]) -> Option<[f64; 3]> {
+/// White noise of block means: diag 1/L_b.
+fn white_component(blocks: &[Coarse]) -> DMatrix<f64> {
+    let m = blocks.len();
+    DMatrix::from_fn(m, m, |a, b| if a == b { 1.0 / blocks[a].len.max(f64::MIN_POSITIVE) } else { 0.0 })
+}
+
+/// The restricted log-likelihood of white noise plus a constant offset drawn anew in each
+/// run (a turn-on bias, variance τ² shared by the runs) on the same block means, at its
+/// REML estimate; `white` seeds the white level. None when it does not converge.
+fn turn_on_likelihood(blocks: &[Coarse], white: f64) -> Option<f64> {
+    let m = blocks.len();
+    let q = blocks.first()?.x.len();
+    if m < q + 6 {
+        return None;
+    }
+    let x = DMatrix::from_fn(m, q, |b, j| blocks[b].x[j]);
+    let y = DVector::from_fn(m, |b, _| blocks[b].r);
+    let runs = DMatrix::from_fn(m, m, |a, b| if blocks[a].source == blocks[b].source { 1.0 } else { 0.0 });
+    let comps = [white_component(blocks), runs];
+    let start = if white > 0.0 { white } else { blocks.iter().map(|b| b.r * b.r * b.len).sum::<f64>() / m as f64 };
+    let (_, ll) = reml_climb(&comps, &x, &y, vec![start.max(f64::MIN_POSITIVE), 0.0])?;
+    ll.is_finite().then_some(ll)
+}
+
+/// One REML climb from `theta` (component 0 the white part, kept positive; the others
+/// non-negative): average-information steps on the restricted log-likelihood
+/// ℓ = −½(ln|V| + ln|XᵀV⁻¹X| + yᵀPy) until no component moves by 1e-4 of itself. Returns
+/// the components and ℓ there (constants dropped: comparable between models of the same
+/// block means and regressors).
+fn reml_climb(
+    comps: &[DMatrix<f64>],
+    x: &DMatrix<f64>,
+    y: &DVector<f64>,
+    mut theta: Vec<f64>,
+) -> Option<(Vec<f64>, f64)> {
+    let nc = comps.len();
+    let at = |theta: &[f64]| comps.iter().zip(theta).fold(DMatrix::zeros(x.nrows(), x.nrows()), |v, (c, t)| v + c * *t);
     for _ in 0..60 {
-        let v = &comps[0] * theta[0] + &comps[1] * theta[1] + &comps[2] * theta[2];
+        let v = at(&theta);
         let vinv = v.cholesky()?.inverse();
         let vx = &vinv * x;
         let xvx = (x.transpose() * &vx).try_inverse()?;
@@ -487,9 +549,9 @@ fn reml_climb(comps: &[DMatrix<f64>; 3], x: &DMatrix<f64>, y: &DVector<f64>, mut
         // no m³ product per component.
         let u: Vec<DVector<f64>> = comps.iter().map(|c| c * &py).collect();
         let pu: Vec<DVector<f64>> = u.iter().map(|v| &p * v).collect();
-        let score: Vec<f64> = (0..3).map(|i| 0.5 * (py.dot(&u[i]) - p.component_mul(&comps[i]).sum())).collect();
+        let score: Vec<f64> = (0..nc).map(|i| 0.5 * (py.dot(&u[i]) - p.component_mul(&comps[i]).sum())).collect();
         // Components at zero whose score points below zero stay at zero.
-        let free: Vec<usize> = (0..3).filter(|&i| i == 0 || theta[i] > 0.0 || score[i] > 0.0).collect();
+        let free: Vec<usize> = (0..nc).filter(|&i| i == 0 || theta[i] > 0.0 || score[i] > 0.0).collect();
         let info = DMatrix::from_fn(free.len(), free.len(), |a, b| 0.5 * u[free[a]].dot(&pu[free[b]]));
         let step = info.try_inverse()? * DVector::from_iterator(free.len(), free.iter().map(|&i| score[i]));
         let mut moved: f64 = 0.0;
@@ -502,7 +564,16 @@ fn reml_climb(comps: &[DMatrix<f64>; 3], x: &DMatrix<f64>, y: &DVector<f64>, mut
             break;
         }
     }
-    Some(theta)
+    let chol = at(&theta).cholesky()?;
+    let ln_det_v = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
+    let vinv = chol.inverse();
+    let vx = &vinv * x;
+    let xvx = (x.transpose() * &vx).cholesky()?;
+    let ln_det_xvx = 2.0 * xvx.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
+    let vy = &vinv * y;
+    let xvy = x.transpose() * &vy;
+    let ypy = y.dot(&vy) - xvy.dot(&xvx.solve(&xvy));
+    Some((theta, -0.5 * (ln_det_v + ln_det_xvx + ypy)))
 }
 
 /// Adds the slow part to channel `c`'s covariance (module documentation) and returns what
@@ -548,9 +619,19 @@ pub(crate) fn inflate(sources: &[SourceBlocks], c: usize, ch: &mut ChannelFit) -
         .flat_map(|(s, o)| s.centre_s.first().zip(s.length_s.first()).map(|(c, l)| c - 0.5 * l + o))
         .fold(f64::INFINITY, f64::min);
     let blocks = coarse_blocks(sources, c, &offsets, t_first, q);
-    let [n2, b2, k2] = reml(&blocks, &flick, start).unwrap_or(start);
-    if b2 == 0.0 && k2 == 0.0 {
-        return Some(SlowNoise { white_density: n2.sqrt(), se_inflation: 1.0, block_s: t_min, ..Default::default() });
+    let ([n2, b2, k2], ll) = reml(&blocks, &flick, start).map_or((start, None), |(t, ll)| (t, Some(ll)));
+    // The turn-on alternative on the same block means ([`SlowNoise::turn_on_log_lr`]).
+    let turn_on_log_lr = ll.zip(turn_on_likelihood(&blocks, n2)).map_or(0.0, |(a, b)| b - a);
+    // Offsets that jump between runs are not wander: none is modelled (the diagnosis draws
+    // them as a turn-on bias).
+    if (b2 == 0.0 && k2 == 0.0) || turn_on_log_lr > TURN_ON_EVIDENCE {
+        return Some(SlowNoise {
+            white_density: n2.sqrt(),
+            se_inflation: 1.0,
+            block_s: t_min,
+            turn_on_log_lr,
+            ..Default::default()
+        });
     }
     // d_b per block, with the session's time of each block.
     let mut d: Vec<(DVector<f64>, (f64, f64))> = Vec::new();
@@ -589,5 +670,6 @@ pub(crate) fn inflate(sources: &[SourceBlocks], c: usize, ch: &mut ChannelFit) -
         random_walk: k2.sqrt(),
         se_inflation: worst,
         block_s: t_min,
+        turn_on_log_lr,
     })
 }

@@ -1,0 +1,107 @@
+//! Whether a session's slow variation is noise: the diagnosis with and without slow noise
+//! (flicker and bias random walk, [`super::slow`]), and the choice between them.
+//!
+//! A MEMS unit's bias wanders: every run gets its own offset, slope and curvature, and the
+//! diagnosis under an AR noise model calls that a systematic residual ("turn-on bias" on
+//! every channel) and may even take it for the Earth's rotation. Treating the wander as
+//! noise everywhere has the opposite risk: a missing effect whose misfit differs from run
+//! to run (a lever arm, a thermal hysteresis) is then absorbed by a large measured wander.
+//! So the automatic mode diagnoses under the AR model first and, only when that leaves the
+//! session unexplained, again with the slow noise measured; it takes the second when
+//!
+//! 1. it keeps every effect the first one added (the wander hid no physics it found),
+//! 2. it leaves systematic only channels the first one left systematic, and fewer of them
+//!    (or none), and
+//! 3. no channel it cleared shows run offsets that jump rather than wander: a constant
+//!    offset drawn anew in each run, white within runs, is likelier than flicker and walk
+//!    on that channel's block means ([`crate::estimate::slow::SlowNoise::jumps_between_runs`]).
+//!    That is a turn-on bias, drawn as a shape. The fit already models no slow noise on
+//!    such a channel, so the second diagnosis keeps it systematic while it clears the
+//!    channels that wander; this rule guards the choice all the same.
+//!
+//! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
+//! this module only chooses.
+
+use super::{diagnose, Diagnosis, Verdict};
+use crate::estimate::{EstimateError, FitOptions, FitRun};
+use crate::units::{SensorKind, AXES};
+use serde::{Deserialize, Serialize};
+
+/// How the diagnosis treats slow noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SlowNoiseMode {
+    /// Decide per session (module documentation).
+    #[default]
+    Auto,
+    /// Always measure slow noise and treat it as noise (`--slow-noise on`).
+    On,
+    /// Never: the AR noise model only (`--slow-noise off`).
+    Off,
+}
+
+/// Diagnoses `model` on `runs` with slow noise treated as `mode` says (`opts.slow_noise`
+/// is set by the mode).
+pub fn diagnose_with_mode(
+    model: &crate::model::Model,
+    runs: &[FitRun<'_>],
+    motions: &super::RunMotions<'_>,
+    opts: &FitOptions,
+    mode: SlowNoiseMode,
+) -> Result<Diagnosis, EstimateError> {
+    let with = |slow_noise| FitOptions { slow_noise, ..*opts };
+    match mode {
+        SlowNoiseMode::On => diagnose(model, runs, motions, &with(true)),
+        SlowNoiseMode::Off => diagnose(model, runs, motions, &with(false)),
+        SlowNoiseMode::Auto => {
+            let first = diagnose(model, runs, motions, &with(false))?;
+            if first.verdict != Verdict::Unexplained {
+                return Ok(first);
+            }
+            let second = diagnose(model, runs, motions, &with(true))?;
+            Ok(choose(first, second))
+        }
+    }
+}
+
+/// The channels (0..6: gyro x..z, accel x..z) still systematic at the end of the ladder.
+fn systematic(d: &Diagnosis) -> Vec<usize> {
+    let last = d.steps.last().map_or(&d.channels, |s| &s.channels);
+    last.iter()
+        .filter(|c| c.systematic)
+        .map(|c| 3 * usize::from(c.sensor == SensorKind::Accel) + AXES.iter().position(|&a| a == c.axis).unwrap_or(0))
+        .collect()
+}
+
+/// The choice (module documentation): the diagnosis with slow noise when it keeps the
+/// first one's effects, clears channels without clearing a turn-on bias, and leaves nothing
+/// new; else the first. The chosen one says why in its warnings.
+fn choose(first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
+    let keeps = first.steps.iter().all(|s| second.steps.iter().any(|t| t.effect == s.effect));
+    let (before, after) = (systematic(&first), systematic(&second));
+    let fewer = after.iter().all(|c| before.contains(c)) && after.len() < before.len();
+    let cleared: Vec<usize> = before.iter().copied().filter(|c| !after.contains(c)).collect();
+    let slow = |c: usize| {
+        let s = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
+        second.final_fit.sensor(s).channels.get(c % 3).and_then(|ch| ch.slow_noise)
+    };
+    let jumps: Vec<usize> =
+        cleared.iter().copied().filter(|&c| slow(c).is_some_and(|s| s.jumps_between_runs())).collect();
+    let name = |c: usize| format!("{} {}", if c < 3 { "gyro" } else { "accel" }, AXES[c % 3]);
+    let names = |cs: &[usize]| cs.iter().map(|&c| name(c)).collect::<Vec<_>>().join(", ");
+    if keeps && fewer && jumps.is_empty() {
+        second.warnings.push(format!(
+            "the slow variation on {} wanders like flicker and bias random walk (different in every run, carried from one run into the next, locked to nothing): it is treated as noise, as --slow-noise on does (--slow-noise off shows it as a systematic residual)",
+            names(&cleared)
+        ));
+        return second;
+    }
+    let mut first = first;
+    if !jumps.is_empty() && keeps && fewer {
+        first.warnings.push(format!(
+            "the run offsets on {} jump between runs and stay flat within them (a turn-on bias is likelier than flicker and walk there): not treated as noise",
+            names(&jumps)
+        ));
+    }
+    first
+}
