@@ -202,3 +202,52 @@ document.body.appendChild(p);
     assert!(measured.parse::<usize>().unwrap_or(0) > 20, "{what}: too few texts measured ({measured})");
     assert!(found.is_empty(), "{what}: overlapping texts: {found}");
 }
+
+/// A knee no catalogue effect explains: the report draws the shape section (its words, the
+/// effects-file entry, the partial-residual plots) with labelled axes and no text running
+/// into other text when Chromium renders it.
+#[test]
+fn diagnose_report_draws_the_shape_of_what_nothing_explains() {
+    let d = tempfile::tempdir().unwrap();
+    let args = [
+        "simulate",
+        "--out",
+        "k",
+        "--serial",
+        "KNEE-1",
+        "--rates",
+        "20,-20,40,-40",
+        "--cone-angles",
+        "15,30",
+        "--duration",
+        "20",
+        "--rate-hz",
+        "50",
+        "--gyro-noise",
+        "0.002",
+        "--accel-noise",
+        "2e-5",
+        "--seed",
+        "36200",
+        "--disturb",
+        "knee:gyro-x:4:0.03",
+    ];
+    let (code, _, err) = run_in(d.path(), &args);
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err) = run_in(d.path(), &["diagnose", "k/session.json", "--report", "k.html", "--figures", "figs"]);
+    assert!(code == 0 || code == 1, "{err}");
+    assert!(out.contains("a knee"), "{out}");
+    let html = std::fs::read_to_string(d.path().join("k.html")).unwrap();
+    self_contained(&html, "shape report");
+    assert!(html.contains("<h3>shape: gyro x: zero below"), "the shape in words");
+    assert!(html.contains("k * max(w_x - w0, 0)"), "the effects-file entry");
+    let plots = plots_are_labelled(&html, "shape report");
+    assert!(plots > 24, "partial-residual plots beside the channels' four: {plots}");
+    let shape_figs = std::fs::read_dir(d.path().join("figs"))
+        .unwrap()
+        .filter(|e| e.as_ref().is_ok_and(|e| e.file_name().to_string_lossy().contains("-shape-")))
+        .count();
+    assert!(shape_figs >= 1, "--figures writes the shape plots");
+    render(&d.path().join("k.html"), "shape report");
+    no_overlapping_text(&d.path().join("k.html"), "shape report");
+}

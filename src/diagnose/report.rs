@@ -248,13 +248,9 @@ pub fn shape_figures(sh: &super::shape::Shape) -> Vec<Figure> {
         .iter()
         .take(3)
         .map(|p| {
-            let kx = match p.variable.as_str() {
-                v if v.contains("^2") => (180.0 / std::f64::consts::PI).powi(2),
-                v if v.contains("w_") => 180.0 / std::f64::consts::PI,
-                v if v.contains("a_") => 1.0 / 9.80665,
-                "cone phase" => 180.0 / std::f64::consts::PI,
-                _ => 1.0,
-            };
+            let kx = p.to_unit;
+            let x_label =
+                if p.unit.is_empty() { format!("{} (index)", p.label) } else { format!("{} ({})", p.label, p.unit) };
             let mean: Vec<(f64, f64)> = p.bins.iter().map(|b| (b.x * kx, b.mean * k)).collect();
             let hi: Vec<(f64, f64)> = p.bins.iter().map(|b| (b.x * kx, 2.0 * b.se * k)).collect();
             let lo: Vec<(f64, f64)> = p.bins.iter().map(|b| (b.x * kx, -2.0 * b.se * k)).collect();
@@ -263,7 +259,7 @@ pub fn shape_figures(sh: &super::shape::Shape) -> Vec<Figure> {
                 stem: format!("{}-shape-{}", slug(&name), slug(&p.variable)),
                 svg: lines(
                     &format!("{name}: residual against {} (bin means)", p.label),
-                    &p.label,
+                    &x_label,
                     &format!("residual ({u})"),
                     &[("bin mean".to_string(), mean), ("+2 SE".to_string(), hi), ("−2 SE".to_string(), lo)],
                 ),

@@ -55,6 +55,16 @@ pub struct PartialResidual {
     pub dof: usize,
     /// (χ² − dof)/√(2 dof): how far it departs from flat.
     pub z: f64,
+    /// The variable's display unit (`°/s`, `g`, `(°/s)²`, `°C`, `°`; empty for a run index).
+    #[serde(default)]
+    pub unit: String,
+    /// Its SI value (the bins' `x`) times this is in `unit`.
+    #[serde(default = "one")]
+    pub to_unit: f64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// What a failing channel's residual looks like.
@@ -274,6 +284,9 @@ pub fn shape_of(
 fn named(mut p: PartialResidual, v: Var, own: bool) -> PartialResidual {
     p.variable = v.expr().unwrap_or_else(|| "cone phase".into());
     p.label = v.label(own);
+    let (unit, k) = v.unit();
+    p.unit = unit.to_string();
+    p.to_unit = k;
     p
 }
 
@@ -332,7 +345,7 @@ fn flatness(variable: String, label: String, bins: Vec<Bin>) -> PartialResidual 
     let chi2: f64 = bins.iter().map(|b| ((b.mean - mean) / b.se.max(f64::MIN_POSITIVE)).powi(2)).sum();
     let dof = bins.len().saturating_sub(1);
     let z = if dof > 0 { (chi2 - dof as f64) / (2.0 * dof as f64).sqrt() } else { 0.0 };
-    PartialResidual { variable, label, bins, chi2, dof, z }
+    PartialResidual { variable, label, bins, chi2, dof, z, unit: String::new(), to_unit: 1.0 }
 }
 
 fn spread(bins: &[Bin]) -> f64 {

@@ -85,8 +85,12 @@ pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(
     let mut buf = String::new();
     let (x0, x1) = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.0)));
     let (y0, y1) = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
-    // Room above the traces for the legend, so that it hides none of them.
-    let (y0, y1) = if series.len() > 1 { with_headroom((y0, y1), 0.45) } else { (y0, y1) };
+    // Room above the traces for the legend (a row per series), so that it hides none of them.
+    let drawn = series.iter().filter(|s| !s.1.is_empty()).count();
+    let (y0, y1) = if drawn > 1 { with_headroom((y0, y1), 0.2 + 0.17 * drawn as f64) } else { (y0, y1) };
+    // A tick a rounding error away from zero is zero (not "6.9e-18").
+    let snap = |v: f64, span: f64| if v.abs() < 1e-9 * span.abs() { 0.0 } else { v };
+    let (xspan, yspan) = (x1 - x0, y1 - y0);
     {
         let root = SVGBackend::with_string(&mut buf, (720, 260)).into_drawing_area();
         let _ = root.fill(&WHITE);
@@ -99,8 +103,8 @@ pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(
             .y_desc(y_label)
             .axis_desc_style(DESC_FONT)
             .label_style(TICK_FONT)
-            .x_label_formatter(&|v| tick(*v))
-            .y_label_formatter(&|v| tick(*v))
+            .x_label_formatter(&|v| tick(snap(*v, xspan)))
+            .y_label_formatter(&|v| tick(snap(*v, yspan)))
             .light_line_style(WHITE)
             .draw();
         for (i, (name, pts)) in series.iter().enumerate() {
@@ -112,7 +116,7 @@ pub fn lines(title: &str, x_label: &str, y_label: &str, series: &[(String, Vec<(
                 s.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 14, y)], c));
             }
         }
-        if series.iter().filter(|s| !s.1.is_empty()).count() > 1 {
+        if drawn > 1 {
             legend(&mut chart, SeriesLabelPosition::UpperRight);
         }
         let _ = root.present();
@@ -183,6 +187,18 @@ pub fn loglog(
         let Ok(mut chart) = builder(&root, title).build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale()) else {
             return String::new();
         };
+        // plotters' log axis repeats the key point where two decades meet (a "10" drawn
+        // twice on itself): a label equal to the one before it is left blank.
+        let (last_x, last_y) = (std::cell::RefCell::new(String::new()), std::cell::RefCell::new(String::new()));
+        let once = |last: &std::cell::RefCell<String>, t: String| {
+            let mut l = last.borrow_mut();
+            if *l == t {
+                String::new()
+            } else {
+                l.clone_from(&t);
+                t
+            }
+        };
         let _ = chart
             .configure_mesh()
             .x_desc(x_label)
@@ -190,8 +206,8 @@ pub fn loglog(
             .axis_desc_style(DESC_FONT)
             .label_style(TICK_FONT)
             .y_labels(10)
-            .y_label_formatter(&|v| format!("{v:.0e}"))
-            .x_label_formatter(&|v| tick(*v))
+            .y_label_formatter(&|v| once(&last_y, format!("{v:.0e}")))
+            .x_label_formatter(&|v| once(&last_x, tick(*v)))
             .draw();
         let c0 = COLORS[0];
         let inside = |y: f64| y.clamp(y0, y1);
