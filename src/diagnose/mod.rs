@@ -447,7 +447,7 @@ fn conclude(
     } else {
         Vec::new()
     };
-    let (mut steps, first_round, mut a, restart) =
+    let (mut steps, mut first_round, mut a, restart) =
         climb(a, model, runs, motions, opts, has_temp, &mut warnings, stand_check.as_mut())?;
     if restart {
         return Ok(None);
@@ -467,6 +467,17 @@ fn conclude(
             }
             !chasing[s]
         });
+        // A candidate that met the evidence rules on such a sensor is not proposed either:
+        // its row says why.
+        for c in first_round
+            .iter_mut()
+            .filter(|c| c.rejected.is_none() && chasing[usize::from(c.sensor == SensorKind::Accel)])
+        {
+            c.rejected = Some(format!(
+                "meets the evidence rules, but no catalogued effect brings the {} residual to the noise floor: tried, not proposed",
+                c.sensor
+            ));
+        }
         if !tried.is_empty() {
             changed = true;
         }
