@@ -58,8 +58,15 @@ pub fn diagnose_with_mode(
             if first.verdict != Verdict::Unexplained {
                 return Ok(first);
             }
-            let second = diagnose(model, runs, motions, &with(true))?;
-            Ok(choose(first, second))
+            // The first answer stands when the second cannot be had, and says so.
+            match diagnose(model, runs, motions, &with(true)) {
+                Ok(second) => Ok(choose(first, second)),
+                Err(e) => {
+                    let mut first = first;
+                    first.warnings.push(format!("slow noise was not tried: {e}"));
+                    Ok(first)
+                }
+            }
         }
     }
 }
@@ -76,7 +83,7 @@ fn systematic(d: &Diagnosis) -> Vec<usize> {
 /// The choice (module documentation): the diagnosis with slow noise when it keeps the
 /// first one's effects, clears channels without clearing a turn-on bias, and leaves nothing
 /// new; else the first. The chosen one says why in its warnings.
-fn choose(first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
+fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
     let keeps = first.steps.iter().all(|s| second.steps.iter().any(|t| t.effect == s.effect));
     let (before, after) = (systematic(&first), systematic(&second));
     let fewer = after.iter().all(|c| before.contains(c)) && after.len() < before.len();
@@ -96,7 +103,6 @@ fn choose(first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
         ));
         return second;
     }
-    let mut first = first;
     if !jumps.is_empty() && keeps && fewer {
         first.warnings.push(format!(
             "the run offsets on {} jump between runs and stay flat within them (a turn-on bias is likelier than flicker and walk there): not treated as noise",

@@ -468,13 +468,8 @@ fn coarse_blocks(sources: &[SourceBlocks], c: usize, offsets: &[f64], t0: f64, q
 /// is where a session shows its flicker and walk. Components are kept non-negative (a
 /// component with a negative step at zero stays there). `start` seeds the iteration.
 fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<([f64; 3], f64)> {
+    let (x, y) = block_regression(blocks)?;
     let m = blocks.len();
-    let q = blocks.first()?.x.len();
-    if m < q + 6 {
-        return None;
-    }
-    let x = DMatrix::from_fn(m, q, |b, j| blocks[b].x[j]);
-    let y = DVector::from_fn(m, |b, _| blocks[b].r);
     let comps = [
         white_component(blocks),
         DMatrix::from_fn(m, m, |a, b| {
@@ -490,15 +485,32 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<([f6
             }
         }),
     ];
-    // A white level from the residual itself when the start has none.
     let mut first = start;
-    if first[0] <= 0.0 {
-        let v: f64 = blocks.iter().map(|b| b.r * b.r * b.len).sum::<f64>() / m as f64;
-        first[0] = v.max(f64::MIN_POSITIVE);
-    }
+    first[0] = white_start(blocks, first[0]);
     let (theta, ll) = reml_climb(&comps, &x, &y, first.to_vec())?;
     let theta = [theta[0], theta[1], theta[2]];
     theta.iter().all(|v| v.is_finite()).then_some((theta, ll))
+}
+
+/// The block-level regression of the block means (regressors X, means y); None when there
+/// are too few blocks beside the regressors to measure variances (fewer than q + 6).
+fn block_regression(blocks: &[Coarse]) -> Option<(DMatrix<f64>, DVector<f64>)> {
+    let m = blocks.len();
+    let q = blocks.first()?.x.len();
+    if m < q + 6 {
+        return None;
+    }
+    Some((DMatrix::from_fn(m, q, |b, j| blocks[b].x[j]), DVector::from_fn(m, |b, _| blocks[b].r)))
+}
+
+/// The white level a climb starts from: `given` when positive, else the block means' own
+/// (mean of r² L).
+fn white_start(blocks: &[Coarse], given: f64) -> f64 {
+    if given > 0.0 {
+        return given;
+    }
+    let v = blocks.iter().map(|b| b.r * b.r * b.len).sum::<f64>() / blocks.len().max(1) as f64;
+    v.max(f64::MIN_POSITIVE)
 }
 
 /// White noise of block means: diag 1/L_b.
@@ -511,17 +523,11 @@ fn white_component(blocks: &[Coarse]) -> DMatrix<f64> {
 /// run (a turn-on bias, variance τ² shared by the runs) on the same block means, at its
 /// REML estimate; `white` seeds the white level. None when it does not converge.
 fn turn_on_likelihood(blocks: &[Coarse], white: f64) -> Option<f64> {
+    let (x, y) = block_regression(blocks)?;
     let m = blocks.len();
-    let q = blocks.first()?.x.len();
-    if m < q + 6 {
-        return None;
-    }
-    let x = DMatrix::from_fn(m, q, |b, j| blocks[b].x[j]);
-    let y = DVector::from_fn(m, |b, _| blocks[b].r);
     let runs = DMatrix::from_fn(m, m, |a, b| if blocks[a].source == blocks[b].source { 1.0 } else { 0.0 });
     let comps = [white_component(blocks), runs];
-    let start = if white > 0.0 { white } else { blocks.iter().map(|b| b.r * b.r * b.len).sum::<f64>() / m as f64 };
-    let (_, ll) = reml_climb(&comps, &x, &y, vec![start.max(f64::MIN_POSITIVE), 0.0])?;
+    let (_, ll) = reml_climb(&comps, &x, &y, vec![white_start(blocks, white), 0.0])?;
     ll.is_finite().then_some(ll)
 }
 
