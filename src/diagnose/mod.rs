@@ -467,17 +467,7 @@ fn conclude(
             }
             !chasing[s]
         });
-        // A candidate that met the evidence rules on such a sensor is not proposed either:
-        // its row says why.
-        for c in first_round
-            .iter_mut()
-            .filter(|c| c.rejected.is_none() && chasing[usize::from(c.sensor == SensorKind::Accel)])
-        {
-            c.rejected = Some(format!(
-                "meets the evidence rules, but no catalogued effect brings the {} residual to the noise floor: tried, not proposed",
-                c.sensor
-            ));
-        }
+        not_proposed(&mut first_round, &chasing);
         if !tried.is_empty() {
             changed = true;
         }
@@ -731,6 +721,19 @@ fn aliases(
         .filter(|o| gain_after(&o.1, &best.1) < SHARED_FEATURE * best.0.evidence.delta_q)
         .map(|o| o.0.effect.clone())
         .collect()
+}
+
+/// A candidate that met the evidence rules on a sensor no catalogued effect brings to the
+/// noise floor (`chasing[sensor]`) is not proposed either: its row says why.
+fn not_proposed(candidates: &mut [Candidate], chasing: &[bool]) {
+    for c in
+        candidates.iter_mut().filter(|c| c.rejected.is_none() && chasing[usize::from(c.sensor == SensorKind::Accel)])
+    {
+        c.rejected = Some(format!(
+            "meets the evidence rules, but no catalogued effect brings the {} residual to the noise floor: tried, not proposed",
+            c.sensor
+        ));
+    }
 }
 
 /// A catalogued effect tried on a sensor it does not explain, with what it left.
