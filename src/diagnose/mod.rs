@@ -59,6 +59,11 @@ fn refit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, E
     Ok(crate::estimate::fit(&FitRequest::runs(model, runs).options(*opts))?.fit)
 }
 
+/// The channel index 0..6 (gyro x..z, accel x..z) of a sensor's axis.
+fn channel_of(sensor: SensorKind, axis: char) -> usize {
+    3 * usize::from(sensor == SensorKind::Accel) + AXES.iter().position(|&x| x == axis).unwrap_or(0)
+}
+
 /// Relative numerical resolution below which a residual is rounding, not physics (no
 /// sensor resolves 1e-10 of its signal).
 const RESOLUTION: f64 = 1e-10;
@@ -415,8 +420,7 @@ fn draw_shapes(
     remaining
         .iter()
         .map(|ch| {
-            let c =
-                3 * usize::from(ch.sensor == SensorKind::Accel) + AXES.iter().position(|&x| x == ch.axis).unwrap_or(0);
+            let c = channel_of(ch.sensor, ch.axis);
             let n = &noise[c];
             let scale = shape::NoiseScale::new(n.sigma, n.lag1, a.space.slow.get(c).copied().flatten(), span_s, run_s);
             shape::shape_of(&m, &a.base_fit, runs, motions, c, scale)
@@ -494,8 +498,7 @@ fn conclude(
     // A line within ten times the recording's numerical resolution is its rounding (a
     // noiseless recording), not a disturbance.
     let res = resolution(&a.space);
-    let channel =
-        |l: &Line| 3 * usize::from(l.sensor == SensorKind::Accel) + AXES.iter().position(|&x| x == l.axis).unwrap_or(0);
+    let channel = |l: &Line| channel_of(l.sensor, l.axis);
     let found: Vec<Line> = lines::group(&a.space.runs, &names, if tol > 0.0 { 4.0 / tol } else { 0.05 })
         .into_iter()
         .filter(|l| l.amplitude > 10.0 * res[channel(l)])

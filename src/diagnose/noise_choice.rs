@@ -22,7 +22,7 @@
 //! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
 //! this module only chooses.
 
-use super::{diagnose, Diagnosis, Verdict};
+use super::{channel_of, diagnose, Diagnosis, Verdict};
 use crate::estimate::{EstimateError, FitOptions, FitRun};
 use crate::units::{SensorKind, AXES};
 use serde::{Deserialize, Serialize};
@@ -74,10 +74,7 @@ pub fn diagnose_with_mode(
 /// The channels (0..6: gyro x..z, accel x..z) still systematic at the end of the ladder.
 fn systematic(d: &Diagnosis) -> Vec<usize> {
     let last = d.steps.last().map_or(&d.channels, |s| &s.channels);
-    last.iter()
-        .filter(|c| c.systematic)
-        .map(|c| 3 * usize::from(c.sensor == SensorKind::Accel) + AXES.iter().position(|&a| a == c.axis).unwrap_or(0))
-        .collect()
+    last.iter().filter(|c| c.systematic).map(|c| channel_of(c.sensor, c.axis)).collect()
 }
 
 /// The choice (module documentation): the diagnosis with slow noise when it keeps the
@@ -96,18 +93,19 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
         cleared.iter().copied().filter(|&c| slow(c).is_some_and(|s| s.jumps_between_runs())).collect();
     let name = |c: usize| format!("{} {}", if c < 3 { "gyro" } else { "accel" }, AXES[c % 3]);
     let names = |cs: &[usize]| cs.iter().map(|&c| name(c)).collect::<Vec<_>>().join(", ");
-    if keeps && fewer && jumps.is_empty() {
+    if !(keeps && fewer) {
+        return first;
+    }
+    if jumps.is_empty() {
         second.warnings.push(format!(
             "the slow variation on {} wanders like flicker and bias random walk (different in every run, carried from one run into the next, locked to nothing): it is treated as noise, as --slow-noise on does (--slow-noise off shows it as a systematic residual)",
             names(&cleared)
         ));
         return second;
     }
-    if !jumps.is_empty() && keeps && fewer {
-        first.warnings.push(format!(
-            "the run offsets on {} jump between runs and stay flat within them (a turn-on bias is likelier than flicker and walk there): not treated as noise",
-            names(&jumps)
-        ));
-    }
+    first.warnings.push(format!(
+        "the run offsets on {} jump between runs and stay flat within them (a turn-on bias is likelier than flicker and walk there): not treated as noise",
+        names(&jumps)
+    ));
     first
 }
