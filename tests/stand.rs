@@ -145,6 +145,17 @@ fn a_logged_stand_angle_makes_speed_ripple_cost_nothing() {
     let rms: Vec<f64> = f.gyro.channels.iter().map(|c| c.residual_rms).collect();
     println!("logged angle: worst |error|/se {worst:.2}, gyro residual rms / noise {:?}", rms.map_or_each(noise));
     assert!(rms.iter().all(|r| *r < 1.02 * noise), "{rms:?}");
+    // `fit --stand` on it: the rate, phase and ripple follow the logged angle (held, said
+    // so); the cone angle and tilt are still estimated.
+    let fs = fit_with_stand(&model, &logged).unwrap();
+    let held: Vec<&String> = fs.stand.iter().flat_map(|p| &p.held).collect();
+    println!("held per run: {:?}\nheld common: {:?}", &held[..2], fs.stand_base.as_ref().map(|b| &b.held));
+    assert_eq!(held.len(), 2 * fs.stand.len(), "{held:?}");
+    assert!(held.iter().all(|h| h.contains("logged angle")), "{held:?}");
+    let base = fs.stand_base.as_ref().unwrap();
+    assert_eq!(base.held.len(), 4, "{:?}", base.held);
+    assert!(base.held.iter().all(|h| h.starts_with("speed ripple")), "{:?}", base.held);
+    assert!(fs.stand.iter().all(|p| (p.value.get(0) - p.nominal.get(0)).abs() < 3.0 * p.std_error.get(0)));
     // The same session with the angle column not named: the declared uniform turning.
     let mut blind = logged.clone();
     for r in &mut blind.runs {
@@ -183,4 +194,91 @@ fn a_misnamed_or_misplaced_angle_column_is_refused_by_name() {
     let (code, _, err) = crate::common::run_in(dir.path(), &["fit", "s", "--dry-run"]);
     assert_eq!(code, 18, "{err}");
     assert!(err.contains("angle_column must be a column name"), "{err}");
+}
+
+/// Issue 36 part 1: `fit --stand` estimates the stand's common imperfections too. A stand
+/// whose base is tilted, whose speed ripples once and twice per revolution, and whose cone
+/// angle, rate and phases are off their labels: every imperfection within 3 SE of the
+/// truth, the coefficients within 3 SE, and without them the coefficients are biased.
+#[test]
+fn fit_stand_recovers_tilt_and_ripple_with_the_settings() {
+    let mut cfg = SimConfig::paper();
+    cfg.gyro_noise_deg_s = 0.002;
+    cfg.accel_noise_g = 2e-5;
+    cfg.seed = 41;
+    cfg.sample_rate_hz = 50.0;
+    for r in &mut cfg.runs {
+        r.duration_s = 24.0;
+    }
+    for s in ["tilt=0.2,-0.1", "ripple1=0.005,30", "ripple2=0.003,-60", "cone=0.2", "rate=-0.003", "phase=1.0,-0.5"] {
+        cfg.stand.set(s).unwrap();
+    }
+    let s = cfg.generate();
+    let model = Model::default_model();
+    let f = fit_with_stand(&model, &s).unwrap();
+    let b = f.stand_base.as_ref().expect("common stand imperfections");
+    println!("held: {:?}", b.held);
+    assert!(b.held.is_empty(), "{:?}", b.held);
+    let first = cfg.runs.iter().find(|r| matches!(r.motion, MotionSpec::Conic { .. })).unwrap();
+    let truth = cfg.stand.conic_motion(&first.motion, 0).unwrap();
+    let got =
+        [b.tilt_rad[0], b.tilt_rad[1], b.ripple_rad[0][0], b.ripple_rad[0][1], b.ripple_rad[1][0], b.ripple_rad[1][1]];
+    let se = [
+        b.tilt_se_rad[0],
+        b.tilt_se_rad[1],
+        b.ripple_se_rad[0][0],
+        b.ripple_se_rad[0][1],
+        b.ripple_se_rad[1][0],
+        b.ripple_se_rad[1][1],
+    ];
+    let want = [
+        truth.tilt_rad[0],
+        truth.tilt_rad[1],
+        truth.ripple_rad[0][0],
+        truth.ripple_rad[0][1],
+        truth.ripple_rad[1][0],
+        truth.ripple_rad[1][1],
+    ];
+    for k in 0..6 {
+        let z = (got[k] - want[k]) / se[k];
+        println!("common {k}: {:.3e} ± {:.1e}, true {:.3e} (z {z:+.2})", got[k], se[k], want[k]);
+        assert!(z.abs() < 3.0, "common {k}: {} ± {}, true {}", got[k], se[k], want[k]);
+    }
+    // No wobble on this stand: zero within 3 SE.
+    for k in 0..2 {
+        assert!(
+            b.wobble_rad[k].abs() < 3.0 * b.wobble_se_rad[k],
+            "wobble {k}: {} ± {}",
+            b.wobble_rad[k],
+            b.wobble_se_rad[k]
+        );
+    }
+    let mut worst = 0.0f64;
+    for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients) {
+        let truth = cfg.truth.value(&c.name).unwrap();
+        let z = (c.value - truth).abs() / c.std_error.unwrap();
+        worst = worst.max(z);
+        assert!(z < 3.5, "{} = {} ± {:?}, true {truth}", c.name, c.value, c.std_error);
+    }
+    println!("coefficients: worst |error|/se = {worst:.2}");
+    for (k, st) in f.stand.iter().enumerate() {
+        let plan = cfg.runs.iter().filter(|r| matches!(r.motion, MotionSpec::Conic { .. })).nth(k).unwrap();
+        let t = cfg.stand.conic_motion(&plan.motion, k).unwrap();
+        let want = [t.cone_angle_rad.to_degrees(), t.rate_rad_s.to_degrees(), t.phase_rad.to_degrees()];
+        for (j, w) in want.into_iter().enumerate() {
+            let z = (st.value.get(j) - w) / st.std_error.get(j);
+            assert!(z.abs() < 4.0, "{} setting {j}: {} ± {}, true {w}", st.run, st.value.get(j), st.std_error.get(j));
+        }
+    }
+    // With only the runs' settings (the ripple and tilt left out) the coefficients are biased.
+    let plain = fit_session(&s, &model, &FitOptions::default()).unwrap();
+    let biased = plain
+        .gyro
+        .coefficients
+        .iter()
+        .chain(&plain.accel.coefficients)
+        .map(|c| (c.value - cfg.truth.value(&c.name).unwrap()).abs() / c.std_error.unwrap())
+        .fold(0.0, f64::max);
+    println!("plain fit: worst |error|/se = {biased:.1}");
+    assert!(biased > 10.0, "{biased}");
 }

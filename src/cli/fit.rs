@@ -116,7 +116,7 @@ fn print_fit(a: &Args, f: &Fitted) -> anyhow::Result<()> {
     }
     s += &format::profile_fits(p);
     s += &format::nonlinear(&p.nonlinear);
-    s += &format::stand(&p.stand);
+    s += &format::stand(&p.stand, p.stand_base.as_ref());
     super::out(format_args!("{s}"))
 }
 

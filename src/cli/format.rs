@@ -163,8 +163,9 @@ pub fn check_summary(r: &CheckReport) -> String {
     s
 }
 
-/// Estimated stand settings per run, value ± 2σ next to the label.
-pub fn stand(params: &[crosscal::estimate::StandParams]) -> String {
+/// Estimated stand settings per run, value ± 2σ next to the label, then the stand's common
+/// imperfections (tilt, speed ripple, wobble) and what the runs could not identify.
+pub fn stand(params: &[crosscal::estimate::StandParams], base: Option<&crosscal::estimate::StandBase>) -> String {
     let mut s = String::new();
     if params.is_empty() {
         return s;
@@ -176,6 +177,24 @@ pub fn stand(params: &[crosscal::estimate::StandParams]) -> String {
         let cell =
             |k: usize| format!("{:.5} ± {:.1e} [{}]", p.value.get(k), 2.0 * p.std_error.get(k), p.nominal.get(k));
         let _ = writeln!(s, "  {:<20} {:>26} {:>28} {:>24}", p.run, cell(0), cell(1), cell(2));
+        for h in &p.held {
+            let _ = writeln!(s, "    held: {h}");
+        }
+    }
+    if let Some(b) = base {
+        let _ = writeln!(s, "stand imperfections common to the runs (estimated ± 2σ):");
+        for t in b.summary() {
+            let (what, v, se, unit) = (&t.what, t.value, t.std_error, t.unit);
+            let phase = match t.phase_deg {
+                Some(_) if v < 2.0 * se => "  (not distinguishable from none)".to_string(),
+                Some([psi, sp]) => format!("  (phase {psi:+.1} ± {:.1}°)", 2.0 * sp),
+                None => String::new(),
+            };
+            let _ = writeln!(s, "  {what:<36} {v:>+9.4} ± {:.2e} {unit}{phase}", 2.0 * se);
+        }
+        for h in &b.held {
+            let _ = writeln!(s, "  held: {h}");
+        }
     }
     s
 }

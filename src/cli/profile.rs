@@ -138,7 +138,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
                 outln!("unit {} profile {} (created {}, model '{}')", p.serial, path.display(), p.created_utc, p.model);
                 out!("{}", format::profile_fits(&p));
                 out!("{}", format::nonlinear(&p.nonlinear));
-                out!("{}", format::stand(&p.stand));
+                out!("{}", format::stand(&p.stand, p.stand_base.as_ref()));
             }
         }
         Sub::Diff { a, b, threshold } => {

@@ -139,15 +139,10 @@ pub fn finding(
             (values, message)
         }
         "speed-ripple-1" | "speed-ripple-2" => {
-            let h = if id == "speed-ripple-1" { 1.0 } else { 2.0 };
-            let (c, s) = (v[0], v[1]);
-            let amp = c.hypot(s);
-            let r = 100.0 * h * amp;
-            let se_r =
-                100.0 * h * if amp > 0.0 { ((c * se[0]).powi(2) + (s * se[1]).powi(2)).sqrt() / amp } else { se[0] };
-            let psi = deg(c.atan2(s));
-            let se_psi = if amp > 0.0 { deg(se[0].hypot(se[1]) / (std::f64::consts::SQRT_2 * amp)) } else { 180.0 };
-            let times = if h < 1.5 { "once" } else { "twice" };
+            let h = if id == "speed-ripple-1" { 1 } else { 2 };
+            let [r, se_r, psi, se_psi] = crate::motion::stand::speed_ripple(h, [v[0], v[1]], [se[0], se[1]]);
+            let (r, se_r, psi, se_psi) = (100.0 * r, 100.0 * se_r, deg(psi), deg(se_psi));
+            let times = if h == 1 { "once" } else { "twice" };
             let values = vec![
                 value(format!("speed ripple {times} per revolution"), r, se_r, "%"),
                 value(format!("speed ripple {times} per revolution, phase"), psi, se_psi, "deg"),
@@ -158,17 +153,10 @@ pub fn finding(
             (values, message)
         }
         "cone-wobble" => {
-            let amp = deg(v[0].hypot(v[1]));
-            let se_a = deg(se[0].hypot(se[1]) / std::f64::consts::SQRT_2);
-            let psi = deg(v[1].atan2(v[0]));
+            let [amp, se_a, psi, se_psi] = crate::motion::stand::polar(v[0], v[1], se[0], se[1]).map(deg);
             let values = vec![
                 value("cone-axis wobble".into(), amp, se_a, "deg"),
-                value(
-                    "cone-axis wobble, phase".into(),
-                    psi,
-                    if amp > 0.0 { deg(se_a.to_radians() / amp.to_radians()) } else { 180.0 },
-                    "deg",
-                ),
+                value("cone-axis wobble, phase".into(), psi, se_psi, "deg"),
             ];
             let message = format!(
                 "the stand: its cone angle wobbles once per revolution by {amp:.3} ± {se_a:.3}° (phase {psi:.0}°): fit with --stand or repair the stand's bearing"

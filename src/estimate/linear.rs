@@ -30,7 +30,7 @@ pub(crate) fn fit_samples(
     let mut v = fit_core(model, &SensorKind::BOTH, sources, robust_runs, opts)?;
     let accel = v.pop().ok_or(EstimateError::NoData)?;
     let gyro = v.pop().ok_or(EstimateError::NoData)?;
-    Ok(Fit { gyro, accel, nonlinear: Vec::new(), stand: Vec::new() })
+    Ok(Fit { gyro, accel, nonlinear: Vec::new(), stand: Vec::new(), stand_base: None })
 }
 
 /// Failure of a fit over [`Samples`]: reading a streamed file, or the estimate itself.

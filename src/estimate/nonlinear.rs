@@ -335,5 +335,5 @@ pub(crate) fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Resu
             }
         }
     }
-    Ok(Fit { gyro, accel, nonlinear: params, stand: Vec::new() })
+    Ok(Fit { gyro, accel, nonlinear: params, stand: Vec::new(), stand_base: None })
 }

@@ -117,6 +117,10 @@ pub struct Fit {
     /// Estimated stand settings (cone angle, rate, phase) per conic run, when fitted.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub stand: Vec<StandParams>,
+    /// The stand's imperfections common to its conic runs (tilt, ripple, wobble), when the
+    /// stand settings were fitted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stand_base: Option<super::StandBase>,
 }
 
 impl Fit {

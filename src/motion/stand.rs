@@ -149,6 +149,30 @@ fn rotate_t(theta: f64, alpha: f64, v: [f64; 3]) -> [f64; 3] {
     [c * x[0] + s * x[1], -s * x[0] + c * x[1], x[2]]
 }
 
+/// Amplitude and phase of a pair of harmonic components: `x` and `y` with standard errors
+/// `se_x`, `se_y` → (A, σ_A, ψ, σ_ψ) with A = √(x² + y²), ψ = atan2(y, x) (rad) and the
+/// first-order (delta-method) errors σ_A² = (x σ_x)² + (y σ_y)² over A², σ_ψ² = (y σ_x)² +
+/// (x σ_y)² over A⁴. At A = 0 the phase is undefined (σ_ψ = π) and σ_A is the mean error.
+pub fn polar(x: f64, y: f64, se_x: f64, se_y: f64) -> [f64; 4] {
+    let amp = x.hypot(y);
+    if amp > 0.0 {
+        let se_amp = (x * se_x).hypot(y * se_y) / amp;
+        let se_psi = (y * se_x).hypot(x * se_y) / (amp * amp);
+        [amp, se_amp, y.atan2(x), se_psi.min(std::f64::consts::PI)]
+    } else {
+        [0.0, se_x.hypot(se_y) / std::f64::consts::SQRT_2, 0.0, std::f64::consts::PI]
+    }
+}
+
+/// The relative speed ripple h·A and its phase ψ of the angle ripple `[c, s]` h times per
+/// revolution (θ = θ₀ + c cos hθ₀ + s sin hθ₀ = θ₀ + A sin(hθ₀ + ψ), so the speed is
+/// ω_s (1 + h·A cos(hθ₀ + ψ))), with standard errors: (h·A, σ, ψ rad, σ_ψ).
+pub fn speed_ripple(h: usize, cs: [f64; 2], se: [f64; 2]) -> [f64; 4] {
+    let [a, sa, psi, spsi] = polar(cs[1], cs[0], se[1], se[0]);
+    let h = h as f64;
+    [h * a, h * sa, psi, spsi]
+}
+
 /// The stand's angle, rate and angular acceleration from a logged angle θ_k (rad) on the
 /// time stamps: θ unwrapped, θ̇ and θ̈ by the local least-squares (Savitzky–Golay)
 /// derivative `deriv` applied once and twice ([`super::derivative_offline`]).

@@ -293,6 +293,7 @@ pub fn from_imucal(path: &Path, text: &str, serial: &str, g_m_s2: f64) -> Result
         accel: sensor_fit(SensorKind::Accel),
         nonlinear: Vec::new(),
         stand: Vec::new(),
+        stand_base: None,
         runs: Vec::new(),
         validation: None,
         correction: Default::default(),

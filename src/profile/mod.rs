@@ -149,6 +149,9 @@ pub struct Profile {
     /// Estimated stand settings per conic run (`fit --stand`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub stand: Vec<crate::estimate::StandParams>,
+    /// The stand's common imperfections (tilt, speed ripple, wobble) from `fit --stand`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stand_base: Option<crate::estimate::StandBase>,
     /// Runs used to fit.
     pub runs: Vec<RunUsed>,
     /// Check on runs left out of the fit (`fit --holdout`), if any.
@@ -304,6 +307,7 @@ impl Profile {
             nonlinear: fit.nonlinear,
             user_effects: model.user_definitions(),
             stand: fit.stand,
+            stand_base: fit.stand_base,
             runs,
             correction: CorrectionSettings::default(),
             validation: None,
@@ -339,6 +343,7 @@ impl Profile {
             nonlinear: Vec::new(),
             user_effects: Vec::new(),
             stand: Vec::new(),
+            stand_base: None,
             runs: Vec::new(),
             correction: CorrectionSettings::default(),
             validation: None,

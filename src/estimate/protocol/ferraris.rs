@@ -189,7 +189,8 @@ pub(super) fn ferraris(
     }
     let all_runs: Vec<FitRun<'_>> = obs.iter().map(Obs::as_run).collect();
     let second = fit(model, &all_runs, &opts)?;
-    let mut out = Fit { gyro: second.gyro, accel: first.accel, nonlinear: Vec::new(), stand: Vec::new() };
+    let mut out =
+        Fit { gyro: second.gyro, accel: first.accel, nonlinear: Vec::new(), stand: Vec::new(), stand_base: None };
     // Six faces leave few degrees of freedom, so the residual σ can come out far below the
     // sensor's own noise by chance; the noise of a pose mean is a floor under it.
     let statics: Vec<&Run> = obs.iter().filter(|o| o.turn.is_none()).map(|o| o.run).collect();

@@ -542,7 +542,7 @@ fn forward_fit(
         },
         "",
     );
-    Fit { gyro: gyro_fit, accel: accel_fit, nonlinear: Vec::new(), stand: Vec::new() }
+    Fit { gyro: gyro_fit, accel: accel_fit, nonlinear: Vec::new(), stand: Vec::new(), stand_base: None }
 }
 
 /// Bias and g-sensitivity of the gyro from pose means: `u = b + G a` per channel, linear
