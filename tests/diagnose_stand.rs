@@ -70,7 +70,6 @@ fn a_cone_angle_off_its_label_is_the_stand() {
 }
 
 #[test]
-#[ignore = "known: the rate is named as the stand, but its estimate misses 3 SE on one seed (z = -4.55): the rate SE is too small; open in issue 36"]
 fn a_stand_rate_off_its_label_is_the_stand() {
     for seed in [3, 4] {
         let d = stand_only(&["rate=-0.005"], seed);

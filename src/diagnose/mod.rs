@@ -517,7 +517,7 @@ fn conclude(
     let final_noise = noise_reports(&a.space);
     let shapes = draw_shapes(&a, model, &steps, runs, motions, &remaining, &final_noise);
     let unidentifiable = unidentifiable(&final_fit, &first_round);
-    let stand = with_stand::findings(stand_check, model, &steps, &final_fit, runs, &a);
+    let stand = with_stand::findings(stand_check, opts, model, &steps, &final_fit, runs, &a);
     // The stand explains what the unit does not need to: nothing left is "explained".
     let verdict = if verdict == Verdict::Adequate && !stand.is_empty() { Verdict::Explained } else { verdict };
     let proposal =

@@ -53,6 +53,7 @@ pub use super::stand_words::{StandFinding, StandValue};
 /// A run's noise model as the stand's systems weigh it: the AR filter per channel, and the
 /// slow noise's random effect on the run's basis ([`super::slow`]; `slow[c]` empty or zero
 /// without one).
+#[derive(Clone)]
 pub struct RunNoiseModel {
     /// Per channel AR model.
     pub ar: Vec<ArModel>,
@@ -702,6 +703,41 @@ impl Suspect {
         if !groups.contains(&pick.group) {
             groups.push(pick.group);
         }
+        self.estimate(&groups, model, runs, noise, opts)?;
+        if !self.accepted.iter().any(|a| a.0 == pick.group) {
+            self.accepted.push((pick.group, pick.evidence));
+        }
+        Ok(())
+    }
+
+    /// Estimates every group found again, jointly, under `model` (the end of the ladder)
+    /// and `noise` (the final residual's noise models): a group accepted early was
+    /// estimated under the noise model of a residual that still held its misfit, which
+    /// weighs the samples inefficiently — unbiased, but scattered far beyond the standard
+    /// error the final systems report.
+    pub fn polish(
+        &mut self,
+        model: &Model,
+        runs: &[FitRun<'_>],
+        noise: &[RunNoiseModel],
+        opts: &FitOptions,
+    ) -> Result<(), EstimateError> {
+        let groups: Vec<usize> = self.accepted.iter().map(|a| a.0).collect();
+        if groups.is_empty() {
+            return Ok(());
+        }
+        self.estimate(&groups, model, runs, noise, opts)
+    }
+
+    /// Gauss–Newton on the groups' parameters, the model refitted at every step.
+    fn estimate(
+        &mut self,
+        groups: &[usize],
+        model: &Model,
+        runs: &[FitRun<'_>],
+        noise: &[RunNoiseModel],
+        opts: &FitOptions,
+    ) -> Result<(), EstimateError> {
         let params: Vec<Combo> = groups.iter().flat_map(|&g| self.groups[g].params.iter().cloned()).collect();
         for _ in 0..MAX_STEPS {
             let tracks = self.tracks(runs);
@@ -721,9 +757,6 @@ impl Suspect {
             if worst < 0.01 {
                 break;
             }
-        }
-        if !self.accepted.iter().any(|a| a.0 == pick.group) {
-            self.accepted.push((pick.group, pick.evidence));
         }
         Ok(())
     }

@@ -76,6 +76,7 @@ impl StandCheck<'_, '_, '_> {
 /// motion is as declared), around the model at the end of the ladder.
 pub(super) fn findings(
     check: Option<StandCheck<'_, '_, '_>>,
+    opts: &FitOptions,
     model: &Model,
     steps: &[Step],
     final_fit: &Fit,
@@ -88,7 +89,23 @@ pub(super) fn findings(
             for s in steps {
                 let _ = m.add_effect(&s.effect);
             }
-            let sys = sc.suspect.systems(&m, final_fit, runs, &noise_models(a));
+            let noise = noise_models(a);
+            // The groups estimated again under the final noise model, so that their values
+            // are the estimates whose standard errors the final systems give; if that fails
+            // the values of the climb stand (on the final residual's systems).
+            let plain: Vec<stand::RunNoiseModel> =
+                noise.iter().map(|n| stand::RunNoiseModel { dispersion: [1.0; 6], ..n.clone() }).collect();
+            if sc.suspect.polish(&m, sc.declared, &plain, opts).is_ok() {
+                let tracks = sc.suspect.tracks(sc.declared);
+                let moved: Vec<FitRun<'_>> =
+                    sc.declared.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
+                let req = crate::estimate::FitRequest::runs(&m, &moved).options(*opts);
+                if let Ok(out) = crate::estimate::fit(&req) {
+                    let sys = sc.suspect.systems(&m, &out.fit, &moved, &noise);
+                    return sc.suspect.findings(&sys, &a.names);
+                }
+            }
+            let sys = sc.suspect.systems(&m, final_fit, runs, &noise);
             sc.suspect.findings(&sys, &a.names)
         }
         _ => Vec::new(),
