@@ -65,6 +65,9 @@ impl StandMotion {
         let th0 = w * t_s + self.phase_rad;
         let (mut theta, mut d1, mut d2) = (th0, 1.0, 0.0);
         for (h, [c, s]) in self.ripple_rad.iter().enumerate() {
+            if *c == 0.0 && *s == 0.0 {
+                continue;
+            }
             let h = (h + 1) as f64;
             let (sn, cs) = (h * th0).sin_cos();
             theta += c * cs + s * sn;
@@ -108,7 +111,7 @@ impl StandMotion {
             w[i] = td * f[i] + ad * gv[i];
             e[i] = tdd * f[i] + td * (f_t[i] * td + f_a[i] * ad) + add * gv[i] + ad * td * g_t[i];
         }
-        let to_body = |v: [f64; 3]| rotate_t(theta, alpha, v);
+        let to_body = |v: [f64; 3]| rotate_t([st, ct], [sa, ca], v);
         let up = to_body(self.up());
         if self.earth_rad_s.iter().any(|&x| x != 0.0) {
             let we = to_body(self.earth_rad_s);
@@ -139,11 +142,10 @@ pub fn to_sensor(k: Kinematics, mount: &Mount) -> SensorKinematics {
     }
 }
 
-/// Rᵀ v with R = Rz(−θ)·Ry(α)·Rz(θ): Rᵀ = Rz(−θ)·Ry(−α)·Rz(θ).
+/// Rᵀ v with R = Rz(−θ)·Ry(α)·Rz(θ): Rᵀ = Rz(−θ)·Ry(−α)·Rz(θ), from (sin θ, cos θ) and
+/// (sin α, cos α).
 #[inline]
-fn rotate_t(theta: f64, alpha: f64, v: [f64; 3]) -> [f64; 3] {
-    let (s, c) = theta.sin_cos();
-    let (sa, ca) = alpha.sin_cos();
+fn rotate_t([s, c]: [f64; 2], [sa, ca]: [f64; 2], v: [f64; 3]) -> [f64; 3] {
     let w = [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]];
     let x = [ca * w[0] - sa * w[2], w[1], sa * w[0] + ca * w[2]];
     [c * x[0] + s * x[1], -s * x[0] + c * x[1], x[2]]
