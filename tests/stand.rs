@@ -282,3 +282,54 @@ fn fit_stand_recovers_tilt_and_ripple_with_the_settings() {
     println!("plain fit: worst |error|/se = {biased:.1}");
     assert!(biased > 10.0, "{biased}");
 }
+
+/// `fit --stand` estimates the Earth's rotation the manifest does not declare, as
+/// `diagnose` suggests: its vertical part (shared by the conic runs and the static poses)
+/// and its horizontal part in the stand's base and on each static pose (whose heading is
+/// unknown), each within 3 SE; the coefficients stay within their errors.
+#[test]
+fn fit_stand_estimates_the_undeclared_earth_rotation_on_cones_and_poses() {
+    let mut cfg = SimConfig::paper();
+    cfg.gyro_noise_deg_s = 0.002;
+    cfg.accel_noise_g = 2e-5;
+    cfg.seed = 12;
+    cfg.sample_rate_hz = 50.0;
+    for r in &mut cfg.runs {
+        r.duration_s = 24.0;
+    }
+    let template = cfg.runs[0].clone();
+    for (name, up) in [("still-z", [0.0, 0.0, 1.0]), ("still-y", [0.0, 1.0, 0.0]), ("still-x", [-1.0, 0.0, 0.0])] {
+        let mut p = template.clone();
+        p.name = name.into();
+        p.motion = MotionSpec::Static { up_stand: up, earth_rate_rad_s: [0.0; 3] };
+        p.duration_s = 60.0;
+        cfg.runs.push(p);
+    }
+    cfg.stand.set("earth=48,30").unwrap();
+    let s = cfg.generate();
+    let f = fit_with_stand(&Model::default_model(), &s).unwrap();
+    let b = f.stand_base.as_ref().unwrap();
+    println!("held: {:?}", b.held);
+    let omega = 7.292_115e-5_f64;
+    let (up, horizontal) = (omega * 48f64.to_radians().sin(), omega * 48f64.to_radians().cos());
+    let z_up = (b.earth_rad_s[2] - up) / b.earth_se_rad_s[2];
+    let h = b.earth_rad_s[0].hypot(b.earth_rad_s[1]);
+    let z_h = (h - horizontal) / (b.earth_se_rad_s[0].hypot(b.earth_se_rad_s[1]) / 2f64.sqrt());
+    println!(
+        "vertical {:.4e} ± {:.1e} (z {z_up:+.2}), horizontal {h:.4e} (z {z_h:+.2})",
+        b.earth_rad_s[2], b.earth_se_rad_s[2]
+    );
+    assert!(z_up.abs() < 3.0 && z_h.abs() < 3.0, "{b:#?}");
+    assert_eq!(b.poses.len(), 3, "{b:#?}");
+    for p in &b.poses {
+        let v = p.horizontal_rad_s[0].hypot(p.horizontal_rad_s[1]);
+        let se = p.horizontal_se_rad_s[0].hypot(p.horizontal_se_rad_s[1]) / 2f64.sqrt();
+        println!("{}: horizontal {v:.4e} ± {se:.1e}", p.run);
+        assert!((v - horizontal).abs() < 3.0 * se, "{p:?}");
+    }
+    for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients) {
+        let truth = cfg.truth.value(&c.name).unwrap();
+        let z = (c.value - truth).abs() / c.std_error.unwrap();
+        assert!(z < 3.5, "{} = {} ± {:?}, true {truth}", c.name, c.value, c.std_error);
+    }
+}

@@ -25,8 +25,8 @@ use super::select::Evidence;
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::frames::Mount;
 use crate::model::{forward, Model, State, TermRef};
-use crate::motion::stand::StandMotion;
-use crate::motion::{SampleMap, SensorKinematics, Track};
+use crate::motion::stand::{AddRate, StandMotion};
+use crate::motion::Track;
 use crate::session::MotionSpec;
 use crate::stats::ArModel;
 use crate::units::SensorKind;
@@ -80,18 +80,6 @@ enum RunStand {
     Static { up: [f64; 3], earth: [f64; 3] },
     /// Anything else (no stand parameters).
     Other,
-}
-
-/// A constant rate added to a static pose's true rate (the Earth's, estimated).
-#[derive(Debug)]
-struct AddRate([f64; 3]);
-
-impl SampleMap for AddRate {
-    fn apply(&self, k: &mut SensorKinematics) {
-        for i in 0..3 {
-            k.w_rad_s[i] += self.0[i];
-        }
-    }
 }
 
 /// One parameter of a group: a combination of global stand parameters.
@@ -194,7 +182,7 @@ impl Suspect {
         if !earth_declared {
             for &r in &statics {
                 if let RunStand::Static { up, .. } = out[r] {
-                    let [e1, e2] = crate::simulate::stand::horizontal_basis(up);
+                    let [e1, e2] = crate::motion::stand::horizontal_basis(up);
                     locals[r] = vec![(earth_z, Dir::Rate(up)), (width, Dir::Rate(e1)), (width + 1, Dir::Rate(e2))];
                     horizontals.push(vec![(width, 1.0)]);
                     horizontals.push(vec![(width + 1, 1.0)]);

@@ -151,6 +151,37 @@ fn rotate_t([s, c]: [f64; 2], [sa, ca]: [f64; 2], v: [f64; 3]) -> [f64; 3] {
     [c * x[0] + s * x[1], -s * x[0] + c * x[1], x[2]]
 }
 
+/// Two horizontal unit vectors perpendicular to `up` (right-handed with it): the first is
+/// the stand axis least aligned with up, made perpendicular.
+pub fn horizontal_basis(up: [f64; 3]) -> [[f64; 3]; 2] {
+    let n = (up[0] * up[0] + up[1] * up[1] + up[2] * up[2]).sqrt().max(f64::MIN_POSITIVE);
+    let u = up.map(|x| x / n);
+    let i = (0..3).min_by(|&a, &b| u[a].abs().total_cmp(&u[b].abs())).unwrap_or(0);
+    let mut e1 = [0.0; 3];
+    e1[i] = 1.0;
+    let d = u[i];
+    for k in 0..3 {
+        e1[k] -= d * u[k];
+    }
+    let m = (e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]).sqrt().max(f64::MIN_POSITIVE);
+    let e1 = e1.map(|x| x / m);
+    let e2 = [u[1] * e1[2] - u[2] * e1[1], u[2] * e1[0] - u[0] * e1[2], u[0] * e1[1] - u[1] * e1[0]];
+    [e1, e2]
+}
+
+/// A constant rate added to a state's true rate (the Earth's on a static pose), sensor axes,
+/// rad/s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AddRate(pub [f64; 3]);
+
+impl super::SampleMap for AddRate {
+    fn apply(&self, k: &mut super::SensorKinematics) {
+        for i in 0..3 {
+            k.w_rad_s[i] += self.0[i];
+        }
+    }
+}
+
 /// Amplitude and phase of a pair of harmonic components: `x` and `y` with standard errors
 /// `se_x`, `se_y` → (A, σ_A, ψ, σ_ψ) with A = √(x² + y²), ψ = atan2(y, x) (rad) and the
 /// first-order (delta-method) errors σ_A² = (x σ_x)² + (y σ_y)² over A², σ_ψ² = (y σ_x)² +

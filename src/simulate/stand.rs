@@ -158,23 +158,7 @@ impl StandErrors {
     }
 }
 
-/// Two horizontal unit vectors perpendicular to `up` (right-handed with it): the first is
-/// the stand axis least aligned with up, made perpendicular.
-pub fn horizontal_basis(up: [f64; 3]) -> [[f64; 3]; 2] {
-    let n = (up[0] * up[0] + up[1] * up[1] + up[2] * up[2]).sqrt().max(f64::MIN_POSITIVE);
-    let u = up.map(|x| x / n);
-    let i = (0..3).min_by(|&a, &b| u[a].abs().total_cmp(&u[b].abs())).unwrap_or(0);
-    let mut e1 = [0.0; 3];
-    e1[i] = 1.0;
-    let d = u[i];
-    for k in 0..3 {
-        e1[k] -= d * u[k];
-    }
-    let m = (e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]).sqrt().max(f64::MIN_POSITIVE);
-    let e1 = e1.map(|x| x / m);
-    let e2 = [u[1] * e1[2] - u[2] * e1[1], u[2] * e1[0] - u[0] * e1[2], u[0] * e1[1] - u[1] * e1[0]];
-    [e1, e2]
-}
+pub use crate::motion::stand::horizontal_basis;
 
 #[cfg(test)]
 mod tests {

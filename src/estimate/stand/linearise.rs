@@ -2,7 +2,7 @@
 //! the stand parameters (module docs of [`super`]) and, per channel, the gain G = R₁₁⁻¹R₁₂
 //! of the coefficients on them.
 
-use super::{Predictor, StandProblem, COMMON, COMMON_STEP, RUN_STEP};
+use super::{Predictor, StandProblem, COMMON, COMMON_STEP, EARTH, POSE_STEP, RUN_STEP};
 use crate::estimate::{CoefStatus, EstimateError, Fit};
 use crate::model::State;
 use crate::motion::stand::StandMotion;
@@ -23,21 +23,44 @@ pub(super) struct Linearised {
     pub raw: DVector<f64>,
 }
 
+/// How one parameter moves a run's motion, for its central difference.
+enum Move {
+    /// A conic run's stand motion above and below.
+    Stand(StandMotion, StandMotion),
+    /// A rate added along a direction (sensor axes) on a static pose.
+    Rate([f64; 3]),
+}
+
 impl StandProblem<'_> {
-    /// The stand's local parameters of conic run `ci` as (global index, step, motion
-    /// above, motion below): its own three, then the common ones.
-    fn perturbed(&self, x: &[f64], ci: usize) -> Vec<(usize, f64, StandMotion, StandMotion)> {
-        let nc = self.conic.len();
-        let own = (0..3).map(|k| (3 * ci + k, RUN_STEP[k]));
-        let common = (0..COMMON).map(|k| (3 * nc + k, COMMON_STEP));
-        own.chain(common)
-            .map(|(p, h)| {
-                let (mut hi, mut lo) = (x.to_vec(), x.to_vec());
-                hi[p] += h;
-                lo[p] -= h;
-                (p, h, self.stand_of(&hi, ci), self.stand_of(&lo, ci))
-            })
-            .collect()
+    /// The parameters that move run `ri` as (global index, step, how): a conic run's own
+    /// three and the common ones; a static pose's vertical and horizontal Earth rate.
+    fn perturbed(&self, x: &[f64], ri: usize) -> Vec<(usize, f64, Move)> {
+        let c0 = self.common();
+        if let Some(ci) = self.conic.iter().position(|&i| i == ri) {
+            let own = (0..3).map(|k| (3 * ci + k, RUN_STEP[k]));
+            let common = (0..COMMON).map(|k| (c0 + k, COMMON_STEP[k]));
+            return own
+                .chain(common)
+                .map(|(p, h)| {
+                    let (mut hi, mut lo) = (x.to_vec(), x.to_vec());
+                    hi[p] += h;
+                    lo[p] -= h;
+                    (p, h, Move::Stand(self.stand_of(&hi, ci), self.stand_of(&lo, ci)))
+                })
+                .collect();
+        }
+        match self.poses.iter().position(|p| p.run == ri) {
+            Some(pi) => {
+                let pose = &self.poses[pi];
+                let h0 = c0 + COMMON + 2 * pi;
+                vec![
+                    (c0 + EARTH + 2, POSE_STEP, Move::Rate(pose.up)),
+                    (h0, POSE_STEP, Move::Rate(pose.horizontal[0])),
+                    (h0 + 1, POSE_STEP, Move::Rate(pose.horizontal[1])),
+                ]
+            }
+            None => Vec::new(),
+        }
     }
 
     /// The projected normal equations of the stand step at parameters `x` (tracks and fit
@@ -73,19 +96,29 @@ impl StandProblem<'_> {
         let runs = crate::estimate::fit_runs(self.session, tracks);
         let mut d: Vec<[f64; 6]> = Vec::new();
         for (ri, run) in runs.iter().enumerate() {
-            let ci = self.conic.iter().position(|&i| i == ri);
-            let pert = ci.map(|ci| self.perturbed(x, ci)).unwrap_or_default();
+            let pert = self.perturbed(x, ri);
             d.resize(pert.len(), [0.0; 6]);
             for k in 0..run.len() {
                 let st = run.state(k);
                 let y = [run.gyro[k], run.accel[k]];
                 let p0 = pred.predict(&st);
-                for (j, (_, h, hi, lo)) in pert.iter().enumerate() {
+                for (j, (_, h, how)) in pert.iter().enumerate() {
                     let at = |sm: &StandMotion| {
                         let s = self.state_at(ri, sm, k);
                         State { w: s.w_rad_s.xyz, e: s.e_rad_s2.xyz, a: s.a_m_s2.xyz, ..st }
                     };
-                    let (ph, pl) = (pred.predict(&at(hi)), pred.predict(&at(lo)));
+                    let turned = |sign: f64, v: &[f64; 3]| {
+                        let mut s = st;
+                        for i in 0..3 {
+                            s.w[i] += sign * h * v[i];
+                        }
+                        s
+                    };
+                    let (sh, sl) = match how {
+                        Move::Stand(hi, lo) => (at(hi), at(lo)),
+                        Move::Rate(v) => (turned(1.0, v), turned(-1.0, v)),
+                    };
+                    let (ph, pl) = (pred.predict(&sh), pred.predict(&sl));
                     for c in 0..6 {
                         d[j][c] = (ph[c] - pl[c]) / (2.0 * h);
                     }

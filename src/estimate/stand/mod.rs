@@ -100,9 +100,31 @@ pub struct StandBase {
     pub wobble_rad: [f64; 2],
     /// Their standard errors, rad.
     pub wobble_se_rad: [f64; 2],
+    /// The Earth's rate in the stand's base axes (x, y horizontal, up), rad/s; zero when
+    /// held (declared in the manifest, or not identifiable).
+    #[serde(default)]
+    pub earth_rad_s: [f64; 3],
+    /// Its standard errors, rad/s.
+    #[serde(default)]
+    pub earth_se_rad_s: [f64; 3],
+    /// Per static pose the Earth's horizontal rate along the pose's two horizontal
+    /// directions (its heading is unknown), rad/s.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub poses: Vec<PoseEarth>,
     /// Parameters the runs cannot identify, held at zero, with why.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub held: Vec<String>,
+}
+
+/// The Earth's horizontal rate on one static pose, as `fit --stand` estimated it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseEarth {
+    /// Run name.
+    pub run: String,
+    /// Along the pose's two horizontal directions (sensor axes), rad/s.
+    pub horizontal_rad_s: [f64; 2],
+    /// Their standard errors, rad/s.
+    pub horizontal_se_rad_s: [f64; 2],
 }
 
 impl StandBase {
@@ -114,6 +136,9 @@ impl StandBase {
             ripple_se_rad: [[se[2], se[3]], [se[4], se[5]]],
             wobble_rad: [v[6], v[7]],
             wobble_se_rad: [se[6], se[7]],
+            earth_rad_s: [v[EARTH], v[EARTH + 1], v[EARTH + 2]],
+            earth_se_rad_s: [se[EARTH], se[EARTH + 1], se[EARTH + 2]],
+            poses: Vec::new(),
             held,
         }
     }
@@ -142,6 +167,19 @@ impl StandBase {
         let w = &self.wobble_rad;
         let [a, sa, psi, spsi] = crate::motion::stand::polar(w[0], w[1], self.wobble_se_rad[0], self.wobble_se_rad[1]);
         out.push(term("cone-axis wobble", deg(a), deg(sa), "deg", Some([deg(psi), deg(spsi)])));
+        // The Earth's rate in °/h.
+        let deg_h = |v: f64| deg(v) * 3600.0;
+        let (e, se) = (&self.earth_rad_s, &self.earth_se_rad_s);
+        out.push(term("Earth's rate, vertical", deg_h(e[2]), deg_h(se[2]), "deg/h", None));
+        let [h, sh, psi, spsi] = crate::motion::stand::polar(e[0], e[1], se[0], se[1]);
+        let horizontal = Some([deg(psi), deg(spsi)]);
+        out.push(term("Earth's rate, horizontal (stand base)", deg_h(h), deg_h(sh), "deg/h", horizontal));
+        for p in &self.poses {
+            let (v, s) = (p.horizontal_rad_s, p.horizontal_se_rad_s);
+            let [h, sh, psi, spsi] = crate::motion::stand::polar(v[0], v[1], s[0], s[1]);
+            let what = format!("Earth's rate, horizontal on '{}'", p.run);
+            out.push(term(&what, deg_h(h), deg_h(sh), "deg/h", Some([deg(psi), deg(spsi)])));
+        }
         out
     }
 }
@@ -161,8 +199,13 @@ pub struct StandTerm {
     pub phase_deg: Option<[f64; 2]>,
 }
 
-/// Number of stand parameters common to the conic runs (tilt ×2, ripple ×4, wobble ×2).
-const COMMON: usize = 8;
+/// Number of stand parameters common to the runs (tilt ×2, ripple ×4, wobble ×2, the
+/// Earth's rate in the stand's base axes ×3).
+const COMMON: usize = 11;
+/// The first of the Earth's rate's three common parameters (base x, y, up).
+const EARTH: usize = 8;
+/// The Earth's rotation rate, rad/s.
+const EARTH_RAD_S: f64 = 7.292_115e-5;
 /// The common parameters' names, for what is held.
 const COMMON_NAMES: [&str; COMMON] = [
     "base tilt about x",
@@ -173,16 +216,23 @@ const COMMON_NAMES: [&str; COMMON] = [
     "speed ripple twice per revolution (sin)",
     "cone-axis wobble (cos)",
     "cone-axis wobble (sin)",
+    "Earth's rate along the stand base's x",
+    "Earth's rate along the stand base's y",
+    "Earth's rate, vertical",
 ];
 /// A run's own parameters' names.
 const RUN_NAMES: [&str; 3] = ["cone angle", "rate", "phase"];
 /// Central-difference steps of a run's α (deg), ω_s (deg/s), φ (deg).
 const RUN_STEP: [f64; 3] = [1e-4, 1e-4, 1e-3];
-/// Central-difference step of the common parameters, rad.
-const COMMON_STEP: f64 = 1e-6;
+/// Central-difference step of the common parameters, rad (rad/s for the Earth's rate).
+const COMMON_STEP: [f64; COMMON] = [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-8, 1e-8, 1e-8];
+/// Central-difference step of a static pose's horizontal Earth rate, rad/s.
+const POSE_STEP: f64 = 1e-8;
 /// How far a common parameter may go before the estimate is refused as not a stand's
-/// imperfection, rad: tilt 2°, angle ripple 0.1 and 0.05 rad (10 % of the rate), wobble 2°.
-const COMMON_LIMIT: [f64; COMMON] = [0.035, 0.035, 0.1, 0.1, 0.05, 0.05, 0.035, 0.035];
+/// imperfection, rad: tilt 2°, angle ripple 0.1 and 0.05 rad (10 % of the rate), wobble 2°;
+/// the Earth's rate 1.5 × its size (rad/s).
+const COMMON_LIMIT: [f64; COMMON] =
+    [0.035, 0.035, 0.1, 0.1, 0.05, 0.05, 0.035, 0.035, 1.5 * EARTH_RAD_S, 1.5 * EARTH_RAD_S, 1.5 * EARTH_RAD_S];
 /// A parameter whose information left after the model's coefficients and the parameters
 /// kept before it is below this share of its own is held (not identifiable here).
 const HOLD_BELOW: f64 = 1e-6;
@@ -242,7 +292,9 @@ impl<'m> Predictor<'m> {
 type Converged = (Vec<f64>, Vec<Track>, Fit);
 
 /// The stand problem of a session: which runs are conic, and the tracks and fit at given
-/// parameters `x` (per conic run `[α deg, ω_s deg/s, φ deg]`, then the [`COMMON`] ones, rad).
+/// parameters `x` (per conic run `[α deg, ω_s deg/s, φ deg]`, then the [`COMMON`] ones, rad
+/// and rad/s, then per static pose the Earth's horizontal rate along its two horizontal
+/// directions, rad/s — the heading being unknown, each pose has its own).
 struct StandProblem<'a> {
     model: &'a Model,
     session: &'a Session,
@@ -254,11 +306,37 @@ struct StandProblem<'a> {
     declared: Vec<Track>,
     /// Per run, the logged stand angle with its derivatives (runs that log their angle).
     logged: Vec<Option<Vec<Angle>>>,
+    /// The static poses whose Earth rate is estimated (none when the manifest declares it).
+    poses: Vec<Pose>,
+    /// The manifest declares the Earth's rate (its parameters are then held).
+    earth_declared: bool,
+}
+
+/// A static pose as the Earth's rate sees it: its run, its up and two horizontal directions
+/// in sensor axes.
+struct Pose {
+    run: usize,
+    up: [f64; 3],
+    horizontal: [[f64; 3]; 2],
 }
 
 impl StandProblem<'_> {
     fn width(&self) -> usize {
-        3 * self.conic.len() + COMMON
+        3 * self.conic.len() + COMMON + 2 * self.poses.len()
+    }
+
+    /// Index of the first common parameter.
+    fn common(&self) -> usize {
+        3 * self.conic.len()
+    }
+
+    /// The Earth's rate on static pose `pi` at parameters `x`, sensor axes, rad/s: the
+    /// vertical shared with the conic runs along its up, its own horizontal part.
+    fn pose_rate(&self, x: &[f64], pi: usize) -> [f64; 3] {
+        let pose = &self.poses[pi];
+        let up = x[self.common() + EARTH + 2];
+        let h = &x[self.common() + COMMON + 2 * pi..];
+        std::array::from_fn(|i| up * pose.up[i] + h[0] * pose.horizontal[0][i] + h[1] * pose.horizontal[1][i])
     }
 
     /// The stand motion of conic run number `ci` at parameters `x`.
@@ -272,7 +350,7 @@ impl StandProblem<'_> {
             tilt_rad: [c[0], c[1]],
             ripple_rad: [[c[2], c[3]], [c[4], c[5]]],
             wobble_rad: [c[6], c[7]],
-            earth_rad_s: [0.0; 3],
+            earth_rad_s: [c[EARTH], c[EARTH + 1], c[EARTH + 2]],
         }
     }
 
@@ -291,7 +369,18 @@ impl StandProblem<'_> {
         (0..self.session.runs.len())
             .map(|ri| {
                 if self.conic.get(ci) != Some(&ri) {
-                    return self.declared[ri].clone();
+                    return match self.poses.iter().position(|p| p.run == ri) {
+                        Some(pi) => {
+                            let w = self.pose_rate(x, pi);
+                            if w.iter().all(|v| *v == 0.0) {
+                                self.declared[ri].clone()
+                            } else {
+                                let add = crate::motion::stand::AddRate(w);
+                                self.declared[ri].mapped(std::sync::Arc::new(add))
+                            }
+                        }
+                        None => self.declared[ri].clone(),
+                    };
                 }
                 let sm = self.stand_of(x, ci);
                 ci += 1;
@@ -324,7 +413,7 @@ impl StandProblem<'_> {
         let mut free: Vec<usize> = Vec::new();
         for j in 0..self.width() {
             let own = lin.raw[j];
-            if own.is_nan() || own <= 0.0 {
+            if own.is_nan() || own <= 0.0 || self.is_declared(j) {
                 continue;
             }
             let mff = lin.info.select_rows(&free).select_columns(&free);
@@ -440,20 +529,36 @@ impl StandProblem<'_> {
                 )));
             }
         }
-        let common = &x[3 * self.conic.len()..];
-        if let Some(k) = (0..COMMON).find(|&k| common[k].abs() > COMMON_LIMIT[k] || !common[k].is_finite()) {
+        let common = &x[self.common()..];
+        let limit = |k: usize| if k < COMMON { COMMON_LIMIT[k] } else { COMMON_LIMIT[EARTH] };
+        if let Some(k) = (0..common.len()).find(|&k| common[k].abs() > limit(k) || !common[k].is_finite()) {
+            let what = match k {
+                k if k < COMMON => COMMON_NAMES[k].to_string(),
+                k => format!(
+                    "Earth's horizontal rate on static run '{}'",
+                    self.session.runs[self.poses[(k - COMMON) / 2].run].spec.name
+                ),
+            };
             return Err(EstimateError::NotConverged(format!(
-                "the estimated {} {:.4} rad is implausibly large for a stand (limit ±{} rad): the runs do not pin it down, or the labels are wrong",
-                COMMON_NAMES[k], common[k], COMMON_LIMIT[k]
+                "the estimated {what} {:.4e} is implausibly large for a stand or the Earth (limit ±{:.1e}): the runs do not pin it down, the labels are wrong, or the unit has an effect the model lacks",
+                common[k],
+                limit(k)
             )));
         }
         Ok(())
     }
 
+    /// Whether parameter `j` is the Earth's rate the manifest declares.
+    fn is_declared(&self, j: usize) -> bool {
+        self.earth_declared && (self.common() + EARTH..self.common() + COMMON).contains(&j)
+    }
+
     /// Why a parameter is held, in words.
     fn held_reason(&self, j: usize, raw: f64) -> String {
         let logs = j < 3 * self.conic.len() && self.logged[self.conic[j / 3]].is_some();
-        if logs {
+        if self.is_declared(j) {
+            "declared in the manifest (earth_rate on the static runs); not estimated".to_string()
+        } else if logs {
             "followed from the run's logged angle".to_string()
         } else if raw > 0.0 {
             "not identifiable from these runs (it moves the outputs as the model's coefficients or the other stand settings do); held at its label".to_string()
@@ -523,8 +628,26 @@ pub(crate) fn fit_with_stand(
         .collect();
     let mut nominal: Vec<f64> =
         conic.iter().filter_map(|&i| conic_of(&session.runs[i].spec.motion)).flatten().collect();
-    nominal.extend([0.0; COMMON]);
-    let problem = StandProblem { model, session, conic, deriv, opts, g_m_s2, declared, logged };
+    let earth_declared = session.runs.iter().any(|r| {
+        matches!(r.spec.motion, MotionSpec::Static { earth_rate_rad_s, .. } if earth_rate_rad_s.iter().any(|v| *v != 0.0))
+    });
+    let poses: Vec<Pose> = if earth_declared {
+        Vec::new()
+    } else {
+        (0..session.runs.len())
+            .filter(|&i| matches!(session.runs[i].spec.motion, MotionSpec::Static { .. }) && !declared[i].is_empty())
+            .filter_map(|i| {
+                let a = declared[i].at(0).a_m_s2.xyz;
+                let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+                (n > 0.0 && n.is_finite()).then(|| {
+                    let up = a.map(|v| v / n);
+                    Pose { run: i, up, horizontal: crate::motion::stand::horizontal_basis(up) }
+                })
+            })
+            .collect()
+    };
+    nominal.extend(vec![0.0; COMMON + 2 * poses.len()]);
+    let problem = StandProblem { model, session, conic, deriv, opts, g_m_s2, declared, logged, poses, earth_declared };
     let free = problem.identifiable(&nominal)?;
     let (x, tracks, mut f) = problem.gauss_newton(nominal.clone(), &free)?;
     problem.refuse_mislabelled(&x, &nominal, &tracks, &f)?;
@@ -565,7 +688,20 @@ pub(crate) fn fit_with_stand(
         .filter(|&k| held(c0 + k))
         .map(|k| format!("{}: {}", COMMON_NAMES[k], problem.held_reason(c0 + k, lin.raw[c0 + k])))
         .collect();
+    let mut held_common = held_common;
+    let mut poses = Vec::with_capacity(problem.poses.len());
+    for (pi, pose) in problem.poses.iter().enumerate() {
+        let j = c0 + COMMON + 2 * pi;
+        let run = session.runs[pose.run].spec.name.clone();
+        if held(j) || held(j + 1) {
+            let why = problem.held_reason(j, lin.raw[j]);
+            held_common.push(format!("Earth's horizontal rate on static run '{run}': {why}"));
+        }
+        poses.push(PoseEarth { run, horizontal_rad_s: [x[j], x[j + 1]], horizontal_se_rad_s: [se(j), se(j + 1)] });
+    }
     let se_common: Vec<f64> = (0..COMMON).map(|k| se(c0 + k)).collect();
-    f.stand_base = Some(StandBase::from_flat(&x[c0..], &se_common, held_common));
+    let mut base = StandBase::from_flat(&x[c0..], &se_common, held_common);
+    base.poses = poses;
+    f.stand_base = Some(base);
     Ok(f)
 }
