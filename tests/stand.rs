@@ -6,9 +6,9 @@ use crosscal::model::Model;
 use crosscal::session::{MotionSpec, Session};
 use crosscal::simulate::SimConfig;
 
-/// The paper's session with noise, run on a stand whose cone angles are 0.3° larger, rates
-/// 0.5 % slower and phases 1.5° ahead of the labels; the session carries the labels.
-fn mislabelled(seed: u64, duration_s: f64, rate_hz: f64) -> (SimConfig, Session) {
+/// The paper's stand runs with noise 0.002 °/s and 2e-5 g, each run `duration_s` long at
+/// `rate_hz`.
+fn noisy_paper(seed: u64, duration_s: f64, rate_hz: f64) -> SimConfig {
     let mut cfg = SimConfig::paper();
     cfg.sample_rate_hz = rate_hz;
     cfg.gyro_noise_deg_s = 0.002;
@@ -16,6 +16,15 @@ fn mislabelled(seed: u64, duration_s: f64, rate_hz: f64) -> (SimConfig, Session)
     cfg.seed = seed;
     for r in &mut cfg.runs {
         r.duration_s = duration_s;
+    }
+    cfg
+}
+
+/// The paper's session with noise, run on a stand whose cone angles are 0.3° larger, rates
+/// 0.5 % slower and phases 1.5° ahead of the labels; the session carries the labels.
+fn mislabelled(seed: u64, duration_s: f64, rate_hz: f64) -> (SimConfig, Session) {
+    let mut cfg = noisy_paper(seed, duration_s, rate_hz);
+    for r in &mut cfg.runs {
         if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = &mut r.motion {
             *cone_angle_deg += 0.3;
             *rate_deg_s *= 0.995;
@@ -196,14 +205,7 @@ fn a_misnamed_or_misplaced_angle_column_is_refused_by_name() {
 /// truth, the coefficients within 3 SE, and without them the coefficients are biased.
 #[test]
 fn fit_stand_recovers_tilt_and_ripple_with_the_settings() {
-    let mut cfg = SimConfig::paper();
-    cfg.gyro_noise_deg_s = 0.002;
-    cfg.accel_noise_g = 2e-5;
-    cfg.seed = 41;
-    cfg.sample_rate_hz = 50.0;
-    for r in &mut cfg.runs {
-        r.duration_s = 24.0;
-    }
+    let mut cfg = noisy_paper(41, 24.0, 50.0);
     for s in ["tilt=0.2,-0.1", "ripple1=0.005,30", "ripple2=0.003,-60", "cone=0.2", "rate=-0.003", "phase=1.0,-0.5"] {
         cfg.stand.set(s).unwrap();
     }
@@ -272,14 +274,7 @@ fn fit_stand_recovers_tilt_and_ripple_with_the_settings() {
 /// unknown), each within 3 SE; the coefficients stay within their errors.
 #[test]
 fn fit_stand_estimates_the_undeclared_earth_rotation_on_cones_and_poses() {
-    let mut cfg = SimConfig::paper();
-    cfg.gyro_noise_deg_s = 0.002;
-    cfg.accel_noise_g = 2e-5;
-    cfg.seed = 12;
-    cfg.sample_rate_hz = 50.0;
-    for r in &mut cfg.runs {
-        r.duration_s = 24.0;
-    }
+    let mut cfg = noisy_paper(12, 24.0, 50.0);
     let template = cfg.runs[0].clone();
     for (name, up) in [("still-z", [0.0, 0.0, 1.0]), ("still-y", [0.0, 1.0, 0.0]), ("still-x", [-1.0, 0.0, 0.0])] {
         let mut p = template.clone();
