@@ -743,10 +743,7 @@ fn channel_grams(
                     w[i - skip] = v * scale;
                 }
             }
-            if rows > 0 {
-                let w = chn.white.rows(0, rows);
-                chn.gram.gemm_tr(1.0, &w, &w, 1.0);
-            }
+            crate::stats::gram::add_block(&mut chn.gram, &chn.white, rows);
             // The block's last p rows become the next block's history.
             for col in 0..m {
                 let mut x = chn.raw.column_mut(col);

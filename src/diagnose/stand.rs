@@ -508,11 +508,8 @@ impl Whitener {
     }
 
     fn flush(&mut self) {
-        if self.rows > 0 {
-            let w = self.block.rows(0, self.rows);
-            self.gram.gemm_tr(1.0, &w, &w, 1.0);
-            self.rows = 0;
-        }
+        crate::stats::gram::add_block(&mut self.gram, &self.block, self.rows);
+        self.rows = 0;
     }
 
     fn finish(mut self) -> DMatrix<f64> {

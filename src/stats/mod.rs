@@ -7,6 +7,7 @@
 
 pub mod ar;
 pub mod autocov;
+pub mod gram;
 pub mod harmonics;
 pub mod qr;
 pub mod segment;
