@@ -118,7 +118,10 @@ fn rss(f: &SensorFit) -> f64 {
 struct Objective<'a, 'b> {
     model: &'a Model,
     runs: &'a [FitRun<'b>],
-    opts: &'a FitOptions,
+    /// The fit's options for J's evaluations: screening (J needs each sensor's residual
+    /// sum of squares, which the solve gives; the second pass over the samples, for the
+    /// residual's statistics, is skipped), without the slow-noise pass.
+    opts: FitOptions,
     sensors: Vec<(SensorKind, f64)>,
 }
 
@@ -127,7 +130,7 @@ impl Objective<'_, '_> {
         let values = expand(self.model, p);
         let mut j = 0.0;
         for &(s, sigma2) in &self.sensors {
-            match sensor_fit_at(self.model, &values, s, self.runs, self.opts) {
+            match sensor_fit_at(self.model, &values, s, self.runs, &self.opts) {
                 Ok(f) => j += rss(&f) / sigma2,
                 Err(_) => return f64::INFINITY,
             }
@@ -307,7 +310,8 @@ pub(crate) fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Resu
             let s2 = f.channels.iter().map(|c| c.sigma * c.sigma).sum::<f64>() / 3.0;
             sensors.push((s, s2.max(f64::MIN_POSITIVE)));
         }
-        let obj = Objective { model, runs, opts, sensors };
+        let inner = FitOptions { screening: true, slow_noise: false, ..*opts };
+        let obj = Objective { model, runs, opts: inner, sensors };
         let p0 = coarse_start(&obj, &defs, p0);
         let (best, obj) = simplex(obj, &defs, p0, opts.screening)?;
         p_hat = best;

@@ -69,7 +69,7 @@ impl StandMotion {
                 continue;
             }
             let h = (h + 1) as f64;
-            let (sn, cs) = (h * th0).sin_cos();
+            let (sn, cs) = libm::sincos(h * th0);
             theta += c * cs + s * sn;
             d1 += h * (-c * sn + s * cs);
             d2 += h * h * (-c * cs - s * sn);
@@ -92,14 +92,14 @@ impl StandMotion {
     /// Kinematics for a given stand angle and its derivatives (a logged angle).
     pub fn at_angle(&self, an: Angle, g_m_s2: f64) -> Kinematics {
         let Angle { theta, rate: td, accel: tdd } = an;
-        let (st, ct) = theta.sin_cos();
+        let (st, ct) = libm::sincos(theta);
         let [wc, ws] = self.wobble_rad;
         let alpha = self.cone_angle_rad + wc * ct + ws * st;
         let a1 = -wc * st + ws * ct; // dα/dθ
         let a2 = -wc * ct - ws * st; // d²α/dθ²
         let ad = a1 * td;
         let add = a2 * td * td + a1 * tdd;
-        let (sa, ca) = alpha.sin_cos();
+        let (sa, ca) = libm::sincos(alpha);
         let f = [sa * ct, -sa * st, 1.0 - ca];
         let f_t = [-sa * st, -sa * ct, 0.0];
         let f_a = [ca * ct, -ca * st, sa];
