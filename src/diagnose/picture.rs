@@ -5,7 +5,7 @@
 //! reader's eye sees.
 
 use crate::estimate::{Fit, FitRun};
-use crate::model::{forward, Model};
+use crate::model::Model;
 use crate::session::MotionSpec;
 use crate::stats::{chi2_upper, systematic, Systematic};
 use crate::units::{SensorKind, AXES};
@@ -76,8 +76,9 @@ pub fn run_residual(model: &Model, f: &Fit, run: &FitRun<'_>) -> (Vec<Vec<f64>>,
         let values = values_of(f, model, sensor);
         let seen = crate::estimate::seen_tracks(model, f, sensor, std::slice::from_ref(run)).and_then(|mut v| v.pop());
         let moved = FitRun { track: seen.as_ref().unwrap_or(run.track), ..*run };
+        let predict = crate::model::Predictor::new(&terms, &values);
         for k in 0..moved.len() {
-            let u = forward(&terms, &values, &moved.state(k));
+            let u = predict.at(&moved.state(k));
             let y = moved.output(sensor, k);
             for ch in 0..3 {
                 r[3 * si + ch].push(y[ch] - u[ch]);

@@ -20,9 +20,10 @@
 
 use crate::estimate::slow::SlowNoise;
 use crate::estimate::{seen_tracks, CoefStatus, Fit, FitRun};
-use crate::model::{catalog, scale_matrix, CatalogEffect, Model, Role, State, TermRef};
+use crate::model::{catalog, scale_matrix, CatalogEffect, Model, Predictor, Role, State, TermRef};
 use crate::motion::{cone_phase, Track};
 use crate::session::MotionSpec;
+use crate::stats::gram::WhitenedGram;
 use crate::stats::spectrum::{lines, refine_frequency, welch};
 use crate::stats::{ArModel, PhaseLine};
 use crate::units::SensorKind;
@@ -610,8 +611,9 @@ impl Secants {
         for si in 0..2 {
             let terms = u.augmented.terms(SensorKind::BOTH[si]);
             let a = FitRun { track: self.seen[si].as_ref().unwrap_or(run.track), ..*run };
+            let predict = Predictor::new(&terms, &u.values[si]);
             out.start[si].clear();
-            out.start[si].extend((k0..k1).map(|k| crate::model::forward(&terms, &u.values[si], &a.state(k))));
+            out.start[si].extend((k0..k1).map(|k| predict.at(&a.state(k))));
         }
         let (start, out) = (&out.start, &mut out.cols);
         out.resize_with(self.moved.len(), Vec::new);
@@ -625,9 +627,10 @@ impl Secants {
                     let Some(moved) = moved else { continue };
                     let terms = u.augmented.terms(SensorKind::BOTH[si]);
                     let b = FitRun { track: moved, ..*run };
+                    let predict = Predictor::new(&terms, &u.values[si]);
                     for (i, c) in col.iter_mut().enumerate() {
                         let u0 = start[si][i];
-                        let u1 = crate::model::forward(&terms, &u.values[si], &b.state(k0 + i));
+                        let u1 = predict.at(&b.state(k0 + i));
                         for ch in 0..3 {
                             c[3 * si + ch] = (u1[ch] - u0[ch]) / step;
                         }
@@ -640,8 +643,7 @@ impl Secants {
 
 /// The whitened Grams of the six channels of one run, built block by block: the states
 /// and the basis rows of a block are evaluated once for all channels; each channel's block
-/// of unwhitened columns (with its last p rows of history ahead of it) is prewhitened a
-/// column at a time and its Gram updated by one matrix product.
+/// of unwhitened columns is prewhitened and its Gram updated ([`WhitenedGram`]).
 fn channel_grams(
     u: &Universe,
     run: &FitRun<'_>,
@@ -654,26 +656,8 @@ fn channel_grams(
     let nb = basis.size;
     let terms: [Vec<TermRef<'_>>; 2] = SensorKind::BOTH.map(|s| u.augmented.terms(s));
     let k_matrix: [[[f64; 3]; 3]; 2] = [0, 1].map(|si| scale_matrix(&terms[si], &u.values[si]));
-    struct Channel {
-        m: usize,
-        p: usize,
-        raw: DMatrix<f64>,
-        white: DMatrix<f64>,
-        gram: DMatrix<f64>,
-    }
-    let mut chans: Vec<Channel> = (0..6)
-        .map(|c| {
-            let m = u.width(c) + nb + 1;
-            let p = noise[c].ar.order();
-            Channel {
-                m,
-                p,
-                raw: DMatrix::zeros(BLOCK + p, m),
-                white: DMatrix::zeros(BLOCK, m),
-                gram: DMatrix::zeros(m, m),
-            }
-        })
-        .collect();
+    let mut chans: Vec<WhitenedGram> =
+        (0..6).map(|c| WhitenedGram::new(u.width(c) + nb + 1, &noise[c].ar, BLOCK)).collect();
     let mut states: Vec<State> = Vec::with_capacity(BLOCK);
     let mut basis_rows = DMatrix::<f64>::zeros(BLOCK, nb);
     let mut row = vec![0.0; nb];
@@ -697,10 +681,8 @@ fn channel_grams(
         }
         for (c, chn) in chans.iter_mut().enumerate() {
             let (si, ch) = (c / 3, c % 3);
-            let (p, m) = (chn.p, chn.m);
-            let width = m - nb - 1;
+            let width = u.width(c);
             for (j, &(_, src)) in u.columns[c].iter().enumerate() {
-                let col = &mut chn.raw.column_mut(j);
                 match src {
                     Source::Term(k) => {
                         term_column(
@@ -712,49 +694,24 @@ fn channel_grams(
                             &states,
                             &mut phi[..len],
                         );
-                        col.rows_mut(p, len).copy_from_slice(&phi[..len]);
+                        chn.column(j, len).copy_from_slice(&phi[..len]);
                     }
                     Source::Secant(e, pi) => {
-                        for (i, s) in secant_block.cols[e][pi].iter().enumerate() {
-                            col[p + i] = s[c];
+                        for (o, s) in chn.column(j, len).iter_mut().zip(&secant_block.cols[e][pi]) {
+                            *o = s[c];
                         }
                     }
                 }
             }
             for b in 0..nb {
-                chn.raw.column_mut(width + b).rows_mut(p, len).copy_from(&basis_rows.column(b).rows(0, len));
+                chn.column(width + b, len).copy_from_slice(&basis_rows.as_slice()[b * BLOCK..b * BLOCK + len]);
             }
-            chn.raw.column_mut(m - 1).rows_mut(p, len).copy_from_slice(&r[c][k0..k1]);
-            // Prewhiten a column at a time: x_i − Σ φ_l x_{i−l}, scaled to unit innovation
-            // variance; the run's first p rows (no history) are left out.
-            let ar = &noise[c].ar;
-            let scale = if ar.innovation_var > 0.0 { 1.0 / ar.innovation_var.sqrt() } else { 0.0 };
-            let skip = p.saturating_sub(k0).min(len);
-            let rows = len - skip;
-            for col in 0..m {
-                let x = chn.raw.column(col);
-                let x = x.as_slice();
-                let w = &mut chn.white.column_mut(col);
-                for i in skip..len {
-                    let mut v = x[p + i];
-                    for (l, f) in ar.phi.iter().enumerate() {
-                        v -= f * x[p + i - 1 - l];
-                    }
-                    w[i - skip] = v * scale;
-                }
-            }
-            crate::stats::gram::add_block(&mut chn.gram, &chn.white, rows);
-            // The block's last p rows become the next block's history.
-            for col in 0..m {
-                let mut x = chn.raw.column_mut(col);
-                for l in 0..p.min(len) {
-                    x[p - p.min(len) + l] = x[p + len - p.min(len) + l];
-                }
-            }
+            chn.column(width + nb, len).copy_from_slice(&r[c][k0..k1]);
+            chn.commit(len);
         }
         k0 = k1;
     }
-    chans.into_iter().map(|c| c.gram).collect()
+    chans.into_iter().map(WhitenedGram::finish).collect()
 }
 
 /// The Gauss–Newton column of term `t` in output channel `ch`: its regressor for an

@@ -24,10 +24,11 @@ use super::algebra::{pinv_sym, Lsq};
 use super::select::Evidence;
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::frames::Mount;
-use crate::model::{forward, Model, State, TermRef};
-use crate::motion::stand::{AddRate, StandMotion};
+use crate::model::{Model, Predictor, State, TermRef};
+use crate::motion::stand::{to_sensor, AddRate, StandMotion};
 use crate::motion::Track;
 use crate::session::MotionSpec;
+use crate::stats::gram::WhitenedGram;
 use crate::stats::ArModel;
 use crate::units::SensorKind;
 use nalgebra::{DMatrix, DVector};
@@ -305,7 +306,6 @@ impl Suspect {
         Systems { folds, total, raw, base: layout.count, samples }
     }
 
-    #[allow(clippy::too_many_lines)]
     fn run_system(
         &self,
         r: usize,
@@ -315,9 +315,9 @@ impl Suspect {
         run: &FitRun<'_>,
         noise: &RunNoiseModel,
     ) -> (Fold, Fold) {
-        let p_all = layout.count + self.width;
         let n = run.len();
         let locals = &self.locals[r];
+        let nl = locals.len();
         let terms: [Vec<TermRef<'_>>; 2] = SensorKind::BOTH.map(|s| model.terms(s));
         let values: [Vec<f64>; 2] = SensorKind::BOTH.map(|s| {
             let sf = fit.sensor(s);
@@ -325,7 +325,6 @@ impl Suspect {
         });
         let seen: [Option<Track>; 2] = SensorKind::BOTH
             .map(|s| crate::estimate::seen_tracks(model, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
-        let resid = super::picture::run_residual(model, fit, run).0;
         // Per channel: global indices of its columns (model coefficients, then stand).
         let index: Vec<Vec<usize>> = (0..6)
             .map(|c| {
@@ -337,65 +336,64 @@ impl Suspect {
         // The slow noise as a random effect on the run's basis (super::slow), where it has one.
         let slow = |c: usize| noise.slow.get(c).filter(|d| d.iter().any(|v| *v != 0.0));
         let nb = |c: usize| if slow(c).is_some() { noise.basis.size } else { 0 };
-        let mut chans: Vec<Whitener> =
-            (0..6).map(|c| Whitener::new(index[c].len() + nb(c) + 1, &noise.ar[c])).collect();
-        let mut basis_row = vec![0.0; noise.basis.size];
-        let predict = |s: &State| {
-            let g = forward(&terms[0], &values[0], s);
-            let a = forward(&terms[1], &values[1], s);
-            [g[0], g[1], g[2], a[0], a[1], a[2]]
+        let mut chans: Vec<WhitenedGram> =
+            (0..6).map(|c| WhitenedGram::new(index[c].len() + nb(c) + 1, &noise.ar[c], BLOCK)).collect();
+        let knobs = Knobs {
+            predict: [0, 1].map(|si| Predictor::new(&terms[si], &values[si])),
+            stand: match &self.runs[r] {
+                RunStand::Conic { declared, now, mount } => Some((declared.rate_rad_s, *now, mount)),
+                _ => None,
+            },
+            g_m_s2: self.g_m_s2,
         };
-        let stand = match &self.runs[r] {
-            RunStand::Conic { declared, now, mount } => Some((declared.rate_rad_s, *now, mount)),
-            _ => None,
-        };
-        let mut d = vec![[0.0f64; 6]; locals.len()];
-        let mut row = Vec::new();
-        for k in 0..n {
-            let st = run.state(k);
-            let p0 = predict(&st);
-            for (j, &(_, dir)) in locals.iter().enumerate() {
-                let mut s1 = st;
-                match (dir, &stand) {
-                    (Dir::Knob(kn), Some((rate, now, mount))) => {
-                        let mut m = *now;
-                        knob(&mut m, *rate, kn, STEP[kn]);
-                        let x = m.sensor_at(run.track.t_s[k], self.g_m_s2, mount);
-                        s1.w = x.w_rad_s.xyz;
-                        s1.e = x.e_rad_s2.xyz;
-                        s1.a = x.a_m_s2.xyz;
+        // A block's knob columns ([local][channel][sample]), states per sensor and basis rows.
+        let mut dcol = vec![0.0; nl * 6 * BLOCK];
+        let mut states: [Vec<State>; 2] = [Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK)];
+        let mut basis = vec![0.0; noise.basis.size * BLOCK];
+        let mut brow = vec![0.0; noise.basis.size];
+        // The residual (output − the fitted model on the motion each sensor sees).
+        let mut resid = vec![0.0; 6 * BLOCK];
+        let mut k0 = 0;
+        while k0 < n {
+            let k1 = (k0 + BLOCK).min(n);
+            let len = k1 - k0;
+            states.iter_mut().for_each(Vec::clear);
+            for (i, k) in (k0..k1).enumerate() {
+                let st = run.state(k);
+                knobs.columns(locals, run.track.t_s[k], &st, |j, c, v| dcol[(j * 6 + c) * BLOCK + i] = v);
+                for (si, s) in states.iter_mut().enumerate() {
+                    let seen_st = match &seen[si] {
+                        Some(t) => FitRun { track: t, ..*run }.state(k),
+                        None => st,
+                    };
+                    let (u, y) = (knobs.predict[si].at(&seen_st), run.output(SensorKind::BOTH[si], k));
+                    for ch in 0..3 {
+                        resid[(3 * si + ch) * BLOCK + i] = y[ch] - u[ch];
                     }
-                    (Dir::Rate(v), _) => {
-                        for i in 0..3 {
-                            s1.w[i] += STEP[KNOBS - 1] * v[i];
-                        }
-                    }
-                    _ => {}
+                    s.push(seen_st);
                 }
-                let p1 = predict(&s1);
-                let h = match dir {
-                    Dir::Knob(kn) => STEP[kn],
-                    Dir::Rate(_) => STEP[KNOBS - 1],
-                };
-                for c in 0..6 {
-                    d[j][c] = (p1[c] - p0[c]) / h;
+                noise.basis.row(run.track.t_s[k], &mut brow);
+                for (b, v) in brow.iter().enumerate() {
+                    basis[b * BLOCK + i] = *v;
                 }
             }
-            let states: [State; 2] = std::array::from_fn(|si| match &seen[si] {
-                Some(t) => FitRun { track: t, ..*run }.state(k),
-                None => st,
-            });
-            noise.basis.row(run.track.t_s[k], &mut basis_row);
-            for c in 0..6 {
-                let si = c / 3;
-                row.clear();
-                row.extend(layout.channel[c].iter().map(|&(_, ti)| terms[si][ti].regressor(&states[si])));
-                row.extend(d.iter().map(|x| x[c]));
-                row.extend_from_slice(&basis_row[..nb(c)]);
-                row.push(resid[c][k]);
-                chans[c].push(&row);
+            for (c, w) in chans.iter_mut().enumerate() {
+                let (si, nbase) = (c / 3, layout.channel[c].len());
+                for (col, &(_, ti)) in layout.channel[c].iter().enumerate() {
+                    terms[si][ti].regressors(&states[si], w.column(col, len));
+                }
+                for j in 0..nl {
+                    w.column(nbase + j, len).copy_from_slice(&dcol[(j * 6 + c) * BLOCK..][..len]);
+                }
+                for b in 0..nb(c) {
+                    w.column(nbase + nl + b, len).copy_from_slice(&basis[b * BLOCK..][..len]);
+                }
+                w.column(nbase + nl + nb(c), len).copy_from_slice(&resid[c * BLOCK..][..len]);
+                w.commit(len);
             }
+            k0 = k1;
         }
+        let p_all = layout.count + self.width;
         let mut fold = Fold { g: DMatrix::zeros(p_all, p_all), b: DVector::zeros(p_all), yy: 0.0 };
         let mut raw = fold.clone();
         for (c, w) in chans.into_iter().enumerate() {
@@ -416,6 +414,70 @@ impl Suspect {
             }
         }
         (fold, raw)
+    }
+}
+
+/// The stand's columns of one run at a sample: the change of the fitted model's outputs
+/// per unit change of each local stand parameter (a forward difference).
+struct Knobs<'m> {
+    predict: [Predictor<'m>; 2],
+    /// A conic run's declared rate, motion now believed and mount.
+    stand: Option<(f64, StandMotion, &'m Mount)>,
+    g_m_s2: f64,
+}
+
+impl Knobs<'_> {
+    fn outputs(&self, s: &State) -> [f64; 6] {
+        let g = self.predict[0].at(s);
+        let a = self.predict[1].at(s);
+        [g[0], g[1], g[2], a[0], a[1], a[2]]
+    }
+
+    /// Calls `out(local, channel, column value)` for every local parameter at the sample
+    /// with state `st` at `t_s`. The stand's angle and cone angle are worked out once and
+    /// their sines reused by the parameters that leave them alone (the same numbers as
+    /// the nudged motion's own [`StandMotion::sensor_at`]).
+    fn columns(&self, locals: &[(usize, Dir)], t_s: f64, st: &State, mut out: impl FnMut(usize, usize, f64)) {
+        let p0 = self.outputs(st);
+        let at = self.stand.map(|(_, now, _)| {
+            let an = now.angle(t_s);
+            let sc = libm::sincos(an.theta);
+            (an, sc, now.cone_trig(sc))
+        });
+        for (j, &(_, dir)) in locals.iter().enumerate() {
+            let mut s1 = *st;
+            let h = match dir {
+                Dir::Knob(kn) => STEP[kn],
+                Dir::Rate(_) => STEP[KNOBS - 1],
+            };
+            match (dir, &self.stand, &at) {
+                (Dir::Knob(kn), Some((rate, now, mount)), Some((an0, sc0, cone0))) => {
+                    let mut m = *now;
+                    knob(&mut m, *rate, kn, h);
+                    // Rate, phase and ripple move the stand's angle; the others keep it.
+                    let x = if matches!(kn, 1 | 2 | 5..=8) {
+                        let an = m.angle(t_s);
+                        m.at_angle_trig(an, libm::sincos(an.theta), Some(*cone0), self.g_m_s2)
+                    } else {
+                        m.at_angle_trig(*an0, *sc0, Some(*cone0), self.g_m_s2)
+                    };
+                    let x = to_sensor(x, mount);
+                    s1.w = x.w_rad_s.xyz;
+                    s1.e = x.e_rad_s2.xyz;
+                    s1.a = x.a_m_s2.xyz;
+                }
+                (Dir::Rate(v), ..) => {
+                    for i in 0..3 {
+                        s1.w[i] += h * v[i];
+                    }
+                }
+                _ => {}
+            }
+            let p1 = self.outputs(&s1);
+            for c in 0..6 {
+                out(j, c, (p1[c] - p0[c]) / h);
+            }
+        }
     }
 }
 
@@ -453,68 +515,6 @@ impl BaseLayout {
             }
         }
         Self { channel, count }
-    }
-}
-
-/// Prewhitens rows with an AR filter (scaled to unit innovation variance) and accumulates
-/// their Gram a block at a time; the first p rows (no history) are left out.
-struct Whitener {
-    phi: Vec<f64>,
-    scale: f64,
-    history: Vec<Vec<f64>>,
-    block: DMatrix<f64>,
-    rows: usize,
-    gram: DMatrix<f64>,
-}
-
-impl Whitener {
-    fn new(m: usize, ar: &ArModel) -> Self {
-        let scale = if ar.innovation_var > 0.0 { 1.0 / ar.innovation_var.sqrt() } else { 0.0 };
-        Self {
-            phi: ar.phi.clone(),
-            scale,
-            history: Vec::with_capacity(ar.phi.len() + 1),
-            block: DMatrix::zeros(BLOCK, m),
-            rows: 0,
-            gram: DMatrix::zeros(m, m),
-        }
-    }
-
-    fn push(&mut self, x: &[f64]) {
-        let p = self.phi.len();
-        if self.history.len() == p {
-            for (j, v) in x.iter().enumerate() {
-                let mut w = *v;
-                for (l, f) in self.phi.iter().enumerate() {
-                    w -= f * self.history[p - 1 - l][j];
-                }
-                self.block[(self.rows, j)] = w * self.scale;
-            }
-            self.rows += 1;
-            if self.rows == BLOCK {
-                self.flush();
-            }
-        }
-        if p > 0 {
-            if self.history.len() == p {
-                let mut oldest = self.history.remove(0);
-                oldest.clear();
-                oldest.extend_from_slice(x);
-                self.history.push(oldest);
-            } else {
-                self.history.push(x.to_vec());
-            }
-        }
-    }
-
-    fn flush(&mut self) {
-        crate::stats::gram::add_block(&mut self.gram, &self.block, self.rows);
-        self.rows = 0;
-    }
-
-    fn finish(mut self) -> DMatrix<f64> {
-        self.flush();
-        self.gram
     }
 }
 

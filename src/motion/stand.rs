@@ -91,15 +91,40 @@ impl StandMotion {
 
     /// Kinematics for a given stand angle and its derivatives (a logged angle).
     pub fn at_angle(&self, an: Angle, g_m_s2: f64) -> Kinematics {
-        let Angle { theta, rate: td, accel: tdd } = an;
-        let (st, ct) = libm::sincos(theta);
+        self.at_angle_trig(an, libm::sincos(an.theta), None, g_m_s2)
+    }
+
+    /// The cone angle at a stand angle with sine and cosine `(st, ct)` (the wobble turns
+    /// it once a revolution), with its own sine and cosine: (α, sin α, cos α).
+    pub fn cone_trig(&self, (st, ct): (f64, f64)) -> (f64, f64, f64) {
+        let [wc, ws] = self.wobble_rad;
+        let alpha = self.cone_angle_rad + wc * ct + ws * st;
+        let (sa, ca) = libm::sincos(alpha);
+        (alpha, sa, ca)
+    }
+
+    /// [`Self::at_angle`] with sin θ and cos θ given, and the cone angle's sine and cosine
+    /// reused from `cone` ([`Self::cone_trig`] of a motion at the same θ) when its α is this
+    /// motion's: many nearby motions at one sample (a stand parameter nudged at a time)
+    /// then cost one or two sines, the same numbers as [`Self::at_angle`].
+    pub fn at_angle_trig(
+        &self,
+        an: Angle,
+        (st, ct): (f64, f64),
+        cone: Option<(f64, f64, f64)>,
+        g_m_s2: f64,
+    ) -> Kinematics {
+        let Angle { theta: _, rate: td, accel: tdd } = an;
         let [wc, ws] = self.wobble_rad;
         let alpha = self.cone_angle_rad + wc * ct + ws * st;
         let a1 = -wc * st + ws * ct; // dα/dθ
         let a2 = -wc * ct - ws * st; // d²α/dθ²
         let ad = a1 * td;
         let add = a2 * td * td + a1 * tdd;
-        let (sa, ca) = libm::sincos(alpha);
+        let (sa, ca) = match cone {
+            Some((a, sa, ca)) if a.to_bits() == alpha.to_bits() => (sa, ca),
+            _ => libm::sincos(alpha),
+        };
         let f = [sa * ct, -sa * st, 1.0 - ca];
         let f_t = [-sa * st, -sa * ct, 0.0];
         let f_a = [ca * ct, -ca * st, sa];
