@@ -960,6 +960,21 @@ pub fn scale_matrix(terms: &[TermRef<'_>], values: &[f64]) -> [[f64; 3]; 3] {
 #[inline]
 pub fn forward(terms: &[TermRef<'_>], values: &[f64], s: &State) -> [f64; 3] {
     let mut u = [0.0; 3];
+    weighted_regressors(terms, values, |e, k, ch, w| u[ch] += w * e.regressor(k, s));
+    u
+}
+
+/// Every nonzero term's contribution to the forward model as (effect, regressor index,
+/// output channel, weight), in order: an output-side term once with its value; an
+/// input-side term once per component of its input perturbation, weighted by the value
+/// times the scale matrix's element (`u_i = K_i·(x + Δ)`). Shared by [`forward`] and
+/// [`Predictor`].
+#[inline]
+fn weighted_regressors<'a>(
+    terms: &[TermRef<'a>],
+    values: &[f64],
+    mut visit: impl FnMut(&'a dyn Effect, usize, usize, f64),
+) {
     let mut k = None;
     for (t, &v) in terms.iter().zip(values) {
         if v == 0.0 {
@@ -967,16 +982,15 @@ pub fn forward(terms: &[TermRef<'_>], values: &[f64], s: &State) -> [f64; 3] {
         }
         let comps = t.input_components();
         if comps.is_empty() {
-            u[t.term.channel] += v * t.regressor(s);
+            visit(t.effect, t.index, t.term.channel, v);
         } else {
             let k = k.get_or_insert_with(|| scale_matrix(terms, values));
             let i = t.term.channel;
             for (j, kj) in comps {
-                u[i] += v * k[i][j] * t.effect.regressor(kj, s);
+                visit(t.effect, kj, i, v * k[i][j]);
             }
         }
     }
-    u
 }
 
 #[cfg(test)]

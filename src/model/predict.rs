@@ -1,6 +1,6 @@
 //! The forward model compiled for many states ([`Predictor`]).
 
-use super::{scale_matrix, Effect, State, TermRef};
+use super::{weighted_regressors, Effect, State, TermRef};
 
 /// [`super::forward`] worked out once for many states: each nonzero term's channel, weight and
 /// regressor (an input-side term's components weighted by the scale matrix's row), so that
@@ -17,22 +17,7 @@ impl<'a> Predictor<'a> {
     /// The predictor of one sensor's `terms` at `values`.
     pub fn new(terms: &[TermRef<'a>], values: &[f64]) -> Self {
         let mut parts = Vec::new();
-        let mut k = None;
-        for (t, &v) in terms.iter().zip(values) {
-            if v == 0.0 {
-                continue;
-            }
-            let comps = t.input_components();
-            if comps.is_empty() {
-                parts.push((t.effect, t.index, t.term.channel, v));
-            } else {
-                let k = k.get_or_insert_with(|| scale_matrix(terms, values));
-                let i = t.term.channel;
-                for (j, kj) in comps {
-                    parts.push((t.effect, kj, i, v * k[i][j]));
-                }
-            }
-        }
+        weighted_regressors(terms, values, |e, k, ch, w| parts.push((e, k, ch, w)));
         Self { parts }
     }
 
