@@ -3,18 +3,11 @@
 use super::ArModel;
 use nalgebra::DMatrix;
 
-/// `gram += Wᵀ·W` for the first `rows` rows of the column-major `block` (W = those rows).
-///
-/// One packed matrix product (nalgebra's `gemm`, which hands dynamic matrices to
-/// `matrixmultiply`) with a transposed copy of the rows: `gemm_tr`, its naive counterpart,
-/// takes a dot product per element and was the largest single cost of `diagnose` at scale.
-pub fn add_block(gram: &mut DMatrix<f64>, block: &DMatrix<f64>, rows: usize) {
-    let mut wt = DMatrix::zeros(block.ncols(), rows.min(block.nrows()));
-    add_block_scaled(gram, block, rows, 1.0, &mut wt);
-}
-
-/// `gram += alpha·Wᵀ·W` for the first `rows` rows of `block` (see [`add_block`]), Wᵀ
-/// copied into `wt` (m × at least `rows`, reused between blocks: no allocation per block).
+/// `gram += alpha·Wᵀ·W` for the first `rows` rows of the column-major `block` (W = those
+/// rows), Wᵀ copied into `wt` (m × at least `rows`, reused between blocks: no allocation
+/// per block). One packed matrix product (nalgebra's `gemm`, which hands dynamic matrices
+/// to `matrixmultiply`): `gemm_tr`, its naive counterpart, takes a dot product per element
+/// and was the largest single cost of `diagnose` at scale.
 pub fn add_block_scaled(gram: &mut DMatrix<f64>, block: &DMatrix<f64>, rows: usize, alpha: f64, wt: &mut DMatrix<f64>) {
     let (ld, m) = block.shape();
     let rows = rows.min(ld).min(wt.ncols());
@@ -74,7 +67,7 @@ impl WhitenedGram {
     pub fn commit(&mut self, len: usize) {
         let p = self.phi.len();
         if p == 0 {
-            // White already: the block's Gram scaled by 1/σ², no copy.
+            // White already: the block's Gram scaled by 1/σ², no filtered copy of the block.
             add_block_scaled(&mut self.gram, &self.raw, len, self.scale * self.scale, &mut self.wt);
             self.seen += len;
             return;
@@ -144,7 +137,7 @@ mod tests {
         for (ld, m, rows) in [(40, 9, 33), (256, 30, 256), (256, 31, 200), (259, 40, 3)] {
             let block = DMatrix::from_fn(ld, m, |i, j| ((i * 7 + j * 3) % 11) as f64 - 5.0 + 0.1 * j as f64);
             let mut gram = DMatrix::from_element(m, m, 1.0);
-            add_block(&mut gram, &block, rows);
+            add_block_scaled(&mut gram, &block, rows, 1.0, &mut DMatrix::zeros(m, rows));
             let w = block.rows(0, rows);
             let want = w.transpose() * w + DMatrix::from_element(m, m, 1.0);
             assert!((gram - want).abs().max() < 1e-9);
