@@ -48,7 +48,7 @@ pub use g_sensitivity::GSensitivity;
 pub use hysteresis::Hysteresis;
 pub use lever_arm::LeverArm;
 pub use nonlinear::{NonlinearEffect, ParamDef};
-pub use predict::Predictor;
+pub use predict::{forward, scale_matrix, Predictor};
 pub use quadratic::Quadratic;
 pub use scale_asymmetry::ScaleAsymmetry;
 pub use temp_bias::TempBias;
@@ -935,62 +935,6 @@ impl TermRef<'_> {
 /// Name of a matrix coefficient, e.g. `matrix_name(Gyro, "c", 0, 1)` = `gyro.c_xy`.
 pub fn matrix_name(sensor: SensorKind, letter: &str, i: usize, j: usize) -> String {
     format!("{}.{letter}_{}{}", sensor.as_str(), AXES[i], AXES[j])
-}
-
-/// The sensor's scale/coupling matrix from the values of its `Role::Scale` terms (the
-/// identity when the model has none).
-pub fn scale_matrix(terms: &[TermRef<'_>], values: &[f64]) -> [[f64; 3]; 3] {
-    let mut k = [[0.0; 3]; 3];
-    let mut any = false;
-    for (t, &v) in terms.iter().zip(values) {
-        if let Role::Scale(j) = t.term.role {
-            k[t.term.channel][j] += v;
-            any = true;
-        }
-    }
-    if !any {
-        k = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    }
-    k
-}
-
-/// Forward model of one sensor: `u_i = Σ_k θ_k φ_k(state)` over the terms of channel i,
-/// input-side terms weighted by the channel's row of the scale matrix
-/// (`u_i = K_i·(x + Δ) + …`, see [`Effect::input_components`]).
-#[inline]
-pub fn forward(terms: &[TermRef<'_>], values: &[f64], s: &State) -> [f64; 3] {
-    let mut u = [0.0; 3];
-    weighted_regressors(terms, values, |e, k, ch, w| u[ch] += w * e.regressor(k, s));
-    u
-}
-
-/// Every nonzero term's contribution to the forward model as (effect, regressor index,
-/// output channel, weight), in order: an output-side term once with its value; an
-/// input-side term once per component of its input perturbation, weighted by the value
-/// times the scale matrix's element (`u_i = K_i·(x + Δ)`). Shared by [`forward`] and
-/// [`Predictor`].
-#[inline]
-fn weighted_regressors<'a>(
-    terms: &[TermRef<'a>],
-    values: &[f64],
-    mut visit: impl FnMut(&'a dyn Effect, usize, usize, f64),
-) {
-    let mut k = None;
-    for (t, &v) in terms.iter().zip(values) {
-        if v == 0.0 {
-            continue;
-        }
-        let comps = t.input_components();
-        if comps.is_empty() {
-            visit(t.effect, t.index, t.term.channel, v);
-        } else {
-            let k = k.get_or_insert_with(|| scale_matrix(terms, values));
-            let i = t.term.channel;
-            for (j, kj) in comps {
-                visit(t.effect, kj, i, v * k[i][j]);
-            }
-        }
-    }
 }
 
 #[cfg(test)]

@@ -1,15 +1,72 @@
-//! The forward model compiled for many states ([`Predictor`]).
+//! The forward model: [`forward`] at one state, [`scale_matrix`] of a sensor's values, and
+//! [`Predictor`], the same sum compiled once for many states.
 
-use super::{weighted_regressors, Effect, State, TermRef};
+use super::{Effect, Role, State, TermRef};
 
-/// [`super::forward`] worked out once for many states: each nonzero term's channel, weight and
+/// The sensor's scale/coupling matrix from the values of its `Role::Scale` terms (the
+/// identity when the model has none).
+pub fn scale_matrix(terms: &[TermRef<'_>], values: &[f64]) -> [[f64; 3]; 3] {
+    let mut k = [[0.0; 3]; 3];
+    let mut any = false;
+    for (t, &v) in terms.iter().zip(values) {
+        if let Role::Scale(j) = t.term.role {
+            k[t.term.channel][j] += v;
+            any = true;
+        }
+    }
+    if !any {
+        k = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    }
+    k
+}
+
+/// Forward model of one sensor: `u_i = Σ_k θ_k φ_k(state)` over the terms of channel i,
+/// input-side terms weighted by the channel's row of the scale matrix
+/// (`u_i = K_i·(x + Δ) + …`, see [`Effect::input_components`]).
+#[inline]
+pub fn forward(terms: &[TermRef<'_>], values: &[f64], s: &State) -> [f64; 3] {
+    let mut u = [0.0; 3];
+    weighted_regressors(terms, values, |e, k, ch, w| u[ch] += w * e.regressor(k, s));
+    u
+}
+
+/// Every nonzero term's contribution to the forward model as (effect, regressor index,
+/// output channel, weight), in order: an output-side term once with its value; an
+/// input-side term once per component of its input perturbation, weighted by the value
+/// times the scale matrix's element (`u_i = K_i·(x + Δ)`). Shared by [`forward`] and
+/// [`Predictor`].
+#[inline]
+fn weighted_regressors<'a>(
+    terms: &[TermRef<'a>],
+    values: &[f64],
+    mut visit: impl FnMut(&'a dyn Effect, usize, usize, f64),
+) {
+    let mut k = None;
+    for (t, &v) in terms.iter().zip(values) {
+        if v == 0.0 {
+            continue;
+        }
+        let comps = t.input_components();
+        if comps.is_empty() {
+            visit(t.effect, t.index, t.term.channel, v);
+        } else {
+            let k = k.get_or_insert_with(|| scale_matrix(terms, values));
+            let i = t.term.channel;
+            for (j, kj) in comps {
+                visit(t.effect, kj, i, v * k[i][j]);
+            }
+        }
+    }
+}
+
+/// [`forward`] worked out once for many states: each nonzero term's channel, weight and
 /// regressor (an input-side term's components weighted by the scale matrix's row), so that
 /// a state costs only the regressors — no input components looked up or scale matrix built
-/// per call. [`Predictor::at`] gives [`super::forward`]'s numbers bit for bit (same terms, same
+/// per call. [`Predictor::at`] gives [`forward`]'s numbers bit for bit (same terms, same
 /// order, the same products).
 #[derive(Clone)]
 pub struct Predictor<'a> {
-    /// (effect, regressor index, output channel, weight) in [`super::forward`]'s order.
+    /// (effect, regressor index, output channel, weight) in [`forward`]'s order.
     parts: Vec<(&'a dyn Effect, usize, usize, f64)>,
 }
 
@@ -35,7 +92,7 @@ impl<'a> Predictor<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{forward, Model};
+    use crate::model::Model;
     use crate::units::SensorKind;
 
     #[test]
