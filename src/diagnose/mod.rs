@@ -20,6 +20,7 @@
 
 pub mod algebra;
 mod disagreement;
+mod knobs;
 mod ladder;
 pub mod lines;
 mod mount;

@@ -257,7 +257,7 @@ fn basis_row(s: f64, theta: Option<f64>, first: usize, out: &mut [f64]) {
     if let Some(th) = theta {
         // cos hθ, sin hθ by the angle-addition recurrence from the first harmonic's
         // (one sin_cos per sample; the recurrence's rounding stays near 1e-15 at these h).
-        let (s1, c1) = th.sin_cos();
+        let (s1, c1) = libm::sincos(th);
         let (mut sn, mut cs) = (0.0, 1.0);
         for h in 1..=HARMONICS {
             (sn, cs) = (sn * c1 + cs * s1, cs * c1 - sn * s1);
@@ -557,8 +557,27 @@ struct Secants {
 /// parameter the columns (buffers reused from block to block).
 #[derive(Default)]
 struct SecantBlock {
+    /// Per sensor the states of the motion it sees, and the model's output there.
+    states: [Vec<State>; 2],
     start: [Vec<[f64; 3]>; 2],
+    /// Scratch: a moved motion's states, the output there, a regressor block.
+    moved: Vec<State>,
+    out: Vec<[f64; 3]>,
+    tmp: Vec<f64>,
     cols: Vec<Vec<Vec<[f64; 6]>>>,
+}
+
+/// `base` with `maps` applied (its stamps, temperature and session time kept).
+fn mapped_state(base: &State, maps: &[std::sync::Arc<dyn crate::motion::SampleMap>]) -> State {
+    let mut k = crate::motion::SensorKinematics {
+        w_rad_s: crate::frames::V3::new(base.w),
+        e_rad_s2: crate::frames::V3::new(base.e),
+        a_m_s2: crate::frames::V3::new(base.a),
+    };
+    for m in maps {
+        m.apply(&mut k);
+    }
+    State { w: k.w_rad_s.xyz, e: k.e_rad_s2.xyz, a: k.a_m_s2.xyz, ..*base }
 }
 
 impl Secants {
@@ -605,32 +624,44 @@ impl Secants {
         Self { seen, moved }
     }
 
-    /// The columns over samples `k0..k1` into `out[candidate][parameter][i]` (resized).
+    /// The columns over samples `k0..k1` into `out[candidate][parameter][i]` (resized). The
+    /// model is evaluated a block at a time ([`Predictor::block`]); a stepped motion that is
+    /// the seen one with a map more (a dead zone) takes the seen states through its maps.
     fn fill(&self, u: &Universe, run: &FitRun<'_>, k0: usize, k1: usize, out: &mut SecantBlock) {
+        let len = k1 - k0;
+        let terms = SensorKind::BOTH.map(|s| u.augmented.terms(s));
+        let predict = [0, 1].map(|si| Predictor::new(&terms[si], &u.values[si]));
+        let from = |si: usize| self.seen[si].as_ref().unwrap_or(run.track);
+        out.tmp.resize(len, 0.0);
+        out.out.resize(len, [0.0; 3]);
         // The model's output on the motion it sees, once per sensor (every secant starts there).
         for si in 0..2 {
-            let terms = u.augmented.terms(SensorKind::BOTH[si]);
-            let a = FitRun { track: self.seen[si].as_ref().unwrap_or(run.track), ..*run };
-            let predict = Predictor::new(&terms, &u.values[si]);
-            out.start[si].clear();
-            out.start[si].extend((k0..k1).map(|k| predict.at(&a.state(k))));
+            let a = FitRun { track: from(si), ..*run };
+            out.states[si].clear();
+            out.states[si].extend((k0..k1).map(|k| a.state(k)));
+            out.start[si].resize(len, [0.0; 3]);
+            predict[si].block(&out.states[si], &mut out.start[si], &mut out.tmp);
         }
-        let (start, out) = (&out.start, &mut out.cols);
-        out.resize_with(self.moved.len(), Vec::new);
+        out.cols.resize_with(self.moved.len(), Vec::new);
         for (e, params) in self.moved.iter().enumerate() {
-            out[e].resize_with(params.len(), Vec::new);
+            out.cols[e].resize_with(params.len(), Vec::new);
             for (pi, (tracks, step)) in params.iter().enumerate() {
-                let col = &mut out[e][pi];
+                let col = &mut out.cols[e][pi];
                 col.clear();
-                col.resize(k1 - k0, [0.0; 6]);
+                col.resize(len, [0.0; 6]);
                 for (si, moved) in tracks.iter().enumerate() {
                     let Some(moved) = moved else { continue };
-                    let terms = u.augmented.terms(SensorKind::BOTH[si]);
-                    let b = FitRun { track: moved, ..*run };
-                    let predict = Predictor::new(&terms, &u.values[si]);
+                    out.moved.clear();
+                    match moved.maps_beyond(from(si)) {
+                        Some(maps) => out.moved.extend(out.states[si].iter().map(|s| mapped_state(s, maps))),
+                        None => {
+                            let b = FitRun { track: moved, ..*run };
+                            out.moved.extend((k0..k1).map(|k| b.state(k)));
+                        }
+                    }
+                    predict[si].block(&out.moved, &mut out.out, &mut out.tmp);
                     for (i, c) in col.iter_mut().enumerate() {
-                        let u0 = start[si][i];
-                        let u1 = predict.at(&b.state(k0 + i));
+                        let (u0, u1) = (out.start[si][i], out.out[i]);
                         for ch in 0..3 {
                             c[3 * si + ch] = (u1[ch] - u0[ch]) / step;
                         }

@@ -21,11 +21,12 @@
 //! least-squares solution of all of them with the model's coefficients.
 
 use super::algebra::{pinv_sym, Lsq};
+use super::knobs::{knob, Dir, Knobs, BLOCK, KNOBS};
 use super::select::Evidence;
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::frames::Mount;
 use crate::model::{Model, Predictor, State, TermRef};
-use crate::motion::stand::{to_sensor, AddRate, StandMotion};
+use crate::motion::stand::{AddRate, StandMotion};
 use crate::motion::Track;
 use crate::session::MotionSpec;
 use crate::stats::gram::WhitenedGram;
@@ -35,15 +36,8 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use std::sync::Arc;
 
-/// Motion parameters of a conic run: cone, rate (relative), phase, tilt ×2, ripple ×4,
-/// wobble ×2, Earth ×3.
-const KNOBS: usize = 14;
 /// The first common knob (tilt); knobs before it belong to one run.
 const COMMON: usize = 3;
-/// Forward-difference step of each knob (rad, relative, rad/s for the Earth's rate).
-const STEP: [f64; KNOBS] = [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-8, 1e-8, 1e-8];
-/// Samples per whitened block.
-const BLOCK: usize = 256;
 /// Gauss–Newton steps on an accepted group.
 const MAX_STEPS: usize = 8;
 /// The Earth's rotation rate, rad/s.
@@ -105,15 +99,6 @@ pub struct Suspect {
     groups: Vec<Group>,
     accepted: Vec<(usize, Evidence)>,
     mounts: Vec<StandFinding>,
-}
-
-/// How a local stand column moves the motion.
-#[derive(Debug, Clone, Copy)]
-enum Dir {
-    /// A knob of the run's stand motion.
-    Knob(usize),
-    /// A rate along a direction (sensor axes) on a static pose.
-    Rate([f64; 3]),
 }
 
 /// The whitened system of one run (global stand parameters after the model's).
@@ -336,16 +321,15 @@ impl Suspect {
         // The slow noise as a random effect on the run's basis (super::slow), where it has one.
         let slow = |c: usize| noise.slow.get(c).filter(|d| d.iter().any(|v| *v != 0.0));
         let nb = |c: usize| if slow(c).is_some() { noise.basis.size } else { 0 };
+        let any_slow = (0..6).any(|c| nb(c) > 0);
         let mut chans: Vec<WhitenedGram> =
             (0..6).map(|c| WhitenedGram::new(index[c].len() + nb(c) + 1, &noise.ar[c], BLOCK)).collect();
-        let knobs = Knobs {
-            predict: [0, 1].map(|si| Predictor::new(&terms[si], &values[si])),
-            stand: match &self.runs[r] {
-                RunStand::Conic { declared, now, mount } => Some((declared.rate_rad_s, *now, mount)),
-                _ => None,
-            },
-            g_m_s2: self.g_m_s2,
+        let predict = [0, 1].map(|si| Predictor::new(&terms[si], &values[si]));
+        let conic = match &self.runs[r] {
+            RunStand::Conic { declared, now, mount } => Some((declared.rate_rad_s, *now, mount)),
+            _ => None,
         };
+        let mut knobs = Knobs::new(predict, locals, conic, self.g_m_s2);
         // A block's knob columns ([local][channel][sample]), states per sensor and basis rows.
         let mut dcol = vec![0.0; nl * 6 * BLOCK];
         let mut states: [Vec<State>; 2] = [Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK)];
@@ -360,23 +344,23 @@ impl Suspect {
             states.iter_mut().for_each(Vec::clear);
             for (i, k) in (k0..k1).enumerate() {
                 let st = run.state(k);
-                knobs.columns(locals, run.track.t_s[k], &st, |j, c, v| dcol[(j * 6 + c) * BLOCK + i] = v);
+                knobs.push(i, run.track.t_s[k], &st);
                 for (si, s) in states.iter_mut().enumerate() {
                     let seen_st = match &seen[si] {
                         Some(t) => FitRun { track: t, ..*run }.state(k),
                         None => st,
                     };
-                    let (u, y) = (knobs.predict[si].at(&seen_st), run.output(SensorKind::BOTH[si], k));
-                    for ch in 0..3 {
-                        resid[(3 * si + ch) * BLOCK + i] = y[ch] - u[ch];
-                    }
                     s.push(seen_st);
                 }
-                noise.basis.row(run.track.t_s[k], &mut brow);
-                for (b, v) in brow.iter().enumerate() {
-                    basis[b * BLOCK + i] = *v;
+                if any_slow {
+                    noise.basis.row(run.track.t_s[k], &mut brow);
+                    for (b, v) in brow.iter().enumerate() {
+                        basis[b * BLOCK + i] = *v;
+                    }
                 }
             }
+            knobs.columns(len, &mut dcol);
+            knobs.residual(&states, |si, i| run.output(SensorKind::BOTH[si], k0 + i), &mut resid);
             for (c, w) in chans.iter_mut().enumerate() {
                 let (si, nbase) = (c / 3, layout.channel[c].len());
                 for (col, &(_, ti)) in layout.channel[c].iter().enumerate() {
@@ -414,83 +398,6 @@ impl Suspect {
             }
         }
         (fold, raw)
-    }
-}
-
-/// The stand's columns of one run at a sample: the change of the fitted model's outputs
-/// per unit change of each local stand parameter (a forward difference).
-struct Knobs<'m> {
-    predict: [Predictor<'m>; 2],
-    /// A conic run's declared rate, motion now believed and mount.
-    stand: Option<(f64, StandMotion, &'m Mount)>,
-    g_m_s2: f64,
-}
-
-impl Knobs<'_> {
-    fn outputs(&self, s: &State) -> [f64; 6] {
-        let g = self.predict[0].at(s);
-        let a = self.predict[1].at(s);
-        [g[0], g[1], g[2], a[0], a[1], a[2]]
-    }
-
-    /// Calls `out(local, channel, column value)` for every local parameter at the sample
-    /// with state `st` at `t_s`. The stand's angle and cone angle are worked out once and
-    /// their sines reused by the parameters that leave them alone (the same numbers as
-    /// the nudged motion's own [`StandMotion::sensor_at`]).
-    fn columns(&self, locals: &[(usize, Dir)], t_s: f64, st: &State, mut out: impl FnMut(usize, usize, f64)) {
-        let p0 = self.outputs(st);
-        let at = self.stand.map(|(_, now, _)| {
-            let an = now.angle(t_s);
-            let sc = libm::sincos(an.theta);
-            (an, sc, now.cone_trig(sc))
-        });
-        for (j, &(_, dir)) in locals.iter().enumerate() {
-            let mut s1 = *st;
-            let h = match dir {
-                Dir::Knob(kn) => STEP[kn],
-                Dir::Rate(_) => STEP[KNOBS - 1],
-            };
-            match (dir, &self.stand, &at) {
-                (Dir::Knob(kn), Some((rate, now, mount)), Some((an0, sc0, cone0))) => {
-                    let mut m = *now;
-                    knob(&mut m, *rate, kn, h);
-                    // Rate, phase and ripple move the stand's angle; the others keep it.
-                    let x = if matches!(kn, 1 | 2 | 5..=8) {
-                        let an = m.angle(t_s);
-                        m.at_angle_trig(an, libm::sincos(an.theta), Some(*cone0), self.g_m_s2)
-                    } else {
-                        m.at_angle_trig(*an0, *sc0, Some(*cone0), self.g_m_s2)
-                    };
-                    let x = to_sensor(x, mount);
-                    s1.w = x.w_rad_s.xyz;
-                    s1.e = x.e_rad_s2.xyz;
-                    s1.a = x.a_m_s2.xyz;
-                }
-                (Dir::Rate(v), ..) => {
-                    for i in 0..3 {
-                        s1.w[i] += h * v[i];
-                    }
-                }
-                _ => {}
-            }
-            let p1 = self.outputs(&s1);
-            for c in 0..6 {
-                out(j, c, (p1[c] - p0[c]) / h);
-            }
-        }
-    }
-}
-
-/// Applies a knob of a stand motion (rate relative to the label `declared_rate`).
-fn knob(m: &mut StandMotion, declared_rate: f64, k: usize, d: f64) {
-    match k {
-        0 => m.cone_angle_rad += d,
-        1 => m.rate_rad_s += d * declared_rate,
-        2 => m.phase_rad += d,
-        3 | 4 => m.tilt_rad[k - 3] += d,
-        5..=8 => m.ripple_rad[(k - 5) / 2][(k - 5) % 2] += d,
-        9 | 10 => m.wobble_rad[k - 9] += d,
-        _ => m.earth_rad_s[k - 11] += d,
     }
 }
 

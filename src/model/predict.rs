@@ -87,6 +87,22 @@ impl<'a> Predictor<'a> {
         }
         u
     }
+
+    /// The outputs at each of `states` into `out` (same length), term by term over the
+    /// whole block (one dynamic call per term and block, [`Effect::regressors`]); `tmp` is
+    /// scratch of at least the block's length. The same sums in the same order as
+    /// [`Self::at`], so the same numbers bit for bit.
+    pub fn block(&self, states: &[State], out: &mut [[f64; 3]], tmp: &mut [f64]) {
+        let n = states.len().min(out.len()).min(tmp.len());
+        let (out, tmp) = (&mut out[..n], &mut tmp[..n]);
+        out.iter_mut().for_each(|u| *u = [0.0; 3]);
+        for &(e, k, ch, w) in &self.parts {
+            e.regressors(k, &states[..n], tmp);
+            for (u, v) in out.iter_mut().zip(tmp.iter()) {
+                u[ch] += w * v;
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -105,6 +121,7 @@ mod tests {
             let values: Vec<f64> =
                 (0..terms.len()).map(|i| if i % 5 == 3 { 0.0 } else { 0.01 * (i as f64 + 1.0).sin() }).collect();
             let p = Predictor::new(&terms, &values);
+            let mut states = Vec::new();
             for k in 0..20 {
                 let x = k as f64 * 0.37;
                 let s = State {
@@ -116,6 +133,12 @@ mod tests {
                     temp_rate_c_s: 0.0,
                 };
                 assert_eq!(p.at(&s).map(f64::to_bits), forward(&terms, &values, &s).map(f64::to_bits));
+                states.push(s);
+            }
+            let mut out = vec![[f64::NAN; 3]; states.len()];
+            p.block(&states, &mut out, &mut vec![0.0; states.len()]);
+            for (s, u) in states.iter().zip(&out) {
+                assert_eq!(u.map(f64::to_bits), p.at(s).map(f64::to_bits));
             }
         }
     }

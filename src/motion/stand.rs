@@ -86,45 +86,91 @@ impl StandMotion {
     /// Kinematics at time `t_s` in stand (platform) axes, gravity `g_m_s2`.
     #[inline]
     pub fn at(&self, t_s: f64, g_m_s2: f64) -> Kinematics {
-        self.at_angle(self.angle(t_s), g_m_s2)
+        self.fixed(g_m_s2).at(t_s)
     }
 
     /// Kinematics for a given stand angle and its derivatives (a logged angle).
     pub fn at_angle(&self, an: Angle, g_m_s2: f64) -> Kinematics {
-        self.at_angle_trig(an, libm::sincos(an.theta), None, g_m_s2)
+        self.fixed(g_m_s2).at_angle(an)
+    }
+
+    /// Kinematics at `t_s` in sensor axes through `mount`.
+    #[inline]
+    pub fn sensor_at(&self, t_s: f64, g_m_s2: f64, mount: &Mount) -> SensorKinematics {
+        to_sensor(self.at(t_s, g_m_s2), mount)
+    }
+
+    /// The motion ready to evaluate at many instants under gravity `g_m_s2`: the base's up
+    /// and (without a wobble) the cone angle's sine and cosine worked out once.
+    pub fn fixed(&self, g_m_s2: f64) -> StandAt {
+        let cone = self.wobble_rad.iter().all(|w| *w == 0.0).then(|| {
+            let (sa, ca) = libm::sincos(self.cone_angle_rad);
+            (self.cone_angle_rad, sa, ca)
+        });
+        StandAt { motion: *self, up: self.up(), cone, g_m_s2 }
+    }
+}
+
+/// A [`StandMotion`] ready to evaluate ([`StandMotion::fixed`]): the same numbers as the
+/// motion's own methods, without the base's up and a constant cone angle's sine and cosine
+/// recomputed at every sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StandAt {
+    /// The motion.
+    pub motion: StandMotion,
+    up: [f64; 3],
+    /// (α, sin α, cos α) when α does not turn with θ (no wobble).
+    cone: Option<(f64, f64, f64)>,
+    g_m_s2: f64,
+}
+
+impl StandAt {
+    /// Kinematics at time `t_s` in stand (platform) axes.
+    #[inline]
+    pub fn at(&self, t_s: f64) -> Kinematics {
+        self.at_angle(self.motion.angle(t_s))
+    }
+
+    /// Kinematics at `t_s` in sensor axes through `mount`.
+    #[inline]
+    pub fn sensor_at(&self, t_s: f64, mount: &Mount) -> SensorKinematics {
+        to_sensor(self.at(t_s), mount)
+    }
+
+    /// Kinematics for a given stand angle and its derivatives (a logged angle).
+    #[inline]
+    pub fn at_angle(&self, an: Angle) -> Kinematics {
+        self.at_angle_trig(an, libm::sincos(an.theta), None)
     }
 
     /// The cone angle at a stand angle with sine and cosine `(st, ct)` (the wobble turns
     /// it once a revolution), with its own sine and cosine: (α, sin α, cos α).
+    #[inline]
     pub fn cone_trig(&self, (st, ct): (f64, f64)) -> (f64, f64, f64) {
-        let [wc, ws] = self.wobble_rad;
-        let alpha = self.cone_angle_rad + wc * ct + ws * st;
-        let (sa, ca) = libm::sincos(alpha);
-        (alpha, sa, ca)
+        let [wc, ws] = self.motion.wobble_rad;
+        let alpha = self.motion.cone_angle_rad + wc * ct + ws * st;
+        self.cone.filter(|c| c.0.to_bits() == alpha.to_bits()).unwrap_or_else(|| {
+            let (sa, ca) = libm::sincos(alpha);
+            (alpha, sa, ca)
+        })
     }
 
     /// [`Self::at_angle`] with sin θ and cos θ given, and the cone angle's sine and cosine
     /// reused from `cone` ([`Self::cone_trig`] of a motion at the same θ) when its α is this
     /// motion's: many nearby motions at one sample (a stand parameter nudged at a time)
     /// then cost one or two sines, the same numbers as [`Self::at_angle`].
-    pub fn at_angle_trig(
-        &self,
-        an: Angle,
-        (st, ct): (f64, f64),
-        cone: Option<(f64, f64, f64)>,
-        g_m_s2: f64,
-    ) -> Kinematics {
+    #[inline]
+    pub fn at_angle_trig(&self, an: Angle, (st, ct): (f64, f64), cone: Option<(f64, f64, f64)>) -> Kinematics {
         let Angle { theta: _, rate: td, accel: tdd } = an;
-        let [wc, ws] = self.wobble_rad;
-        let alpha = self.cone_angle_rad + wc * ct + ws * st;
+        let m = &self.motion;
+        let [wc, ws] = m.wobble_rad;
+        let alpha = m.cone_angle_rad + wc * ct + ws * st;
         let a1 = -wc * st + ws * ct; // dα/dθ
         let a2 = -wc * ct - ws * st; // d²α/dθ²
         let ad = a1 * td;
         let add = a2 * td * td + a1 * tdd;
-        let (sa, ca) = match cone {
-            Some((a, sa, ca)) if a.to_bits() == alpha.to_bits() => (sa, ca),
-            _ => libm::sincos(alpha),
-        };
+        let hit = |c: Option<(f64, f64, f64)>| c.filter(|c| c.0.to_bits() == alpha.to_bits()).map(|c| (c.1, c.2));
+        let (sa, ca) = hit(self.cone).or_else(|| hit(cone)).unwrap_or_else(|| libm::sincos(alpha));
         let f = [sa * ct, -sa * st, 1.0 - ca];
         let f_t = [-sa * st, -sa * ct, 0.0];
         let f_a = [ca * ct, -ca * st, sa];
@@ -137,24 +183,15 @@ impl StandMotion {
             e[i] = tdd * f[i] + td * (f_t[i] * td + f_a[i] * ad) + add * gv[i] + ad * td * g_t[i];
         }
         let to_body = |v: [f64; 3]| rotate_t([st, ct], [sa, ca], v);
-        let up = to_body(self.up());
-        if self.earth_rad_s.iter().any(|&x| x != 0.0) {
-            let we = to_body(self.earth_rad_s);
+        let up = to_body(self.up);
+        if m.earth_rad_s.iter().any(|&x| x != 0.0) {
+            let we = to_body(m.earth_rad_s);
             for i in 0..3 {
                 w[i] += we[i];
             }
         }
-        Kinematics {
-            w_rad_s: V3::new(w),
-            e_rad_s2: V3::new(e),
-            a_m_s2: V3::new([g_m_s2 * up[0], g_m_s2 * up[1], g_m_s2 * up[2]]),
-        }
-    }
-
-    /// Kinematics at `t_s` in sensor axes through `mount`.
-    #[inline]
-    pub fn sensor_at(&self, t_s: f64, g_m_s2: f64, mount: &Mount) -> SensorKinematics {
-        to_sensor(self.at(t_s, g_m_s2), mount)
+        let g = self.g_m_s2;
+        Kinematics { w_rad_s: V3::new(w), e_rad_s2: V3::new(e), a_m_s2: V3::new([g * up[0], g * up[1], g * up[2]]) }
     }
 }
 

@@ -43,7 +43,7 @@ enum Source {
     /// The same state at every sample (static runs; NaN for protocol runs).
     Constant(SensorKinematics),
     /// An imperfect conic stand ([`super::stand::StandMotion`]) evaluated at `t − lag_s`.
-    Stand { s: super::stand::StandMotion, g_m_s2: f64, mount: Mount, lag_s: f64 },
+    Stand { s: super::stand::StandAt, mount: Mount, lag_s: f64 },
 }
 
 /// True motion of one run in sensor axes, one state per recorded sample (SI units).
@@ -123,7 +123,7 @@ impl Track {
                 let _ = self.t_s[k];
                 *s
             }
-            Source::Stand { s, g_m_s2, mount, lag_s } => s.sensor_at(self.t_s[k] - lag_s, *g_m_s2, mount),
+            Source::Stand { s, mount, lag_s } => s.sensor_at(self.t_s[k] - lag_s, mount),
         };
         for m in &self.maps {
             m.apply(&mut s);
@@ -150,7 +150,7 @@ impl Track {
     /// motion, through `mount` (the stand's own settings replace the declared ones).
     pub fn on_stand(&self, s: super::stand::StandMotion, g_m_s2: f64, mount: Mount) -> Track {
         Track {
-            source: Source::Stand { s, g_m_s2, mount, lag_s: 0.0 },
+            source: Source::Stand { s: s.fixed(g_m_s2), mount, lag_s: 0.0 },
             epsilon_source: "exact (stand motion with its estimated imperfections differentiated)".into(),
             ..self.clone()
         }
@@ -179,6 +179,19 @@ impl Track {
         out
     }
 
+    /// The maps `self` applies beyond `base` when it is `base` with more maps (the same
+    /// stamps, source and first maps, [`Self::mapped`]): a state of `self` is then `base`'s
+    /// with these applied in order, no kinematics recomputed. None otherwise.
+    pub fn maps_beyond(&self, base: &Track) -> Option<&[Arc<dyn SampleMap>]> {
+        let n = base.maps.len();
+        let same = Arc::ptr_eq(&self.t_s, &base.t_s)
+            && self.maps.len() >= n
+            && self.maps[..n].iter().zip(&base.maps).all(|(a, b)| Arc::ptr_eq(a, b))
+            && self.temp_rate_c_s == base.temp_rate_c_s
+            && self.source == base.source;
+        same.then(|| &self.maps[n..])
+    }
+
     /// The motion `tau_s` seconds earlier at every stamp (the truth a sensor stamping its
     /// samples `tau_s` late reports). Conic and static tracks shift exactly (their maps,
     /// being pointwise, commute with the shift); stored tracks are interpolated
@@ -190,10 +203,9 @@ impl Track {
             Source::Conic { c, mount, lag_s } => {
                 Track { source: Source::Conic { c: *c, mount: mount.clone(), lag_s: lag_s + tau_s }, ..self.clone() }
             }
-            Source::Stand { s, g_m_s2, mount, lag_s } => Track {
-                source: Source::Stand { s: *s, g_m_s2: *g_m_s2, mount: mount.clone(), lag_s: lag_s + tau_s },
-                ..self.clone()
-            },
+            Source::Stand { s, mount, lag_s } => {
+                Track { source: Source::Stand { s: *s, mount: mount.clone(), lag_s: lag_s + tau_s }, ..self.clone() }
+            }
             Source::Constant(_) => self.clone(),
             _ => {
                 let states: Vec<SensorKinematics> = self.states().collect();

@@ -1,26 +1,33 @@
 //! Accumulating a Gram matrix XᵀX from blocks of rows.
 
 use super::ArModel;
+use faer::linalg::matmul::triangular::{matmul, BlockStructure};
+use faer::{Accum, Mat, MatRef, Par};
 use nalgebra::DMatrix;
 
-/// `gram += alpha·Wᵀ·W` for the first `rows` rows of the column-major `block` (W = those
-/// rows), Wᵀ copied into `wt` (m × at least `rows`, reused between blocks: no allocation
-/// per block). One packed matrix product (nalgebra's `gemm`, which hands dynamic matrices
-/// to `matrixmultiply`): `gemm_tr`, its naive counterpart, takes a dot product per element
-/// and was the largest single cost of `diagnose` at scale.
-pub fn add_block_scaled(gram: &mut DMatrix<f64>, block: &DMatrix<f64>, rows: usize, alpha: f64, wt: &mut DMatrix<f64>) {
-    let (ld, m) = block.shape();
-    let rows = rows.min(ld).min(wt.ncols());
-    if rows == 0 || m == 0 {
+/// `gram += alpha·WᵀW` on the lower triangle of `gram` (diagonal included; the strict
+/// upper triangle is left alone), for W the first `rows` rows of the column-major `block`
+/// of `m = gram.ncols()` columns and leading dimension `ld`. One packed product by faer's
+/// triangular matmul: Wᵀ is read as a view of W (no transposed copy) and only the lower
+/// half is computed, half the flops of the full product.
+pub fn add_block_lower(gram: &mut Mat<f64>, block: &[f64], ld: usize, rows: usize, alpha: f64) {
+    let m = gram.ncols();
+    let rows = rows.min(ld);
+    if rows == 0 || m == 0 || block.len() < ld * (m - 1) + rows {
         return;
     }
-    let w = block.rows(0, rows);
-    for j in 0..m {
-        for (i, v) in w.column(j).iter().enumerate() {
-            wt[(j, i)] = *v;
-        }
-    }
-    gram.gemm(alpha, &wt.columns(0, rows), &w, 1.0);
+    let w = MatRef::from_column_major_slice_with_stride(block, rows, m, ld);
+    matmul(
+        gram.as_mut(),
+        BlockStructure::TriangularLower,
+        Accum::Add,
+        w.transpose(),
+        BlockStructure::Rectangular,
+        w,
+        BlockStructure::Rectangular,
+        alpha,
+        Par::Seq,
+    );
 }
 
 /// The Gram of prewhitened columns, filled a block of samples at a time: the caller writes
@@ -31,12 +38,13 @@ pub fn add_block_scaled(gram: &mut DMatrix<f64>, block: &DMatrix<f64>, rows: usi
 pub struct WhitenedGram {
     phi: Vec<f64>,
     scale: f64,
-    /// (p + block) × m: p rows of history, then the block's rows.
-    raw: DMatrix<f64>,
-    white: DMatrix<f64>,
-    /// The block's rows transposed, for the product.
-    wt: DMatrix<f64>,
-    gram: DMatrix<f64>,
+    /// (p + block) × m column-major: p rows of history, then the block's rows.
+    raw: Vec<f64>,
+    /// block × m column-major: the block whitened (empty when p = 0: the raw block is white).
+    white: Vec<f64>,
+    block: usize,
+    /// Lower triangle of the Gram.
+    gram: Mat<f64>,
     seen: usize,
 }
 
@@ -48,10 +56,10 @@ impl WhitenedGram {
         Self {
             phi: ar.phi.clone(),
             scale,
-            raw: DMatrix::zeros(p + block, m),
-            white: DMatrix::zeros(if p == 0 { 0 } else { block }, m),
-            wt: DMatrix::zeros(m, block),
-            gram: DMatrix::zeros(m, m),
+            raw: vec![0.0; (p + block) * m],
+            white: vec![0.0; if p == 0 { 0 } else { block * m }],
+            block,
+            gram: Mat::zeros(m, m),
             seen: 0,
         }
     }
@@ -59,44 +67,58 @@ impl WhitenedGram {
     /// Column `j`'s values for the next `len` samples (len ≤ the block), to be written.
     pub fn column(&mut self, j: usize, len: usize) -> &mut [f64] {
         let p = self.phi.len();
-        let start = j * self.raw.nrows() + p;
-        &mut self.raw.as_mut_slice()[start..start + len]
+        let start = j * (p + self.block) + p;
+        &mut self.raw[start..start + len.min(self.block)]
     }
 
     /// Whitens the `len` samples written and adds their Gram.
     pub fn commit(&mut self, len: usize) {
-        let p = self.phi.len();
+        let (p, m, ld) = (self.phi.len(), self.gram.ncols(), self.phi.len() + self.block);
+        let len = len.min(self.block);
         if p == 0 {
             // White already: the block's Gram scaled by 1/σ², no filtered copy of the block.
-            add_block_scaled(&mut self.gram, &self.raw, len, self.scale * self.scale, &mut self.wt);
+            add_block_lower(&mut self.gram, &self.raw, ld, len, self.scale * self.scale);
             self.seen += len;
             return;
         }
         let skip = p.saturating_sub(self.seen).min(len);
         let rows = len - skip;
-        for col in 0..self.raw.ncols() {
-            let x = self.raw.column(col);
-            let x = x.as_slice();
-            let w = &mut self.white.column_mut(col);
-            for i in skip..len {
-                let mut v = x[p + i];
-                for (l, f) in self.phi.iter().enumerate() {
-                    v -= f * x[p + i - 1 - l];
+        for col in 0..m {
+            let x = &self.raw[col * ld..(col + 1) * ld];
+            let w = &mut self.white[col * self.block..][..rows];
+            // Four samples at a time (independent chains the processor overlaps), each the
+            // sum x_i − φ_1 x_{i−1} − … − φ_p x_{i−p} in that order, then scaled.
+            let at = |i: usize| p + skip + i;
+            let mut i = 0;
+            while i < rows {
+                let mut v = [0.0; 4];
+                let lanes = (rows - i).min(4);
+                for (j, vj) in v.iter_mut().enumerate().take(lanes) {
+                    *vj = x[at(i + j)];
                 }
-                w[i - skip] = v * self.scale;
+                for (l, &f) in self.phi.iter().enumerate() {
+                    for (j, vj) in v.iter_mut().enumerate().take(lanes) {
+                        *vj -= f * x[at(i + j) - 1 - l];
+                    }
+                }
+                for (o, vj) in w[i..i + lanes].iter_mut().zip(v) {
+                    *o = vj * self.scale;
+                }
+                i += lanes;
             }
         }
-        add_block_scaled(&mut self.gram, &self.white, rows, 1.0, &mut self.wt);
+        add_block_lower(&mut self.gram, &self.white, self.block, rows, 1.0);
         // The last p samples (history and block together) are the next block's history.
-        for col in 0..self.raw.ncols() {
-            self.raw.column_mut(col).as_mut_slice().copy_within(len..len + p, 0);
+        for col in 0..m {
+            self.raw[col * ld..(col + 1) * ld].copy_within(len..len + p, 0);
         }
         self.seen += len;
     }
 
-    /// The Gram of every whitened sample.
+    /// The Gram of every whitened sample (symmetric).
     pub fn finish(self) -> DMatrix<f64> {
-        self.gram
+        let g = &self.gram;
+        DMatrix::from_fn(g.nrows(), g.ncols(), |i, j| if i >= j { g[(i, j)] } else { g[(j, i)] })
     }
 }
 
@@ -136,11 +158,16 @@ mod tests {
     fn equals_the_plain_product_of_the_leading_rows() {
         for (ld, m, rows) in [(40, 9, 33), (256, 30, 256), (256, 31, 200), (259, 40, 3)] {
             let block = DMatrix::from_fn(ld, m, |i, j| ((i * 7 + j * 3) % 11) as f64 - 5.0 + 0.1 * j as f64);
-            let mut gram = DMatrix::from_element(m, m, 1.0);
-            add_block_scaled(&mut gram, &block, rows, 1.0, &mut DMatrix::zeros(m, rows));
+            let mut gram = Mat::from_fn(m, m, |_, _| 1.0);
+            add_block_lower(&mut gram, block.as_slice(), ld, rows, 0.5);
             let w = block.rows(0, rows);
-            let want = w.transpose() * w + DMatrix::from_element(m, m, 1.0);
-            assert!((gram - want).abs().max() < 1e-9);
+            let want = w.transpose() * w * 0.5;
+            for i in 0..m {
+                for j in 0..m {
+                    let expect = if i >= j { want[(i, j)] + 1.0 } else { 1.0 };
+                    assert!((gram[(i, j)] - expect).abs() < 1e-9, "({i}, {j})");
+                }
+            }
         }
     }
 }

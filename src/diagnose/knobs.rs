@@ -1,0 +1,210 @@
+//! The stand's columns of one run ([`super::stand`]): the change of the fitted model's
+//! outputs per unit change of each local stand parameter, a forward difference of the true
+//! inputs pushed through the model, a block of samples at a time.
+
+use crate::frames::Mount;
+use crate::model::{Predictor, State};
+use crate::motion::stand::{to_sensor, StandAt, StandMotion};
+
+/// Motion parameters of a conic run: cone, rate (relative), phase, tilt ×2, ripple ×4,
+/// wobble ×2, Earth ×3.
+pub(super) const KNOBS: usize = 14;
+/// Forward-difference step of each knob (rad, relative, rad/s for the Earth's rate).
+pub(super) const STEP: [f64; KNOBS] =
+    [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-8, 1e-8, 1e-8];
+/// Samples per whitened block.
+pub(super) const BLOCK: usize = 256;
+
+/// How a local stand column moves the motion.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Dir {
+    /// A knob of the run's stand motion.
+    Knob(usize),
+    /// A rate along a direction (sensor axes) on a static pose.
+    Rate([f64; 3]),
+}
+
+/// The stand's columns of one run, a block of samples at a time: the change of the fitted
+/// model's outputs per unit change of each local stand parameter (a forward difference).
+/// Each sample's nudged states are gathered ([`Self::push`]), then the model is evaluated
+/// on the whole block, term by term ([`Predictor::block`]).
+pub(super) struct Knobs<'m> {
+    /// The fitted model's gyro and accel outputs.
+    predict: [Predictor<'m>; 2],
+    /// A conic run's motion now believed, each local parameter's nudged motion (ready to
+    /// evaluate) and the mount.
+    stand: Option<(StandAt, Vec<StandAt>, &'m Mount)>,
+    /// Per local parameter: its direction and step.
+    dirs: Vec<(Dir, f64)>,
+    /// The block's states as believed, then per local parameter its nudged states.
+    base: Vec<State>,
+    nudged: Vec<State>,
+    /// Scratch: outputs at the base and nudged states, and a regressor block.
+    out0: Vec<[f64; 3]>,
+    out1: Vec<[f64; 3]>,
+    tmp: Vec<f64>,
+}
+
+impl<'m> Knobs<'m> {
+    /// The columns of a run with local parameters `locals`, the fitted model's predictors
+    /// and, for a conic run, its declared rate, motion now believed and mount.
+    pub(super) fn new(
+        predict: [Predictor<'m>; 2],
+        locals: &[(usize, Dir)],
+        conic: Option<(f64, StandMotion, &'m Mount)>,
+        g_m_s2: f64,
+    ) -> Self {
+        let dirs: Vec<(Dir, f64)> = locals
+            .iter()
+            .map(|&(_, d)| match d {
+                Dir::Knob(kn) => (d, STEP[kn]),
+                Dir::Rate(_) => (d, STEP[KNOBS - 1]),
+            })
+            .collect();
+        let stand = conic.map(|(declared_rate, now, mount)| {
+            let nudged = dirs
+                .iter()
+                .map(|&(d, h)| {
+                    let mut m = now;
+                    if let Dir::Knob(kn) = d {
+                        knob(&mut m, declared_rate, kn, h);
+                    }
+                    m.fixed(g_m_s2)
+                })
+                .collect();
+            (now.fixed(g_m_s2), nudged, mount)
+        });
+        let nl = dirs.len();
+        Self {
+            predict,
+            stand,
+            dirs,
+            base: vec![State::default(); BLOCK],
+            nudged: vec![State::default(); nl * BLOCK],
+            out0: vec![[0.0; 3]; BLOCK],
+            out1: vec![[0.0; 3]; BLOCK],
+            tmp: vec![0.0; BLOCK],
+        }
+    }
+
+    /// Gathers sample `i` of the block: state `st` at `t_s` and each local parameter's
+    /// nudged state. The stand's angle and cone angle are worked out once and their sines
+    /// reused by the parameters that leave them alone (the same numbers as the nudged
+    /// motion's own [`StandAt::at_angle`]).
+    pub(super) fn push(&mut self, i: usize, t_s: f64, st: &State) {
+        self.base[i] = *st;
+        let at = self.stand.as_ref().map(|(now, ..)| {
+            let an = now.motion.angle(t_s);
+            let sc = libm::sincos(an.theta);
+            (an, sc, now.cone_trig(sc))
+        });
+        for (j, &(dir, h)) in self.dirs.iter().enumerate() {
+            let mut s1 = *st;
+            match (dir, &self.stand, &at) {
+                (Dir::Knob(kn), Some((_, nudged, mount)), Some((an0, sc0, cone0))) => {
+                    let m = &nudged[j];
+                    // Rate, phase and ripple move the stand's angle; the others keep it.
+                    let x = if matches!(kn, 1 | 2 | 5..=8) {
+                        let an = m.motion.angle(t_s);
+                        m.at_angle_trig(an, sincos_near(an.theta, an0.theta, *sc0), Some(*cone0))
+                    } else {
+                        m.at_angle_trig(*an0, *sc0, Some(*cone0))
+                    };
+                    let x = to_sensor(x, mount);
+                    s1.w = x.w_rad_s.xyz;
+                    s1.e = x.e_rad_s2.xyz;
+                    s1.a = x.a_m_s2.xyz;
+                }
+                (Dir::Rate(v), ..) => {
+                    for k in 0..3 {
+                        s1.w[k] += h * v[k];
+                    }
+                }
+                _ => {}
+            }
+            self.nudged[j * BLOCK + i] = s1;
+        }
+    }
+
+    /// The residual `resid[channel·BLOCK + i]` = output − the fitted model at each sensor's
+    /// `states` of the block (the motion it sees); `output(sensor, i)` is the recorded one.
+    pub(super) fn residual(
+        &mut self,
+        states: &[Vec<State>; 2],
+        output: impl Fn(usize, usize) -> [f64; 3],
+        resid: &mut [f64],
+    ) {
+        for (si, p) in self.predict.iter().enumerate() {
+            let len = states[si].len();
+            p.block(&states[si], &mut self.out0, &mut self.tmp);
+            for (i, u) in self.out0[..len].iter().enumerate() {
+                let y = output(si, i);
+                for ch in 0..3 {
+                    resid[(3 * si + ch) * BLOCK + i] = y[ch] - u[ch];
+                }
+            }
+        }
+    }
+
+    /// The columns of the first `len` samples gathered: `dcol[(local·6 + channel)·BLOCK + i]`.
+    pub(super) fn columns(&mut self, len: usize, dcol: &mut [f64]) {
+        for (si, p) in self.predict.iter().enumerate() {
+            p.block(&self.base[..len], &mut self.out0, &mut self.tmp);
+            for (j, &(_, h)) in self.dirs.iter().enumerate() {
+                p.block(&self.nudged[j * BLOCK..][..len], &mut self.out1, &mut self.tmp);
+                for ch in 0..3 {
+                    let col = &mut dcol[(j * 6 + 3 * si + ch) * BLOCK..][..len];
+                    for (i, d) in col.iter_mut().enumerate() {
+                        *d = (self.out1[i][ch] - self.out0[i][ch]) / h;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// sin θ and cos θ from those of a nearby θ₀ (`sc0`): angle addition with the Taylor
+/// series of the difference d = θ − θ₀ (terms to d⁷; the first left out is below 1e-23 for
+/// |d| ≤ 0.01 rad), or libm's when θ is farther. A knob's nudge moves the stand's angle by
+/// far less, so its columns cost no sine of their own.
+#[inline]
+fn sincos_near(theta: f64, theta0: f64, (s0, c0): (f64, f64)) -> (f64, f64) {
+    let d = theta - theta0;
+    if d.abs() > 0.01 {
+        return libm::sincos(theta);
+    }
+    let d2 = d * d;
+    let sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0 * (1.0 - d2 / 42.0)));
+    let cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
+    (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
+}
+
+/// Applies a knob of a stand motion (rate relative to the label `declared_rate`).
+pub(super) fn knob(m: &mut StandMotion, declared_rate: f64, k: usize, d: f64) {
+    match k {
+        0 => m.cone_angle_rad += d,
+        1 => m.rate_rad_s += d * declared_rate,
+        2 => m.phase_rad += d,
+        3 | 4 => m.tilt_rad[k - 3] += d,
+        5..=8 => m.ripple_rad[(k - 5) / 2][(k - 5) % 2] += d,
+        9 | 10 => m.wobble_rad[k - 9] += d,
+        _ => m.earth_rad_s[k - 11] += d,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_nearby_angles_sine_is_libms_to_rounding() {
+        for &t0 in &[0.0, 1.0, -3.0, 250.0, 1.0e4] {
+            let sc0 = libm::sincos(t0);
+            for &d in &[0.0, 1e-9, -3e-6, 2e-3, -0.0099, 0.02] {
+                let (s, c) = sincos_near(t0 + d, t0, sc0);
+                let (s1, c1) = libm::sincos(t0 + d);
+                assert!((s - s1).abs() < 4e-16 && (c - c1).abs() < 4e-16, "θ₀ {t0}, d {d}: {s} {s1} {c} {c1}");
+            }
+        }
+    }
+}
