@@ -283,3 +283,23 @@ fn a_turn_on_bias_under_wander_is_kept_and_the_wander_is_noise() {
         d.warnings
     );
 }
+
+/// A weak turn-on bias (σ 1 mg) on accel z under the same wander: the offsets are the
+/// unit's, so the stand is not blamed for them (no phase per run, no tilt) and no
+/// catalogue effect is added for them.
+#[test]
+fn a_weak_accel_turn_on_bias_under_wander_is_not_blamed_on_the_stand() {
+    use crosscal::simulate::realism::Disturbance;
+    for seed in [1, 2] {
+        let mut c = long_session(seed);
+        c.realism.disturbances = vec![Disturbance::parse("turnon:accel-z:0.001").unwrap()];
+        let d = crate::diagnose::run_diagnose(&c.generate());
+        let shapes: Vec<(String, &str)> =
+            d.shapes.iter().map(|s| (format!("{} {}", s.sensor, s.axis), s.kind.as_str())).collect();
+        let stand: Vec<&str> = d.stand.iter().map(|f| f.message.as_str()).collect();
+        let steps: Vec<&str> = d.steps.iter().map(|s| s.effect.as_str()).collect();
+        println!("seed {seed}: {:?} steps {steps:?} stand {stand:?} shapes {shapes:?}", d.verdict);
+        assert!(stand.is_empty(), "seed {seed}: the stand blamed for a turn-on bias: {stand:?}");
+        assert!(steps.is_empty(), "seed {seed}: {steps:?}");
+    }
+}

@@ -673,15 +673,19 @@ impl Suspect {
         let (g, _) = reduce(&sys.total, sys.base, &joint);
         let (pinv, _) = pinv_sym(&g);
         let labels = self.labels();
+        // A group none of whose parameters stands out of its standard error in the joint
+        // solution (|v| ≤ 3 SE: a per-run group with no run off its label) is not a finding:
+        // the motion it moved is the declared one within the noise.
         let found: Vec<StandFinding> = accepted
             .iter()
             .zip(spans)
-            .map(|((gi, ev), span)| {
+            .filter_map(|((gi, ev), span)| {
                 let group = &self.groups[*gi];
                 let se: Vec<f64> = span.map(|j| pinv[(sys.base + j, sys.base + j)].max(0.0).sqrt()).collect();
                 let values: Vec<f64> = group.params.iter().map(|c| self.departure(c)).collect();
+                let stands_out = values.iter().zip(&se).any(|(v, s)| v.abs() > 3.0 * s);
                 let ctx = self.context(group, names);
-                super::stand_words::finding(group.id, &values, &se, &ctx, &labels, ev.clone())
+                stands_out.then(|| super::stand_words::finding(group.id, &values, &se, &ctx, &labels, ev.clone()))
             })
             .collect();
         self.mounts.iter().cloned().chain(found).collect()

@@ -44,6 +44,12 @@ fn noise_models(a: &Analysis) -> Vec<stand::RunNoiseModel> {
         .collect()
 }
 
+/// The noise models without the channels' dispersion: what an estimate weighs each channel
+/// by (the dispersion decides only whether a group is evidence).
+fn plain(noise: &[stand::RunNoiseModel]) -> Vec<stand::RunNoiseModel> {
+    noise.iter().map(|n| stand::RunNoiseModel { dispersion: [1.0; 6], ..n.clone() }).collect()
+}
+
 impl StandCheck<'_, '_, '_> {
     /// At one step of the climb around `current` (analysed in `a` on `runs`, the corrected
     /// motion): whether a stand group beats every sensor candidate (best ΔBIC
@@ -62,9 +68,7 @@ impl StandCheck<'_, '_, '_> {
             Some(pick) => {
                 // The dispersion decides whether a group is evidence; the estimate weighs each
                 // channel by its noise model alone (the misfit it had is what the group removes).
-                let plain: Vec<stand::RunNoiseModel> =
-                    noise.into_iter().map(|n| stand::RunNoiseModel { dispersion: [1.0; 6], ..n }).collect();
-                self.suspect.accept(pick, current, self.declared, &plain, opts)?;
+                self.suspect.accept(pick, current, self.declared, &plain(&noise), opts)?;
                 Ok(true)
             }
             None => Ok(false),
@@ -93,9 +97,7 @@ pub(super) fn findings(
             // The groups estimated again under the final noise model, so that their values
             // are the estimates whose standard errors the final systems give; if that fails
             // the values of the climb stand (on the final residual's systems).
-            let plain: Vec<stand::RunNoiseModel> =
-                noise.iter().map(|n| stand::RunNoiseModel { dispersion: [1.0; 6], ..n.clone() }).collect();
-            if sc.suspect.polish(&m, sc.declared, &plain, opts).is_ok() {
+            if sc.suspect.polish(&m, sc.declared, &plain(&noise), opts).is_ok() {
                 let tracks = sc.suspect.tracks(sc.declared);
                 let moved: Vec<FitRun<'_>> =
                     sc.declared.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();

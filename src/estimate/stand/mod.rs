@@ -144,7 +144,9 @@ impl StandBase {
     }
 
     /// In the user's units: the tilt in degrees, each ripple as a percentage of the rate,
-    /// the wobble in degrees (the harmonics with their phase).
+    /// the wobble in degrees (the harmonics with their phase). A term held rather than
+    /// estimated (value and standard error both zero: the Earth's rate a manifest declares,
+    /// one the runs cannot see) is left out; [`Self::held`] says why.
     pub fn summary(&self) -> Vec<StandTerm> {
         let deg = f64::to_degrees;
         let term = |what: &str, value, std_error, unit, phase| StandTerm {
@@ -180,6 +182,7 @@ impl StandBase {
             let what = format!("Earth's rate, horizontal on '{}'", p.run);
             out.push(term(&what, deg_h(h), deg_h(sh), "deg/h", Some([deg(psi), deg(spsi)])));
         }
+        out.retain(|t| t.value != 0.0 || t.std_error != 0.0);
         out
     }
 }
@@ -290,6 +293,9 @@ impl<'m> Predictor<'m> {
 
 /// Settings at convergence with their tracks and fit.
 type Converged = (Vec<f64>, Vec<Track>, Fit);
+
+/// The tracks, fit and linearisation at the nominal settings (weights from that fit).
+type Start = (Vec<Track>, Fit, linearise::Linearised);
 
 /// The stand problem of a session: which runs are conic, and the tracks and fit at given
 /// parameters `x` (per conic run `[α deg, ω_s deg/s, φ deg]`, then the [`COMMON`] ones, rad
@@ -404,7 +410,9 @@ impl StandProblem<'_> {
     /// The parameters this session identifies, in order (a run's own first, then the
     /// common ones), each kept when the information it has beyond the model's coefficients
     /// and the parameters kept before it is at least [`HOLD_BELOW`] of its own.
-    fn identifiable(&self, x: &[f64]) -> Result<Vec<usize>, EstimateError> {
+    /// Also returns the tracks, fit and linearisation at `x`: the Gauss–Newton's first step
+    /// starts from them instead of working them out again.
+    fn identifiable(&self, x: &[f64]) -> Result<(Vec<usize>, Start), EstimateError> {
         let tracks = self.tracks(x);
         let f = self.fit_at(&tracks)?;
         let mut sigma2 = [1.0; 6];
@@ -426,21 +434,25 @@ impl StandProblem<'_> {
                 free.push(j);
             }
         }
-        Ok(free)
+        Ok((free, (tracks, f, lin)))
     }
 
-    /// Gauss–Newton over the parameters `free` from `x` with a halving line search; the
+    /// Gauss–Newton over the parameters `free` from `x` (its tracks, fit and linearisation
+    /// with channel weights from that fit: `start`) with a halving line search; the
     /// parameters, their tracks and fit at convergence.
-    fn gauss_newton(&self, mut x: Vec<f64>, free: &[usize]) -> Result<Converged, EstimateError> {
-        let mut tracks = self.tracks(&x);
-        let mut f = self.fit_at(&tracks)?;
+    fn gauss_newton(&self, mut x: Vec<f64>, free: &[usize], start: Start) -> Result<Converged, EstimateError> {
+        let (mut tracks, mut f, first) = start;
+        let mut first = Some(first);
         let mut sigma2 = [1.0; 6];
         for _ in 0..MAX_ITER {
             // Channel weights from the current residual, held through the step's line search
             // (the nominal fit's residual holds the mislabelling; later ones only the noise).
             reweight(&f, &mut sigma2);
             let mut j = cost(&f, &sigma2);
-            let lin = self.linearise(&x, &tracks, &f, &sigma2)?;
+            let lin = match first.take() {
+                Some(lin) => lin,
+                None => self.linearise(&x, &tracks, &f, &sigma2)?,
+            };
             let info = lin.info.select_rows(free).select_columns(free);
             let rhs = lin.rhs.select_rows(free);
             let Some(chol) = info.cholesky() else {
@@ -648,8 +660,8 @@ pub(crate) fn fit_with_stand(
     };
     nominal.extend(vec![0.0; COMMON + 2 * poses.len()]);
     let problem = StandProblem { model, session, conic, deriv, opts, g_m_s2, declared, logged, poses, earth_declared };
-    let free = problem.identifiable(&nominal)?;
-    let (x, tracks, mut f) = problem.gauss_newton(nominal.clone(), &free)?;
+    let (free, start) = problem.identifiable(&nominal)?;
+    let (x, tracks, mut f) = problem.gauss_newton(nominal.clone(), &free, start)?;
     problem.refuse_mislabelled(&x, &nominal, &tracks, &f)?;
     // Final linearisation at the optimum for the covariance, weighted by the final noise.
     let mut sigma2 = [1.0; 6];
@@ -704,4 +716,30 @@ pub(crate) fn fit_with_stand(
     base.poses = poses;
     f.stand_base = Some(base);
     Ok(f)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_summary_leaves_out_what_was_held_and_keeps_what_was_estimated() {
+        let base = StandBase {
+            tilt_rad: [1e-3, 0.0],
+            tilt_se_rad: [1e-5, 1e-5],
+            ripple_rad: [[0.0; 2]; 2],
+            ripple_se_rad: [[1e-6; 2]; 2],
+            wobble_rad: [0.0; 2],
+            wobble_se_rad: [1e-6; 2],
+            earth_rad_s: [0.0; 3],
+            earth_se_rad_s: [0.0; 3],
+            poses: Vec::new(),
+            held: vec!["the Earth's rate: declared in the manifest".into()],
+        };
+        let what: Vec<String> = base.summary().into_iter().map(|t| t.what).collect();
+        assert!(!what.iter().any(|w| w.contains("Earth")), "{what:?}");
+        // An estimate that happens to be zero keeps its line: its standard error is not.
+        assert!(what.contains(&"base tilt about y".to_string()), "{what:?}");
+        assert_eq!(what.len(), 5, "{what:?}");
+    }
 }
