@@ -5,7 +5,7 @@
 use super::{Predictor, StandProblem, COMMON, COMMON_STEP, EARTH, POSE_STEP, RUN_STEP};
 use crate::estimate::{CoefStatus, EstimateError, Fit};
 use crate::model::State;
-use crate::motion::stand::StandMotion;
+use crate::motion::stand::StandAt;
 use crate::motion::Track;
 use crate::stats::QrAccumulator;
 use crate::units::SensorKind;
@@ -24,9 +24,11 @@ pub(super) struct Linearised {
 }
 
 /// How one parameter moves a run's motion, for its central difference.
+// A few per run, built once: the size difference between the variants does not matter.
+#[allow(clippy::large_enum_variant)]
 enum Move {
-    /// A conic run's stand motion above and below.
-    Stand(StandMotion, StandMotion),
+    /// A conic run's stand motion above and below (prepared once for the run's samples).
+    Stand(StandAt, StandAt),
     /// A rate added along a direction (sensor axes) on a static pose.
     Rate([f64; 3]),
 }
@@ -45,7 +47,8 @@ impl StandProblem<'_> {
                     let (mut hi, mut lo) = (x.to_vec(), x.to_vec());
                     hi[p] += h;
                     lo[p] -= h;
-                    (p, h, Move::Stand(self.stand_of(&hi, ci), self.stand_of(&lo, ci)))
+                    let g = self.g_m_s2;
+                    (p, h, Move::Stand(self.stand_of(&hi, ci).fixed(g), self.stand_of(&lo, ci).fixed(g)))
                 })
                 .collect();
         }
@@ -103,7 +106,7 @@ impl StandProblem<'_> {
                 let y = [run.gyro[k], run.accel[k]];
                 let p0 = pred.predict(&st);
                 for (j, (_, h, how)) in pert.iter().enumerate() {
-                    let at = |sm: &StandMotion| {
+                    let at = |sm: &StandAt| {
                         let s = self.state_at(ri, sm, k);
                         State { w: s.w_rad_s.xyz, e: s.e_rad_s2.xyz, a: s.a_m_s2.xyz, ..st }
                     };

@@ -27,7 +27,7 @@ mod linearise;
 use super::memory::fit_in_memory as fit;
 use super::{EstimateError, Fit, FitOptions, FitRun};
 use crate::model::Model;
-use crate::motion::stand::{Angle, StandMotion};
+use crate::motion::stand::{Angle, StandAt, StandMotion};
 use crate::motion::{DerivativeConfig, SensorKinematics, Track};
 use crate::session::{MotionSpec, Session};
 use crate::units::SensorKind;
@@ -362,11 +362,11 @@ impl StandProblem<'_> {
 
     /// Run `ri`'s state at sample `k` on stand `sm`, sensor axes (for the derivatives,
     /// without building a track).
-    fn state_at(&self, ri: usize, sm: &StandMotion, k: usize) -> SensorKinematics {
+    fn state_at(&self, ri: usize, sm: &StandAt, k: usize) -> SensorKinematics {
         let mount = &self.session.runs[ri].spec.mount;
         match &self.logged[ri] {
-            Some(angles) => crate::motion::stand::to_sensor(sm.at_angle(angles[k], self.g_m_s2), mount),
-            None => sm.sensor_at(self.declared[ri].t_s[k], self.g_m_s2, mount),
+            Some(angles) => crate::motion::stand::to_sensor(sm.at_angle(angles[k]), mount),
+            None => sm.sensor_at(self.declared[ri].t_s[k], mount),
         }
     }
 
