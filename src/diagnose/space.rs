@@ -624,13 +624,11 @@ impl Secants {
         Self { seen, moved }
     }
 
-    /// The columns over samples `k0..k1` into `out[candidate][parameter][i]` (resized). The
-    /// model is evaluated a block at a time ([`Predictor::block`]); a stepped motion that is
+    /// The columns over samples `k0..k1` into `out[candidate][parameter][i]` (resized), with
+    /// `predict` the model's outputs per sensor. The model is evaluated a block at a time ([`Predictor::block`]); a stepped motion that is
     /// the seen one with a map more (a dead zone) takes the seen states through its maps.
-    fn fill(&self, u: &Universe, run: &FitRun<'_>, k0: usize, k1: usize, out: &mut SecantBlock) {
+    fn fill(&self, predict: &[Predictor<'_>; 2], run: &FitRun<'_>, k0: usize, k1: usize, out: &mut SecantBlock) {
         let len = k1 - k0;
-        let terms = SensorKind::BOTH.map(|s| u.augmented.terms(s));
-        let predict = [0, 1].map(|si| Predictor::new(&terms[si], &u.values[si]));
         let from = |si: usize| self.seen[si].as_ref().unwrap_or(run.track);
         out.tmp.resize(len, 0.0);
         out.out.resize(len, [0.0; 3]);
@@ -687,6 +685,8 @@ fn channel_grams(
     let nb = basis.size;
     let terms: [Vec<TermRef<'_>>; 2] = SensorKind::BOTH.map(|s| u.augmented.terms(s));
     let k_matrix: [[[f64; 3]; 3]; 2] = [0, 1].map(|si| scale_matrix(&terms[si], &u.values[si]));
+    // The model's outputs, for the secant columns (built once per run, not per block).
+    let predict = [0, 1].map(|si| Predictor::new(&terms[si], &u.values[si]));
     let mut chans: Vec<WhitenedGram> =
         (0..6).map(|c| WhitenedGram::new(u.width(c) + nb + 1, &noise[c].ar, BLOCK)).collect();
     let mut states: Vec<State> = Vec::with_capacity(BLOCK);
@@ -702,7 +702,7 @@ fn channel_grams(
         states.clear();
         states.extend((k0..k1).map(|k| run.state(k)));
         if !u.nonlinear.is_empty() {
-            secants.fill(u, run, k0, k1, &mut secant_block);
+            secants.fill(&predict, run, k0, k1, &mut secant_block);
         }
         for i in 0..len {
             basis.row(t[k0 + i], &mut row);
