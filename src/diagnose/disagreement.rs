@@ -4,6 +4,7 @@
 use super::refit;
 use crate::estimate::{CoefStatus, Fit, FitOptions, FitRun};
 use crate::model::Model;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// A coefficient whose estimate from one run differs from the all-run estimate.
@@ -30,35 +31,49 @@ pub const DISAGREEMENT_Z: f64 = 6.0;
 /// all-run fit by more than [`DISAGREEMENT_Z`] standard errors. Coefficients a single run
 /// cannot identify are held at their all-run values, so the rest stay comparable.
 pub fn per_run_disagreements(model: &Model, all: &Fit, runs: &[FitRun<'_>], opts: &FitOptions) -> Vec<Disagreement> {
-    let mut out = Vec::new();
-    for run in runs {
-        let one = std::slice::from_ref(run);
-        let Ok(first) = refit(model, one, opts) else { continue };
+    // Each run's fits are independent: the runs in parallel, their lists joined in run order.
+    let per_run: Vec<Vec<Disagreement>> = runs.par_iter().map(|run| run_disagreements(model, all, run, opts)).collect();
+    let mut out: Vec<Disagreement> = per_run.into_iter().flatten().collect();
+    out.sort_by(|a, b| b.z.abs().total_cmp(&a.z.abs()));
+    out
+}
+
+/// One run's disagreements with the all-run fit `all`.
+fn run_disagreements(model: &Model, all: &Fit, run: &FitRun<'_>, opts: &FitOptions) -> Vec<Disagreement> {
+    let one = std::slice::from_ref(run);
+    let Ok(first) = refit(model, one, opts) else { return Vec::new() };
+    let held: Vec<&String> =
+        first.gyro.unidentifiable.iter().chain(&first.accel.unidentifiable).map(|c| &c.held).collect();
+    // With nothing the run cannot identify, the first fit is the one to compare.
+    let f = if held.is_empty() {
+        first
+    } else {
         let mut m = model.clone();
-        for c in first.gyro.unidentifiable.iter().chain(&first.accel.unidentifiable) {
-            if let Some(v) = all.get(&c.held).map(|c| c.value) {
-                let _ = m.fix(&c.held, v);
+        for name in held {
+            if let Some(v) = all.get(name).map(|c| c.value) {
+                let _ = m.fix(name, v);
             }
         }
-        let Ok(f) = refit(&m, one, opts) else { continue };
-        for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients) {
-            let (Some(se), Some(a)) = (c.std_error, all.get(&c.name)) else { continue };
-            if c.status != CoefStatus::Fitted || a.status != CoefStatus::Fitted || se <= 0.0 {
-                continue;
-            }
-            let z = (c.value - a.value) / se;
-            if z.abs() > DISAGREEMENT_Z {
-                out.push(Disagreement {
-                    coefficient: c.name.clone(),
-                    run: run.name.to_string(),
-                    run_value: c.value,
-                    run_std_error: se,
-                    all_value: a.value,
-                    z,
-                });
-            }
+        let Ok(f) = refit(&m, one, opts) else { return Vec::new() };
+        f
+    };
+    let mut out = Vec::new();
+    for c in f.gyro.coefficients.iter().chain(&f.accel.coefficients) {
+        let (Some(se), Some(a)) = (c.std_error, all.get(&c.name)) else { continue };
+        if c.status != CoefStatus::Fitted || a.status != CoefStatus::Fitted || se <= 0.0 {
+            continue;
+        }
+        let z = (c.value - a.value) / se;
+        if z.abs() > DISAGREEMENT_Z {
+            out.push(Disagreement {
+                coefficient: c.name.clone(),
+                run: run.name.to_string(),
+                run_value: c.value,
+                run_std_error: se,
+                all_value: a.value,
+                z,
+            });
         }
     }
-    out.sort_by(|a, b| b.z.abs().total_cmp(&a.z.abs()));
     out
 }
