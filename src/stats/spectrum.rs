@@ -122,13 +122,6 @@ pub fn remove_sinusoid(x: &mut [f64], t_s: &[f64], f_hz: f64) {
     }
 }
 
-/// Amplitude of the sinusoid at `f_hz` in `x` (stamps `t_s`): the least-squares fit of
-/// a cos + b sin (after removing the mean), returning √(a² + b²).
-pub fn sinusoid_amplitude(x: &[f64], t_s: &[f64], f_hz: f64) -> f64 {
-    let (a, b) = sinusoid_fit(x, t_s, f_hz);
-    a.hypot(b)
-}
-
 /// The least-squares (a, b) of a cos + b sin at `f_hz` (phase from the first stamp),
 /// after removing the mean.
 fn sinusoid_fit(x: &[f64], t_s: &[f64], f_hz: f64) -> (f64, f64) {
@@ -178,9 +171,15 @@ fn sinusoid_fits<const K: usize>(x: &[f64], t_s: &[f64], f_hz: [f64; K]) -> [(f6
 }
 
 /// The frequency near `f0_hz` (within ±`half_range_hz`) whose fitted sinusoid in `x` is
-/// largest, and that amplitude: a grid at half the record's resolution 1/T, then
-/// golden-section search on the best cell. A Welch bin is far wider than 1/T, and a
-/// frequency off by more than about 1/(4T) loses the phase over the record.
+/// largest, and that amplitude: a grid at half the record's resolution 1/T, then a search
+/// on the best cell to a bracket of 1/(200 T), far below the frequency's own uncertainty.
+/// A Welch bin is far wider than 1/T, and a frequency off by more than about 1/(4T) loses
+/// the phase over the record.
+///
+/// The grid is screened on the record demodulated at `f0_hz` and summed over about 2048
+/// blocks ([`baseband`]: one pass), the best cell and its neighbours fitted exactly; the
+/// search then fits four frequencies per pass ([`sinusoid_fits`]), shrinking the bracket
+/// to 2/5 each pass.
 pub fn refine_frequency(x: &[f64], t_s: &[f64], f0_hz: f64, half_range_hz: f64) -> (f64, f64) {
     let n = x.len().min(t_s.len());
     if n < 3 {
@@ -190,45 +189,84 @@ pub fn refine_frequency(x: &[f64], t_s: &[f64], f0_hz: f64, half_range_hz: f64) 
     let step = 0.5 / span;
     let cells = ((2.0 * half_range_hz / step).ceil() as usize).clamp(1, 400);
     let step = 2.0 * half_range_hz / cells as f64;
-    let (mut best_f, mut best_a) = (f0_hz, sinusoid_amplitude(x, t_s, f0_hz));
-    // The grid four frequencies per pass (the last group padded with its own last cell).
-    const GROUP: usize = 4;
-    for i0 in (0..=cells).step_by(GROUP) {
-        let f: [f64; GROUP] = std::array::from_fn(|j| f0_hz - half_range_hz + (i0 + j).min(cells) as f64 * step);
-        for (j, (a, b)) in sinusoid_fits(x, t_s, f).into_iter().enumerate() {
-            let a = a.hypot(b);
-            if i0 + j <= cells && a > best_a {
-                best_a = a;
-                best_f = f[j];
-            }
+    let cell = |i: usize| f0_hz - half_range_hz + i as f64 * step;
+    let screen = baseband(&x[..n], &t_s[..n], f0_hz);
+    let best_cell = (0..=cells)
+        .map(|i| (i, screen.amplitude(cell(i) - f0_hz)))
+        .fold((0, f64::NEG_INFINITY), |b, (i, a)| if a > b.1 { (i, a) } else { b });
+    // The screened cell, its neighbours and f0 itself, fitted exactly.
+    let near = [best_cell.0.saturating_sub(1), best_cell.0, (best_cell.0 + 1).min(cells)].map(cell);
+    let f = [f0_hz, near[0], near[1], near[2]];
+    let (mut best_f, mut best_a) = (f0_hz, f64::NEG_INFINITY);
+    for (fj, (a, b)) in f.into_iter().zip(sinusoid_fits(x, t_s, f)) {
+        if a.hypot(b) > best_a {
+            (best_f, best_a) = (fj, a.hypot(b));
         }
     }
-    // Golden-section search on the best cell (one new evaluation per iteration), to a
-    // bracket of 1/(200 T): far below the frequency's own uncertainty.
     let (mut lo, mut hi) = (best_f - step, best_f + step);
-    let g = 0.618_033_988_749_895;
-    let (mut m1, mut m2) = (hi - g * (hi - lo), lo + g * (hi - lo));
-    let (mut a1, mut a2) = (sinusoid_amplitude(x, t_s, m1), sinusoid_amplitude(x, t_s, m2));
     for _ in 0..64 {
         if hi - lo <= 0.005 / span {
             break;
         }
-        if a1 > a2 {
-            (hi, m2, a2) = (m2, m1, a1);
-            m1 = hi - g * (hi - lo);
-            a1 = sinusoid_amplitude(x, t_s, m1);
-        } else {
-            (lo, m1, a1) = (m1, m2, a2);
-            m2 = lo + g * (hi - lo);
-            a2 = sinusoid_amplitude(x, t_s, m2);
+        let h = (hi - lo) / 5.0;
+        let f: [f64; 4] = std::array::from_fn(|j| lo + (j + 1) as f64 * h);
+        for (fj, (a, b)) in f.into_iter().zip(sinusoid_fits(x, t_s, f)) {
+            if a.hypot(b) > best_a {
+                (best_f, best_a) = (fj, a.hypot(b));
+            }
         }
+        // The bracket around the best point so far (the previous one when no new point beats it).
+        (lo, hi) = (best_f - h, best_f + h);
     }
-    let f = 0.5 * (lo + hi);
-    let a = sinusoid_amplitude(x, t_s, f);
-    if a > best_a {
-        (f, a)
-    } else {
-        (best_f, best_a)
+    (best_f, best_a)
+}
+
+/// A record demodulated at one frequency and summed over blocks: the amplitude of a nearby
+/// frequency is then a sum over the blocks, not the samples ([`Baseband::amplitude`]).
+struct Baseband {
+    /// Per block: the sum of (x − mean)·e^(−iω₀t) and the block's mean time from the first
+    /// stamp, s.
+    blocks: Vec<([f64; 2], f64)>,
+    n: usize,
+}
+
+/// [`Baseband`] of `x` at `f0_hz`, in blocks of ⌈n/2048⌉ samples: a frequency δ away turns
+/// by at most 2π·δ·(block span)/2 inside a block, 0.025 rad for δ within 16/T.
+fn baseband(x: &[f64], t_s: &[f64], f0_hz: f64) -> Baseband {
+    let n = x.len().min(t_s.len());
+    let mean = x[..n].iter().sum::<f64>() / n.max(1) as f64;
+    let w = std::f64::consts::TAU * f0_hz;
+    let size = n.div_ceil(2048).max(1);
+    let blocks = (0..n)
+        .step_by(size)
+        .map(|k0| {
+            let k1 = (k0 + size).min(n);
+            let (mut re, mut im, mut tm) = (0.0, 0.0, 0.0);
+            for k in k0..k1 {
+                let dt = t_s[k] - t_s[0];
+                let (s, c) = libm::sincos(w * dt);
+                re += (x[k] - mean) * c;
+                im -= (x[k] - mean) * s;
+                tm += dt;
+            }
+            ([re, im], tm / (k1 - k0) as f64)
+        })
+        .collect();
+    Baseband { blocks, n }
+}
+
+impl Baseband {
+    /// About the amplitude of the sinusoid δ Hz from the demodulation frequency:
+    /// 2/n·|Σ_b z_b·e^(−i2πδ t_b)| (the fit's amplitude for a record of many cycles).
+    fn amplitude(&self, delta_hz: f64) -> f64 {
+        let w = std::f64::consts::TAU * delta_hz;
+        let (mut re, mut im) = (0.0, 0.0);
+        for ([zr, zi], t) in &self.blocks {
+            let (s, c) = libm::sincos(w * t);
+            re += zr * c + zi * s;
+            im += zi * c - zr * s;
+        }
+        2.0 * re.hypot(im) / self.n.max(1) as f64
     }
 }
 
