@@ -5,7 +5,7 @@
 //! reader's eye sees.
 
 use crate::estimate::{Fit, FitRun};
-use crate::model::Model;
+use crate::model::{Model, State};
 use crate::session::MotionSpec;
 use crate::stats::{chi2_upper, systematic, Systematic};
 use crate::units::{SensorKind, AXES};
@@ -69,20 +69,36 @@ pub fn run_residual(model: &Model, f: &Fit, run: &FitRun<'_>) -> (Vec<Vec<f64>>,
     } else {
         model
     };
-    let mut r: Vec<Vec<f64>> = (0..6).map(|_| Vec::with_capacity(run.len())).collect();
+    let n = run.len();
+    let mut r: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
     let mut output_ss = [0.0; 6];
-    for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
-        let terms = model.terms(sensor);
-        let values = values_of(f, model, sensor);
-        let seen = crate::estimate::seen_tracks(model, f, sensor, std::slice::from_ref(run)).and_then(|mut v| v.pop());
-        let moved = FitRun { track: seen.as_ref().unwrap_or(run.track), ..*run };
-        let predict = crate::model::Predictor::new(&terms, &values);
-        for k in 0..moved.len() {
-            let u = predict.at(&moved.state(k));
-            let y = moved.output(sensor, k);
-            for ch in 0..3 {
-                r[3 * si + ch].push(y[ch] - u[ch]);
-                output_ss[3 * si + ch] += y[ch] * y[ch];
+    let terms = SensorKind::BOTH.map(|s| model.terms(s));
+    let values = SensorKind::BOTH.map(|s| values_of(f, model, s));
+    let predict = [0, 1].map(|si| crate::model::Predictor::new(&terms[si], &values[si]));
+    let seen = SensorKind::BOTH
+        .map(|s| crate::estimate::seen_tracks(model, f, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
+    let how = [0, 1].map(|si| run.seen_from(seen[si].as_ref()));
+    // A block at a time: the run's states once per block, each sensor's seen states from
+    // them ([`FitRun::seen_states`]), the model by [`Predictor::block`] (the numbers of
+    // `Predictor::at`).
+    const BLOCK: usize = 256;
+    let mut base: Vec<State> = Vec::with_capacity(BLOCK);
+    let mut states: [Vec<State>; 2] = [Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK)];
+    let mut u = vec![[0.0; 3]; BLOCK];
+    let mut tmp = vec![0.0; BLOCK];
+    for k0 in (0..n).step_by(BLOCK) {
+        let k1 = (k0 + BLOCK).min(n);
+        base.clear();
+        base.extend((k0..k1).map(|k| run.state(k)));
+        for si in 0..2 {
+            run.seen_states(&how[si], &base, k0, &mut states[si]);
+            predict[si].block(&states[si], &mut u, &mut tmp);
+            for (i, k) in (k0..k1).enumerate() {
+                let y = run.output(SensorKind::BOTH[si], k);
+                for ch in 0..3 {
+                    r[3 * si + ch][k] = y[ch] - u[i][ch];
+                    output_ss[3 * si + ch] += y[ch] * y[ch];
+                }
             }
         }
     }

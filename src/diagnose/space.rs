@@ -567,19 +567,6 @@ struct SecantBlock {
     cols: Vec<Vec<Vec<[f64; 6]>>>,
 }
 
-/// `base` with `maps` applied (its stamps, temperature and session time kept).
-fn mapped_state(base: &State, maps: &[std::sync::Arc<dyn crate::motion::SampleMap>]) -> State {
-    let mut k = crate::motion::SensorKinematics {
-        w_rad_s: crate::frames::V3::new(base.w),
-        e_rad_s2: crate::frames::V3::new(base.e),
-        a_m_s2: crate::frames::V3::new(base.a),
-    };
-    for m in maps {
-        m.apply(&mut k);
-    }
-    State { w: k.w_rad_s.xyz, e: k.e_rad_s2.xyz, a: k.a_m_s2.xyz, ..*base }
-}
-
 impl Secants {
     fn new(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Self {
         let seen: [Option<Track>; 2] =
@@ -627,16 +614,16 @@ impl Secants {
     /// The columns over samples `k0..k1` into `out[candidate][parameter][i]` (resized), with
     /// `predict` the model's outputs per sensor. The model is evaluated a block at a time ([`Predictor::block`]); a stepped motion that is
     /// the seen one with a map more (a dead zone) takes the seen states through its maps.
-    fn fill(&self, predict: &[Predictor<'_>; 2], run: &FitRun<'_>, k0: usize, k1: usize, out: &mut SecantBlock) {
-        let len = k1 - k0;
+    fn fill(&self, predict: &[Predictor<'_>; 2], run: &FitRun<'_>, k0: usize, base: &[State], out: &mut SecantBlock) {
+        let len = base.len();
+        let k1 = k0 + len;
         let from = |si: usize| self.seen[si].as_ref().unwrap_or(run.track);
         out.tmp.resize(len, 0.0);
         out.out.resize(len, [0.0; 3]);
-        // The model's output on the motion it sees, once per sensor (every secant starts there).
+        // The model's output on the motion it sees, once per sensor (every secant starts
+        // there), its states from the run's (`base`).
         for si in 0..2 {
-            let a = FitRun { track: from(si), ..*run };
-            out.states[si].clear();
-            out.states[si].extend((k0..k1).map(|k| a.state(k)));
+            run.seen_states(&run.seen_from(self.seen[si].as_ref()), base, k0, &mut out.states[si]);
             out.start[si].resize(len, [0.0; 3]);
             predict[si].block(&out.states[si], &mut out.start[si], &mut out.tmp);
         }
@@ -651,7 +638,9 @@ impl Secants {
                     let Some(moved) = moved else { continue };
                     out.moved.clear();
                     match moved.maps_beyond(from(si)) {
-                        Some(maps) => out.moved.extend(out.states[si].iter().map(|s| mapped_state(s, maps))),
+                        Some(maps) => {
+                            out.moved.extend(out.states[si].iter().map(|s| crate::estimate::mapped_state(s, maps)))
+                        }
                         None => {
                             let b = FitRun { track: moved, ..*run };
                             out.moved.extend((k0..k1).map(|k| b.state(k)));
@@ -702,7 +691,7 @@ fn channel_grams(
         states.clear();
         states.extend((k0..k1).map(|k| run.state(k)));
         if !u.nonlinear.is_empty() {
-            secants.fill(&predict, run, k0, k1, &mut secant_block);
+            secants.fill(&predict, run, k0, &states, &mut secant_block);
         }
         for i in 0..len {
             basis.row(t[k0 + i], &mut row);

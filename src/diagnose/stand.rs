@@ -333,6 +333,8 @@ impl Suspect {
         // A block's knob columns ([local][channel][sample]), states per sensor and basis rows.
         let mut dcol = vec![0.0; nl * 6 * BLOCK];
         let mut states: [Vec<State>; 2] = [Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK)];
+        let mut base: Vec<State> = Vec::with_capacity(BLOCK);
+        let how = [0, 1].map(|si| run.seen_from(seen[si].as_ref()));
         let mut basis = vec![0.0; noise.basis.size * BLOCK];
         let mut brow = vec![0.0; noise.basis.size];
         // The residual (output − the fitted model on the motion each sensor sees).
@@ -341,17 +343,13 @@ impl Suspect {
         while k0 < n {
             let k1 = (k0 + BLOCK).min(n);
             let len = k1 - k0;
-            states.iter_mut().for_each(Vec::clear);
+            base.clear();
+            base.extend((k0..k1).map(|k| run.state(k)));
+            for (si, s) in states.iter_mut().enumerate() {
+                run.seen_states(&how[si], &base, k0, s);
+            }
             for (i, k) in (k0..k1).enumerate() {
-                let st = run.state(k);
-                knobs.push(i, run.track.t_s[k], &st);
-                for (si, s) in states.iter_mut().enumerate() {
-                    let seen_st = match &seen[si] {
-                        Some(t) => FitRun { track: t, ..*run }.state(k),
-                        None => st,
-                    };
-                    s.push(seen_st);
-                }
+                knobs.push(i, run.track.t_s[k], &base[i]);
                 if any_slow {
                     noise.basis.row(run.track.t_s[k], &mut brow);
                     for (b, v) in brow.iter().enumerate() {

@@ -40,7 +40,7 @@ pub use identify::{Correlation, Unidentifiable};
 pub use nonlinear::{bound_at_fit, seen_tracks, NonlinearParam};
 pub use request::{fit, FitData, FitOutcome, FitRequest, FitSource, ModelChoice, StreamPolicy};
 pub use result::{ChannelFit, CoefStatus, Coefficient, Fit, SensorFit};
-pub use runs::{fit_runs, tracks, FitRun};
+pub use runs::{fit_runs, mapped_state, tracks, FitRun, SeenFrom};
 pub use stand::{ConeSetting, StandBase, StandParams, StandTerm};
 
 use crate::units::SensorKind;

@@ -17,6 +17,30 @@ pub fn session_time(start_s: Option<f64>, t_s: f64, t0_s: f64) -> f64 {
     }
 }
 
+/// How a sensor's seen motion follows from a run's states ([`FitRun::seen_from`]).
+pub enum SeenFrom<'t> {
+    /// The run's own states.
+    Same,
+    /// The run's states through these maps, in order.
+    Maps(&'t [std::sync::Arc<dyn crate::motion::SampleMap>]),
+    /// A motion of its own.
+    Other(&'t Track),
+}
+
+/// `base` with `maps` applied (its stamps, temperature and session time kept): the state
+/// of a track that is `base`'s with the maps after it.
+pub fn mapped_state(base: &State, maps: &[std::sync::Arc<dyn crate::motion::SampleMap>]) -> State {
+    let mut k = crate::motion::SensorKinematics {
+        w_rad_s: crate::frames::V3::new(base.w),
+        e_rad_s2: crate::frames::V3::new(base.e),
+        a_m_s2: crate::frames::V3::new(base.a),
+    };
+    for m in maps {
+        m.apply(&mut k);
+    }
+    State { w: k.w_rad_s.xyz, e: k.e_rad_s2.xyz, a: k.a_m_s2.xyz, ..*base }
+}
+
 /// One run's data prepared for fitting: its true motion and the sensor outputs.
 #[derive(Debug, Clone, Copy)]
 pub struct FitRun<'a> {
@@ -65,6 +89,37 @@ impl FitRun<'_> {
                 (None, Some(_)) => 0.0,
                 (None, None) => f64::NAN,
             },
+        }
+    }
+
+    /// How the motion `seen` (a sensor's view of this run under nonlinear effects, None: the
+    /// run's own track) is had from this run's states: the same states, the states through
+    /// the maps `seen` applies beyond the track ([`Track::maps_beyond`]), or its own
+    /// kinematics. Worked out once per run, used per block ([`Self::seen_states`]).
+    pub fn seen_from<'t>(&self, seen: Option<&'t Track>) -> SeenFrom<'t> {
+        match seen {
+            None => SeenFrom::Same,
+            Some(t) => match t.maps_beyond(self.track) {
+                Some([]) => SeenFrom::Same,
+                Some(maps) => SeenFrom::Maps(maps),
+                None => SeenFrom::Other(t),
+            },
+        }
+    }
+
+    /// The states of samples `k0..k0 + base.len()` on a seen motion into `out` (cleared),
+    /// from the run's own states `base` of those samples: the numbers of
+    /// `FitRun { track: seen, .. }.state(k)`, without the kinematics worked out again when
+    /// the seen motion is the track with maps after it.
+    pub fn seen_states(&self, how: &SeenFrom<'_>, base: &[State], k0: usize, out: &mut Vec<State>) {
+        out.clear();
+        match how {
+            SeenFrom::Same => out.extend_from_slice(base),
+            SeenFrom::Maps(maps) => out.extend(base.iter().map(|s| mapped_state(s, maps))),
+            SeenFrom::Other(t) => {
+                let r = FitRun { track: t, ..*self };
+                out.extend((k0..k0 + base.len()).map(|k| r.state(k)));
+            }
         }
     }
 
@@ -121,4 +176,61 @@ pub(crate) fn check_user_effects(model: &crate::model::Model, runs: &[FitRun<'_>
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::session::{MotionSpec, Recording};
+
+    #[test]
+    fn seen_states_are_the_seen_tracks_states_bit_for_bit() {
+        let n = 600;
+        let rec = Recording {
+            t_s: (0..n).map(|k| k as f64 * 0.01).collect(),
+            gyro: vec![[0.0; 3]; n],
+            accel: vec![[0.0; 3]; n],
+            ..Default::default()
+        };
+        let motion = MotionSpec::Conic { cone_angle_deg: 15.0, rate_deg_s: 40.0, phase_deg: 5.0 };
+        let track = crate::motion::track_for(
+            &motion,
+            &crate::frames::Mount::identity(),
+            &rec,
+            9.81,
+            &DerivativeConfig::default(),
+        );
+        let run = FitRun {
+            name: "r",
+            track: &track,
+            gyro: &rec.gyro,
+            accel: &rec.accel,
+            temp_c: None,
+            temp_const_c: Some(25.0),
+            start_s: Some(100.0),
+        };
+        let mut dz = crate::model::Model::paper();
+        dz.add_effect("gyro-dead-zone").unwrap();
+        let entry = &dz.nonlinear()[0];
+        let mapped = entry.effect.transform(&[0.05, 0.02, 0.03], &track);
+        let delayed = track.delayed(0.013);
+        for seen in [None, Some(&mapped), Some(&delayed)] {
+            let how = run.seen_from(seen);
+            let direct = FitRun { track: seen.unwrap_or(&track), ..run };
+            let (k0, k1) = (256, 512);
+            let base: Vec<State> = (k0..k1).map(|k| run.state(k)).collect();
+            let mut out = Vec::new();
+            run.seen_states(&how, &base, k0, &mut out);
+            assert_eq!(out.len(), k1 - k0);
+            for (i, k) in (k0..k1).enumerate() {
+                let want = direct.state(k);
+                assert!(out[i].w.iter().zip(&want.w).all(|(a, b)| a.to_bits() == b.to_bits()), "sample {k}");
+                assert!(out[i].e.iter().zip(&want.e).all(|(a, b)| a.to_bits() == b.to_bits()), "sample {k}");
+                assert!(out[i].a.iter().zip(&want.a).all(|(a, b)| a.to_bits() == b.to_bits()), "sample {k}");
+                assert_eq!(out[i].t_session_s.to_bits(), want.t_session_s.to_bits());
+            }
+        }
+        assert!(matches!(run.seen_from(Some(&mapped)), SeenFrom::Maps(m) if m.len() == 1));
+        assert!(matches!(run.seen_from(Some(&delayed)), SeenFrom::Other(_)));
+    }
 }

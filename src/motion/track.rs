@@ -184,11 +184,24 @@ impl Track {
     /// with these applied in order, no kinematics recomputed. None otherwise.
     pub fn maps_beyond(&self, base: &Track) -> Option<&[Arc<dyn SampleMap>]> {
         let n = base.maps.len();
+        // Identity, not contents: comparing a million stored samples (or temperature rates)
+        // per call would cost more than the kinematics it saves.
+        let same_temp = match (&self.temp_rate_c_s, &base.temp_rate_c_s) {
+            (None, None) => true,
+            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        };
+        let same_source = match (&self.source, &base.source) {
+            (Source::Sampled { w, e, a }, Source::Sampled { w: w2, e: e2, a: a2 }) => {
+                std::ptr::eq(w, w2) && std::ptr::eq(e, e2) && std::ptr::eq(a, a2)
+            }
+            (x, y) => x == y,
+        };
         let same = Arc::ptr_eq(&self.t_s, &base.t_s)
             && self.maps.len() >= n
             && self.maps[..n].iter().zip(&base.maps).all(|(a, b)| Arc::ptr_eq(a, b))
-            && self.temp_rate_c_s == base.temp_rate_c_s
-            && self.source == base.source;
+            && same_temp
+            && same_source;
         same.then(|| &self.maps[n..])
     }
 
@@ -476,5 +489,27 @@ mod tests {
         assert_eq!(thin.len(), 1000_usize.div_ceil(7));
         assert_eq!(thin.at(3), stored.at(21));
         assert_eq!(conic.every(7).at(3), conic.at(21));
+    }
+
+    #[test]
+    fn the_maps_beyond_a_track_are_found_by_identity_not_by_comparing_samples() {
+        let (conic, _) = conic_track(&Mount::identity(), 200);
+        let halved = conic.mapped(Arc::new(Halve));
+        assert_eq!(halved.maps_beyond(&conic).map(<[_]>::len), Some(1));
+        assert_eq!(conic.maps_beyond(&conic).map(<[_]>::len), Some(0));
+        assert!(conic.maps_beyond(&halved).is_none());
+        assert!(conic.delayed(0.01).mapped(Arc::new(Halve)).maps_beyond(&conic).is_none());
+        // A stored track's copy holds its own samples: its states are worked out again
+        // (cheaply), not matched against a million stored values.
+        let states: Vec<SensorKinematics> = conic.states().collect();
+        let stored = Track::sampled(
+            conic.t_s.to_vec(),
+            states.iter().map(|s| s.w_rad_s).collect(),
+            states.iter().map(|s| s.e_rad_s2).collect(),
+            states.iter().map(|s| s.a_m_s2).collect(),
+            "test".into(),
+        );
+        assert_eq!(stored.maps_beyond(&stored).map(<[_]>::len), Some(0));
+        assert!(stored.mapped(Arc::new(Halve)).maps_beyond(&stored).is_none());
     }
 }
