@@ -568,7 +568,14 @@ fn refit_reduced(
     // The reduced copies live only for the search (memory: the fit on all samples follows).
     let searched = {
         let every = |v: &[[f64; 3]]| v.iter().step_by(k).copied().collect::<Vec<_>>();
-        let tracks: Vec<crate::motion::Track> = runs.iter().map(|r| r.track.every(k)).collect();
+        // Nonlinear effects that are pointwise maps of the motion (a dead zone) search on a
+        // stored copy of the reduced motion: the same numbers, without the kinematics worked
+        // out again at each of the search's evaluations.
+        let pointwise = |t: &crate::motion::Track| {
+            model.nonlinear().iter().all(|e| e.effect.transform(&e.values, t).maps_beyond(t).is_some())
+        };
+        let tracks: Vec<crate::motion::Track> =
+            runs.iter().map(|r| r.track.every(k)).map(|t| if pointwise(&t) { t.materialised() } else { t }).collect();
         type Outputs = (Vec<[f64; 3]>, Vec<[f64; 3]>, Option<Vec<f64>>);
         let outputs: Vec<Outputs> = runs
             .iter()

@@ -37,7 +37,7 @@ pub trait SampleMap: Send + Sync + fmt::Debug {
 #[derive(Debug, Clone, PartialEq)]
 enum Source {
     /// Stored per sample (recorded reference motion, or a materialised track).
-    Sampled { w: Vec<V3<Sensor>>, e: Vec<V3<Sensor>>, a: Vec<V3<Sensor>> },
+    Sampled { w: Arc<[V3<Sensor>]>, e: Arc<[V3<Sensor>]>, a: Arc<[V3<Sensor>]> },
     /// Conic motion evaluated at `t − lag_s` and turned into sensor axes by `mount`.
     Conic { c: ConicAt, mount: Mount, lag_s: f64 },
     /// The same state at every sample (static runs; NaN for protocol runs).
@@ -89,7 +89,7 @@ impl Track {
     ) -> Self {
         Self {
             t_s: t_s.into(),
-            source: Source::Sampled { w: w_rad_s, e: e_rad_s2, a: a_m_s2 },
+            source: Source::Sampled { w: w_rad_s.into(), e: e_rad_s2.into(), a: a_m_s2.into() },
             maps: Vec::new(),
             epsilon_source,
             temp_rate_c_s: None,
@@ -193,7 +193,7 @@ impl Track {
         };
         let same_source = match (&self.source, &base.source) {
             (Source::Sampled { w, e, a }, Source::Sampled { w: w2, e: e2, a: a2 }) => {
-                std::ptr::eq(w, w2) && std::ptr::eq(e, e2) && std::ptr::eq(a, a2)
+                Arc::ptr_eq(w, w2) && Arc::ptr_eq(e, e2) && Arc::ptr_eq(a, a2)
             }
             (x, y) => x == y,
         };
@@ -232,12 +232,28 @@ impl Track {
                 let (w, e, a) = (shift(|s| s.w_rad_s), shift(|s| s.e_rad_s2), shift(|s| s.a_m_s2));
                 Track {
                     t_s: self.t_s.clone(),
-                    source: Source::Sampled { w, e, a },
+                    source: Source::Sampled { w: w.into(), e: e.into(), a: a.into() },
                     maps: Vec::new(),
                     epsilon_source: self.epsilon_source.clone(),
                     temp_rate_c_s: self.temp_rate_c_s.clone(),
                 }
             }
+        }
+    }
+
+    /// The same track with its source's states stored sample by sample (its maps kept, to
+    /// apply after them): every later evaluation is a lookup, with the numbers the source
+    /// gives. For a search that evaluates a short track many times through pointwise maps.
+    pub fn materialised(&self) -> Track {
+        let plain = Track { maps: Vec::new(), ..self.clone() };
+        let states: Vec<SensorKinematics> = plain.states().collect();
+        Track {
+            source: Source::Sampled {
+                w: states.iter().map(|s| s.w_rad_s).collect(),
+                e: states.iter().map(|s| s.e_rad_s2).collect(),
+                a: states.iter().map(|s| s.a_m_s2).collect(),
+            },
+            ..self.clone()
         }
     }
 
@@ -304,7 +320,7 @@ pub fn track_for(
             )
         }
         MotionSpec::Reference => match rec.reference.as_ref() {
-            None => (Source::Sampled { w: Vec::new(), e: Vec::new(), a: Vec::new() }, String::new()),
+            None => (Source::Sampled { w: Arc::new([]), e: Arc::new([]), a: Arc::new([]) }, String::new()),
             Some(r) => reference_source(rec, r, mount, deriv),
         },
     };
@@ -340,7 +356,7 @@ fn logged_source(
         e.push(mount.to_sensor(k.e_rad_s2));
         a.push(mount.to_sensor(k.a_m_s2));
     }
-    (Source::Sampled { w, e, a }, super::stand::logged_method(deriv))
+    (Source::Sampled { w: w.into(), e: e.into(), a: a.into() }, super::stand::logged_method(deriv))
 }
 
 /// A reference run's stored states, with ε given or derived from the reference rate.
@@ -499,8 +515,7 @@ mod tests {
         assert_eq!(conic.maps_beyond(&conic).map(<[_]>::len), Some(0));
         assert!(conic.maps_beyond(&halved).is_none());
         assert!(conic.delayed(0.01).mapped(Arc::new(Halve)).maps_beyond(&conic).is_none());
-        // A stored track's copy holds its own samples: its states are worked out again
-        // (cheaply), not matched against a million stored values.
+        // A stored track's copies share its samples (identity holds through `mapped`).
         let states: Vec<SensorKinematics> = conic.states().collect();
         let stored = Track::sampled(
             conic.t_s.to_vec(),
@@ -510,6 +525,7 @@ mod tests {
             "test".into(),
         );
         assert_eq!(stored.maps_beyond(&stored).map(<[_]>::len), Some(0));
-        assert!(stored.mapped(Arc::new(Halve)).maps_beyond(&stored).is_none());
+        assert_eq!(stored.mapped(Arc::new(Halve)).maps_beyond(&stored).map(<[_]>::len), Some(1));
+        assert!(stored.every(2).mapped(Arc::new(Halve)).maps_beyond(&stored).is_none());
     }
 }
