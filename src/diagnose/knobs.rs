@@ -148,9 +148,34 @@ impl<'m> Knobs<'m> {
 
     /// The columns of the first `len` samples gathered: `dcol[(local·6 + channel)·BLOCK + i]`.
     pub(super) fn columns(&mut self, len: usize, dcol: &mut [f64]) {
+        // Which of ω, ε and a each knob moved in this block (a tilt moves only a, the
+        // Earth's rate only ω): a sensor whose model reads none of them has the outputs of
+        // the base states there, so its columns are exactly zero without evaluating it.
+        let base = &self.base[..len];
+        let moved: Vec<[bool; 3]> = (0..self.dirs.len())
+            .map(|j| {
+                let nudged = &self.nudged[j * BLOCK..][..len];
+                let differs = |f: fn(&State) -> [f64; 3]| {
+                    nudged
+                        .iter()
+                        .zip(base)
+                        .any(|(x, y)| f(x).iter().zip(&f(y)).any(|(a, b)| a.to_bits() != b.to_bits()))
+                };
+                [differs(|s| s.w), differs(|s| s.e), differs(|s| s.a)]
+            })
+            .collect();
         for (si, p) in self.predict.iter().enumerate() {
-            p.block(&self.base[..len], &mut self.out0, &mut self.tmp);
+            let reads = p.reads();
+            p.block(base, &mut self.out0, &mut self.tmp);
             for (j, &(_, h)) in self.dirs.iter().enumerate() {
+                let [w, e, a] = moved[j];
+                let felt = (w && reads.rate) || (e && reads.ang_accel) || (a && reads.force);
+                if !felt {
+                    for ch in 0..3 {
+                        dcol[(j * 6 + 3 * si + ch) * BLOCK..][..len].fill(0.0);
+                    }
+                    continue;
+                }
                 p.block(&self.nudged[j * BLOCK..][..len], &mut self.out1, &mut self.tmp);
                 for ch in 0..3 {
                     let col = &mut dcol[(j * 6 + 3 * si + ch) * BLOCK..][..len];

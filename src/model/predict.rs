@@ -78,6 +78,22 @@ impl<'a> Predictor<'a> {
         Self { parts }
     }
 
+    /// The quantities of a state this predictor's outputs read (the union of its effects'
+    /// [`Effect::inputs`]): outputs at two states that agree in these are equal.
+    pub fn reads(&self) -> super::Inputs {
+        self.parts.iter().fold(super::Inputs::NONE, |a, (e, ..)| {
+            let b = e.inputs();
+            super::Inputs {
+                rate: a.rate || b.rate,
+                ang_accel: a.ang_accel || b.ang_accel,
+                force: a.force || b.force,
+                time: a.time || b.time,
+                temperature: a.temperature || b.temperature,
+                temperature_rate: a.temperature_rate || b.temperature_rate,
+            }
+        })
+    }
+
     /// The sensor's three outputs at `s`.
     #[inline]
     pub fn at(&self, s: &State) -> [f64; 3] {
@@ -141,5 +157,21 @@ mod tests {
                 assert_eq!(u.map(f64::to_bits), p.at(s).map(f64::to_bits));
             }
         }
+    }
+
+    #[test]
+    fn a_predictor_reads_what_its_effects_read() {
+        let m = Model::paper();
+        let terms = m.terms(SensorKind::Gyro);
+        let values: Vec<f64> = terms.iter().map(|t| t.term.nominal + 0.01).collect();
+        let gyro = Predictor::new(&terms, &values).reads();
+        assert!(gyro.rate && gyro.ang_accel && !gyro.force && !gyro.temperature);
+        let terms = m.terms(SensorKind::Accel);
+        let values: Vec<f64> = terms.iter().map(|t| t.term.nominal + 0.01).collect();
+        let accel = Predictor::new(&terms, &values).reads();
+        assert!(accel.force && !accel.rate && !accel.ang_accel);
+        // All values zero: no term, nothing read.
+        let none = Predictor::new(&terms, &vec![0.0; terms.len()]).reads();
+        assert!(!none.force && !none.rate);
     }
 }
