@@ -81,17 +81,7 @@ impl<'a> Predictor<'a> {
     /// The quantities of a state this predictor's outputs read (the union of its effects'
     /// [`Effect::inputs`]): outputs at two states that agree in these are equal.
     pub fn reads(&self) -> super::Inputs {
-        self.parts.iter().fold(super::Inputs::NONE, |a, (e, ..)| {
-            let b = e.inputs();
-            super::Inputs {
-                rate: a.rate || b.rate,
-                ang_accel: a.ang_accel || b.ang_accel,
-                force: a.force || b.force,
-                time: a.time || b.time,
-                temperature: a.temperature || b.temperature,
-                temperature_rate: a.temperature_rate || b.temperature_rate,
-            }
-        })
+        self.parts.iter().fold(super::Inputs::NONE, |a, (e, ..)| a.and(e.inputs()))
     }
 
     /// The sensor's three outputs at `s`.

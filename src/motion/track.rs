@@ -515,15 +515,11 @@ mod tests {
         assert_eq!(conic.maps_beyond(&conic).map(<[_]>::len), Some(0));
         assert!(conic.maps_beyond(&halved).is_none());
         assert!(conic.delayed(0.01).mapped(Arc::new(Halve)).maps_beyond(&conic).is_none());
-        // A stored track's copies share its samples (identity holds through `mapped`).
-        let states: Vec<SensorKinematics> = conic.states().collect();
-        let stored = Track::sampled(
-            conic.t_s.to_vec(),
-            states.iter().map(|s| s.w_rad_s).collect(),
-            states.iter().map(|s| s.e_rad_s2).collect(),
-            states.iter().map(|s| s.a_m_s2).collect(),
-            "test".into(),
-        );
+        // A stored track's copies share its samples (identity holds through `mapped`); a
+        // stored copy of a track gives its states and keeps its maps.
+        let stored = conic.materialised();
+        assert!((0..200).all(|k| stored.at(k) == conic.at(k)));
+        assert!((0..200).all(|k| halved.materialised().at(k) == halved.at(k)));
         assert_eq!(stored.maps_beyond(&stored).map(<[_]>::len), Some(0));
         assert_eq!(stored.mapped(Arc::new(Halve)).maps_beyond(&stored).map(<[_]>::len), Some(1));
         assert!(stored.every(2).mapped(Arc::new(Halve)).maps_beyond(&stored).is_none());
