@@ -29,8 +29,9 @@ pub(super) enum Dir {
 /// Each sample's nudged states are gathered ([`Self::push`]), then the model is evaluated
 /// on the whole block, term by term ([`Predictor::block`]).
 pub(super) struct Knobs<'m> {
-    /// The fitted model's gyro and accel outputs.
+    /// The fitted model's gyro and accel outputs, and what each reads of a state.
     predict: [Predictor<'m>; 2],
+    reads: [crate::model::Inputs; 2],
     /// A conic run's motion now believed, each local parameter's nudged motion (ready to
     /// evaluate) and the mount.
     stand: Option<(StandAt, Vec<StandAt>, &'m Mount)>,
@@ -39,6 +40,8 @@ pub(super) struct Knobs<'m> {
     /// The block's states as believed, then per local parameter its nudged states.
     base: Vec<State>,
     nudged: Vec<State>,
+    /// Per local parameter: whether its nudge moved ω, ε and a in the block.
+    moved: Vec<[bool; 3]>,
     /// Scratch: outputs at the base and nudged states, and a regressor block.
     out0: Vec<[f64; 3]>,
     out1: Vec<[f64; 3]>,
@@ -76,11 +79,13 @@ impl<'m> Knobs<'m> {
         });
         let nl = dirs.len();
         Self {
+            reads: [0, 1].map(|si| predict[si].reads()),
             predict,
             stand,
             dirs,
             base: vec![State::default(); BLOCK],
             nudged: vec![State::default(); nl * BLOCK],
+            moved: vec![[true; 3]; nl],
             out0: vec![[0.0; 3]; BLOCK],
             out1: vec![[0.0; 3]; BLOCK],
             tmp: vec![0.0; BLOCK],
@@ -152,23 +157,18 @@ impl<'m> Knobs<'m> {
         // Earth's rate only ω): a sensor whose model reads none of them has the outputs of
         // the base states there, so its columns are exactly zero without evaluating it.
         let base = &self.base[..len];
-        let moved: Vec<[bool; 3]> = (0..self.dirs.len())
-            .map(|j| {
-                let nudged = &self.nudged[j * BLOCK..][..len];
-                let differs = |f: fn(&State) -> [f64; 3]| {
-                    nudged
-                        .iter()
-                        .zip(base)
-                        .any(|(x, y)| f(x).iter().zip(&f(y)).any(|(a, b)| a.to_bits() != b.to_bits()))
-                };
-                [differs(|s| s.w), differs(|s| s.e), differs(|s| s.a)]
-            })
-            .collect();
+        for (j, m) in self.moved.iter_mut().enumerate() {
+            let nudged = &self.nudged[j * BLOCK..][..len];
+            let differs = |f: fn(&State) -> [f64; 3]| {
+                nudged.iter().zip(base).any(|(x, y)| f(x).iter().zip(&f(y)).any(|(a, b)| a.to_bits() != b.to_bits()))
+            };
+            *m = [differs(|s| s.w), differs(|s| s.e), differs(|s| s.a)];
+        }
         for (si, p) in self.predict.iter().enumerate() {
-            let reads = p.reads();
+            let reads = self.reads[si];
             p.block(base, &mut self.out0, &mut self.tmp);
             for (j, &(_, h)) in self.dirs.iter().enumerate() {
-                let [w, e, a] = moved[j];
+                let [w, e, a] = self.moved[j];
                 let felt = (w && reads.rate) || (e && reads.ang_accel) || (a && reads.force);
                 if !felt {
                     for ch in 0..3 {

@@ -611,12 +611,13 @@ impl Secants {
         Self { seen, moved }
     }
 
-    /// The columns over samples `k0..k1` into `out[candidate][parameter][i]` (resized), with
-    /// `predict` the model's outputs per sensor. The model is evaluated a block at a time ([`Predictor::block`]); a stepped motion that is
-    /// the seen one with a map more (a dead zone) takes the seen states through its maps.
+    /// The columns over the samples from `k0` whose run states are `base` into
+    /// `out[candidate][parameter][i]` (resized), with `predict` the model's outputs per
+    /// sensor. The model is evaluated a block at a time ([`Predictor::block`]); every motion's
+    /// states come from those it is derived from ([`FitRun::seen_states`]: a stepped motion
+    /// that is the seen one with a map more, a dead zone, takes the seen states through it).
     fn fill(&self, predict: &[Predictor<'_>; 2], run: &FitRun<'_>, k0: usize, base: &[State], out: &mut SecantBlock) {
         let len = base.len();
-        let k1 = k0 + len;
         let from = |si: usize| self.seen[si].as_ref().unwrap_or(run.track);
         out.tmp.resize(len, 0.0);
         out.out.resize(len, [0.0; 3]);
@@ -636,16 +637,8 @@ impl Secants {
                 col.resize(len, [0.0; 6]);
                 for (si, moved) in tracks.iter().enumerate() {
                     let Some(moved) = moved else { continue };
-                    out.moved.clear();
-                    match moved.maps_beyond(from(si)) {
-                        Some(maps) => {
-                            out.moved.extend(out.states[si].iter().map(|s| crate::estimate::mapped_state(s, maps)))
-                        }
-                        None => {
-                            let b = FitRun { track: moved, ..*run };
-                            out.moved.extend((k0..k1).map(|k| b.state(k)));
-                        }
-                    }
+                    let seen = FitRun { track: from(si), ..*run };
+                    seen.seen_states(&seen.seen_from(Some(moved)), &out.states[si], k0, &mut out.moved);
                     predict[si].block(&out.moved, &mut out.out, &mut out.tmp);
                     for (i, c) in col.iter_mut().enumerate() {
                         let (u0, u1) = (out.start[si][i], out.out[i]);
