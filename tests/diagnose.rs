@@ -179,8 +179,9 @@ fn an_uncatalogued_wobble_is_reported_as_unexplained() {
     for run in &mut s.runs {
         if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = run.spec.motion {
             let c = crosscal::motion::Conic::from_deg(cone_angle_deg, rate_deg_s, phase_deg);
-            for (k, g) in run.rec.gyro.iter_mut().enumerate() {
-                g[1] += 0.01 * DEG * (3.0 * c.theta(run.rec.t_s[k]) + 0.7).sin();
+            let t_s = run.rec.t_s.clone();
+            for (k, g) in run.rec.gyro.make_mut().iter_mut().enumerate() {
+                g[1] += 0.01 * DEG * (3.0 * c.theta(t_s[k]) + 0.7).sin();
             }
         }
     }

@@ -313,7 +313,7 @@ fn protocol_diagnose_names_a_turn_that_stands_out_and_is_not_adequate_then() {
     let (clean, _) = crate::common::clean_and_g_sensitive();
     let mut sim = multi_position(&clean, 20.0, 24, 3.0, 2);
     // The first turn runs from 20 s to 21.5 s at 100 Hz.
-    for w in &mut sim.recording.gyro[2000..2150] {
+    for w in &mut sim.recording.gyro.make_mut()[2000..2150] {
         for v in w.iter_mut() {
             *v *= 1.1;
         }
@@ -353,7 +353,7 @@ fn every_pose_and_static_run_is_checked_against_the_rest() {
     let (s, e) = (run_start + p.start, run_start + p.end);
     let scale = truth.c_gyro[(2, 2)];
     for k in s + (e - s) / 2..e {
-        sim.recording.gyro[k][2] += 0.05f64.to_radians() * scale;
+        sim.recording.gyro.make_mut()[k][2] += 0.05f64.to_radians() * scale;
     }
     let (_, report) = fit_protocol(&sim.session(), &model, &ProtocolOptions::default()).unwrap();
     let flagged: Vec<_> = report.poses.iter().filter(|q| q.motion.is_some()).collect();
@@ -368,7 +368,7 @@ fn every_pose_and_static_run_is_checked_against_the_rest() {
     let face = sim.manifest.runs.iter().find(|r| r.name == "y_p").unwrap().rows.unwrap();
     let mid = (face.0 + face.1) / 2;
     for k in mid..mid + 30 {
-        sim.recording.accel[k][0] += 2000.0 * ((k - mid) as f64 * 1.3).sin();
+        sim.recording.accel.make_mut()[k][0] += 2000.0 * ((k - mid) as f64 * 1.3).sin();
     }
     let (_, report) = fit_protocol(&sim.session(), &Model::ferraris(), &ProtocolOptions::default()).unwrap();
     let flagged: Vec<&str> = report.poses.iter().filter(|q| q.motion.is_some()).map(|q| q.run.as_str()).collect();
@@ -402,7 +402,7 @@ fn rates_at_rest_beyond_the_noise_are_not_adequate_even_when_none_stands_out() {
     }
     let mut sim = multi_position(&clean, 20.0, 24, 3.0, 2);
     let n = sim.recording.gyro.len() as f64;
-    for (k, w) in sim.recording.gyro.iter_mut().enumerate().skip(2000) {
+    for (k, w) in sim.recording.gyro.make_mut().iter_mut().enumerate().skip(2000) {
         w[1] += 4.0 * (k as f64 - 2000.0) / (n - 2000.0);
     }
     let d = diagnose_protocol(&sim.session(), &Model::tedaldi()).unwrap();

@@ -20,8 +20,8 @@ fn huber_fit_shrugs_off_spikes_that_wreck_least_squares() {
     for run in &mut s.runs {
         for i in (37..run.rec.len()).step_by(200) {
             let sign = 1.0;
-            run.rec.gyro[i][n % 3] += sign * 5.0 * k;
-            run.rec.accel[i][(n + 1) % 3] += sign * 0.05 * 9.80665;
+            run.rec.gyro.make_mut()[i][n % 3] += sign * 5.0 * k;
+            run.rec.accel.make_mut()[i][(n + 1) % 3] += sign * 0.05 * 9.80665;
             n += 1;
         }
     }

@@ -253,3 +253,49 @@ fn streamed_fit_warns_as_the_in_memory_reader_and_refuses_gaps_when_strict() {
     assert_eq!(strict, in_memory.to_string());
     assert!(strict.to_string().contains("cone+10.csv:902:1 (t): gap in t of 1.0"), "{strict}");
 }
+
+/// Recordings past the heap budget live in a mapped spill file (`session::column`): with
+/// the budget at 0 every column is spilled, and `diagnose` (its fits, refits and stand
+/// systems) and `fit` say the same, to the last digit, as with the recordings on the heap;
+/// so does a run where no spill file can be made.
+#[test]
+fn spilled_recordings_give_the_numbers_of_the_heap() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sim = [
+        "simulate",
+        "-o",
+        "s",
+        "--duration",
+        "40",
+        "--gyro-noise",
+        "0.002",
+        "--accel-noise",
+        "2e-5",
+        "--hidden",
+        "gyro-dead-zone",
+        "--set",
+        "gyro.dz_x=9e-4",
+    ];
+    crate::common::run_ok(d, &sim);
+    let run = |heap_mb: Option<&str>, args: &[&str]| {
+        let mut c = std::process::Command::new(crate::common::bin());
+        c.args(args).current_dir(d);
+        if let Some(mb) = heap_mb {
+            c.env("CROSSCAL_HEAP_MB", mb);
+        }
+        if heap_mb == Some("no-tmp") {
+            // No spill file can be made: the columns stay on the heap, past the budget.
+            c.env("CROSSCAL_HEAP_MB", "0").env("TMPDIR", d.join("no such folder"));
+        }
+        let out = c.output().unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let heap = run(None, &["diagnose", "s"]);
+    assert!(heap.contains("gyro-dead-zone"), "{heap}");
+    assert_eq!(run(Some("0"), &["diagnose", "s"]), heap);
+    assert_eq!(run(Some("no-tmp"), &["diagnose", "s"]), heap);
+    let fit = |mb| run(mb, &["fit", "s", "--dry-run"]);
+    assert_eq!(fit(Some("0")), fit(None));
+}

@@ -188,8 +188,8 @@ mod tests {
         let n = 600;
         let rec = Recording {
             t_s: (0..n).map(|k| k as f64 * 0.01).collect(),
-            gyro: vec![[0.0; 3]; n],
-            accel: vec![[0.0; 3]; n],
+            gyro: vec![[0.0; 3]; n].into(),
+            accel: vec![[0.0; 3]; n].into(),
             ..Default::default()
         };
         let motion = MotionSpec::Conic { cone_angle_deg: 15.0, rate_deg_s: 40.0, phase_deg: 5.0 };

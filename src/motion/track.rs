@@ -50,7 +50,7 @@ enum Source {
 #[derive(Debug, Clone)]
 pub struct Track {
     /// Time stamps, s (shared with the tracks derived from this one).
-    pub t_s: Arc<[f64]>,
+    pub t_s: crate::session::Column<f64>,
     source: Source,
     maps: Vec<Arc<dyn SampleMap>>,
     /// How ε was obtained (exact, given, or which derivative).
@@ -197,7 +197,7 @@ impl Track {
             }
             (x, y) => x == y,
         };
-        let same = Arc::ptr_eq(&self.t_s, &base.t_s)
+        let same = self.t_s.same_as(&base.t_s)
             && self.maps.len() >= n
             && self.maps[..n].iter().zip(&base.maps).all(|(a, b)| Arc::ptr_eq(a, b))
             && same_temp
@@ -261,7 +261,7 @@ impl Track {
     /// reduced data.
     pub fn every(&self, step: usize) -> Track {
         let step = step.max(1);
-        let t_s: Arc<[f64]> = self.t_s.iter().step_by(step).copied().collect();
+        let t_s: crate::session::Column<f64> = self.t_s.iter().step_by(step).copied().collect();
         let source = match &self.source {
             Source::Sampled { w, e, a } => {
                 let pick = |x: &[V3<Sensor>]| x.iter().step_by(step).copied().collect();

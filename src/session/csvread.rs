@@ -1,5 +1,6 @@
 //! Reading one recording CSV into SI arrays, without a `String` per field.
 
+use super::column::ColumnBuilder;
 use super::error::{Problem, SessionError};
 use super::open::open_recording;
 use crate::frames::V3;
@@ -735,13 +736,10 @@ fn read_stream<R: std::io::Read>(
     opts: ReadOptions,
 ) -> Result<Recording, SessionError> {
     let mut rows = RowReader::new(path, input, units, g_m_s2, opts.clone())?;
-    let mut t_s = Vec::with_capacity(cap);
-    let mut out = Recording {
-        gyro: Vec::with_capacity(cap),
-        accel: Vec::with_capacity(cap),
-        temp_c: rows.has_temp().then(|| Vec::with_capacity(cap)),
-        ..Default::default()
-    };
+    // The long columns go to the heap within the readers' budget, beyond it to a mapped
+    // spill file (`super::column`); the optional ones are reserved from the file's size.
+    let (mut t_s, mut gyro, mut accel) = (ColumnBuilder::new(), ColumnBuilder::new(), ColumnBuilder::new());
+    let mut temp_c = rows.has_temp().then(|| Vec::with_capacity(cap));
     let mut refc =
         opts.reference.then(|| ReferenceColumns { e_rad_s2: rows.has_eps().then(Vec::new), ..Default::default() });
     let mut angle = opts.angle_column.is_some().then(|| Vec::with_capacity(cap));
@@ -752,9 +750,9 @@ fn read_stream<R: std::io::Read>(
             return Err(gap.to_error(path, rows.t_column()));
         }
         t_s.push(row.t_s);
-        out.gyro.push(row.gyro);
-        out.accel.push(row.accel);
-        if let Some(v) = out.temp_c.as_mut() {
+        gyro.push(row.gyro);
+        accel.push(row.accel);
+        if let Some(v) = temp_c.as_mut() {
             v.push(row.temp_c);
         }
         if let Some(v) = angle.as_mut() {
@@ -771,13 +769,21 @@ fn read_stream<R: std::io::Read>(
     if t_s.is_empty() {
         return Err(rows.no_samples());
     }
-    // The arrays were reserved from the file's size (an over-estimate): give back the rest.
-    out.t_s = t_s.into();
-    out.gyro.shrink_to_fit();
-    out.accel.shrink_to_fit();
-    if let Some(v) = out.temp_c.as_mut() {
-        v.shrink_to_fit();
-    }
+    let spill_err = |e: std::io::Error| SessionError::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::new(e.kind(), format!("keeping its samples in a temporary spill file: {e}")),
+    };
+    let mut out = Recording {
+        t_s: t_s.finish().map_err(spill_err)?,
+        gyro: gyro.finish().map_err(spill_err)?,
+        accel: accel.finish().map_err(spill_err)?,
+        // Reserved from the file's size (an over-estimate): give back the rest.
+        temp_c: temp_c.map(|mut v| {
+            v.shrink_to_fit();
+            v
+        }),
+        ..Default::default()
+    };
     out.reference = refc;
     out.angle_rad = angle.map(|mut v| {
         v.shrink_to_fit();

@@ -101,8 +101,8 @@ pub fn recording_from_columns(
     let warnings = super::sanity::scan_record(&t_s, &gyro, &accel, &label(run).display().to_string());
     Ok(Recording {
         t_s: t_s.into(),
-        gyro,
-        accel,
+        gyro: gyro.into(),
+        accel: accel.into(),
         temp_c: c.temp_c.map(<[f64]>::to_vec),
         reference: None,
         angle_rad: None,

@@ -5,6 +5,7 @@
 //! sensor frame; the motion described by the manifest is in the stand frame and is moved to
 //! the sensor frame with the run's mount by [`crate::motion`].
 
+pub mod column;
 mod csvread;
 mod csvwrite;
 mod error;
@@ -20,6 +21,7 @@ mod shape;
 mod source;
 
 use crate::units::{AccelUnit, GyroUnit, TimeUnit, Units};
+pub use column::{Column, ColumnBuilder};
 pub use csvread::{
     parse_recording, read_recording, sha256_hex, ReadOptions, Recording, ReferenceColumns, Row, RowReader,
 };

@@ -28,11 +28,11 @@ impl ReferenceColumns {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Recording {
     /// Time stamps, s, strictly increasing.
-    pub t_s: std::sync::Arc<[f64]>,
+    pub t_s: super::Column<f64>,
     /// Gyro outputs, sensor frame.
-    pub gyro: Vec<[f64; 3]>,
+    pub gyro: super::Column<[f64; 3]>,
     /// Accelerometer outputs, sensor frame.
-    pub accel: Vec<[f64; 3]>,
+    pub accel: super::Column<[f64; 3]>,
     /// Temperature, °C, when the CSV has a `temp` column.
     pub temp_c: Option<Vec<f64>>,
     /// Reference columns, when requested and present.
@@ -61,9 +61,9 @@ impl Recording {
     /// Panics if the range is out of bounds; callers check it against [`Self::len`].
     pub fn slice(&self, start: usize, end: usize) -> Self {
         Self {
-            t_s: self.t_s[start..end].into(),
-            gyro: self.gyro[start..end].to_vec(),
-            accel: self.accel[start..end].to_vec(),
+            t_s: self.t_s.slice(start, end),
+            gyro: self.gyro.slice(start, end),
+            accel: self.accel.slice(start, end),
             temp_c: self.temp_c.as_ref().map(|t| t[start..end].to_vec()),
             reference: self.reference.as_ref().map(|r| r.slice(start, end)),
             angle_rad: self.angle_rad.as_ref().map(|a| a[start..end].to_vec()),

@@ -313,8 +313,7 @@ impl SimConfig {
             }
             let (gens, prng) = if self.carry_noise { (&mut carried, &mut crng) } else { (&mut own, &mut prng) };
             let coloured = !(self.gyro_process.is_zero() && self.accel_process.is_zero());
-            rec.gyro.reserve(n);
-            rec.accel.reserve(n);
+            let (mut gyro, mut accel) = (Vec::with_capacity(n), Vec::with_capacity(n));
             // The outputs follow the unit's true temperature; the temp column is its reading.
             let true_c = self.true_temperatures_c(runs.len(), &rec.t_s, elapsed, total);
             rec.temp_c = true_c.as_deref().map(|t| self.temp_reading.read(t, self.seed, runs.len()));
@@ -342,9 +341,10 @@ impl SimConfig {
                         a[i] += gens[3 + i].next_sample(prng);
                     }
                 }
-                rec.gyro.push(g);
-                rec.accel.push(a);
+                gyro.push(g);
+                accel.push(a);
             }
+            (rec.gyro, rec.accel) = (gyro.into(), accel.into());
             self.realism.finish(
                 &mut rec,
                 [1.0 / units.gyro.to_rad_s(), 1.0 / units.accel.to_m_s2(self.g_m_s2)],

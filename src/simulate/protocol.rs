@@ -60,17 +60,18 @@ impl ProtocolTruth {
 struct Builder<'a> {
     truth: &'a ProtocolTruth,
     rng: ChaCha8Rng,
-    rec: Recording,
-    /// Stamps so far (moved into `rec` by [`Builder::finish`]).
+    /// Outputs so far.
+    gyro: Vec<[f64; 3]>,
+    accel: Vec<[f64; 3]>,
+    /// Stamps so far.
     t: Vec<f64>,
     q: UnitQuaternion<f64>,
 }
 
 impl Builder<'_> {
     /// The recording built so far, with its stamps.
-    fn finish(mut self) -> Recording {
-        self.rec.t_s = self.t.into();
-        self.rec
+    fn finish(self) -> Recording {
+        Recording { t_s: self.t.into(), gyro: self.gyro.into(), accel: self.accel.into(), ..Default::default() }
     }
 
     fn sample(&mut self, w_body: Vector3<f64>) {
@@ -84,10 +85,10 @@ impl Builder<'_> {
             ua[i] += an.map_or(0.0, |d| d.sample(&mut self.rng));
             ug[i] += gn.map_or(0.0, |d| d.sample(&mut self.rng));
         }
-        self.rec.gyro.push([ug[0], ug[1], ug[2]]);
-        self.rec.accel.push([ua[0], ua[1], ua[2]]);
+        self.gyro.push([ug[0], ug[1], ug[2]]);
+        self.accel.push([ua[0], ua[1], ua[2]]);
         // One sample at a time while building: the stamps are rebuilt with the sample.
-        let n = self.rec.gyro.len();
+        let n = self.gyro.len();
         self.t.push((n - 1) as f64 / t.rate_hz);
     }
 
@@ -173,7 +174,8 @@ pub fn ferraris(truth: &ProtocolTruth, hold_s: f64, turn_deg: f64, seed: u64) ->
     let mut b = Builder {
         truth,
         rng: ChaCha8Rng::seed_from_u64(seed),
-        rec: Recording::default(),
+        gyro: Vec::new(),
+        accel: Vec::new(),
         t: Vec::new(),
         q: UnitQuaternion::identity(),
     };
@@ -230,7 +232,8 @@ pub fn multi_position(
     let mut b = Builder {
         truth,
         rng: ChaCha8Rng::seed_from_u64(seed),
-        rec: Recording::default(),
+        gyro: Vec::new(),
+        accel: Vec::new(),
         t: Vec::new(),
         q: UnitQuaternion::identity(),
     };

@@ -235,7 +235,8 @@ impl Realism {
     pub fn finish<R: rand::Rng>(&self, rec: &mut crate::session::Recording, to_file: [f64; 2], rng: &mut R) {
         if self.quantum.iter().any(|q| *q > 0.0) {
             let [qg, qa] = to_file;
-            for (g, a) in rec.gyro.iter_mut().zip(rec.accel.iter_mut()) {
+            let (gyro, accel) = (rec.gyro.make_mut(), rec.accel.make_mut());
+            for (g, a) in gyro.iter_mut().zip(accel.iter_mut()) {
                 for i in 0..3 {
                     g[i] = self.quantise(SensorKind::Gyro, g[i] * qg) / qg;
                     a[i] = self.quantise(SensorKind::Accel, a[i] * qa) / qa;
