@@ -224,3 +224,54 @@ fn aliased_candidates_come_with_the_runs_that_separate_them() {
     assert!(!first.indistinguishable.iter().any(|e| e == "accel-scale-asymmetry"), "{:?}", first.indistinguishable);
     assert_eq!(d.verdict, Verdict::Explained, "{:?}", d.unexplained);
 }
+
+/// Issue 36: a weak gyro g-sensitivity (a few standard errors of its coefficients on these
+/// runs) is named as g-sensitivity when it is named at all, never as anisoelasticity,
+/// whose 15 products of specific force reach the same residual with more parameters.
+#[test]
+fn a_weak_gyro_g_sensitivity_is_not_named_anisoelasticity() {
+    let (_, clean) = hidden("", &[], 5);
+    let mut m = Model::default_model();
+    m.add_effect("gyro-g-sensitivity").unwrap();
+    let f = crate::common::fit_session(&clean, &m, &FitOptions::default()).unwrap();
+    let se = |name: &str| f.gyro.coefficients.iter().find(|c| c.name == name).and_then(|c| c.std_error).unwrap();
+    let values = [("gyro.g_xx", 4.0 * se("gyro.g_xx")), ("gyro.g_yz", -3.0 * se("gyro.g_yz"))];
+    for seed in [1, 2, 3, 4, 5, 6] {
+        let (_, s) = hidden("gyro-g-sensitivity", &values, seed);
+        let d = run_diagnose(&s);
+        let named: Vec<&str> = d.steps.iter().map(|st| st.effect.as_str()).collect();
+        assert!(named.iter().all(|e| *e == "gyro-g-sensitivity"), "seed {seed}: {values:?} named {named:?}");
+    }
+}
+
+/// Issue 36: a play-type hysteresis (backlash: the output holds after each turn of the
+/// input until the input has moved by twice the play) on every gyro axis does not bring a
+/// time delay with it: the delay is never added; the hysteresis is what is named or shown.
+#[test]
+fn a_play_type_hysteresis_brings_no_time_delay() {
+    let half_play = 0.02 * DEG;
+    for seed in [1, 2, 3] {
+        let (_, mut s) = hidden("", &[], seed);
+        let tr = tracks(&s, &DerivativeConfig::default());
+        for (run, track) in s.runs.iter_mut().zip(&tr) {
+            let mut held: Option<[f64; 3]> = None;
+            for (k, g) in run.rec.gyro.make_mut().iter_mut().enumerate() {
+                let w = track.at(k).w_rad_s.xyz;
+                let y = held.map_or(w, |h| std::array::from_fn(|i| h[i].clamp(w[i] - half_play, w[i] + half_play)));
+                for i in 0..3 {
+                    g[i] += y[i] - w[i];
+                }
+                held = Some(y);
+            }
+        }
+        let d = run_diagnose(&s);
+        let named: Vec<&str> = d.steps.iter().map(|st| st.effect.as_str()).collect();
+        assert!(!named.contains(&"time-delay"), "seed {seed}: named {named:?}");
+        assert!(
+            d.verdict != Verdict::Adequate && (named.contains(&"gyro-hysteresis") || !d.unexplained.is_empty()),
+            "seed {seed}: {:?} {named:?} {:?}",
+            d.verdict,
+            d.unexplained
+        );
+    }
+}

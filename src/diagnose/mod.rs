@@ -670,8 +670,19 @@ fn climb(
         let Some(best) = passing.iter().max_by(|x, y| x.0.evidence.delta_q.total_cmp(&y.0.evidence.delta_q)) else {
             break;
         };
-        let best = temperature::lowest_sufficient_degree(best, &passing);
-        let indistinguishable = aliases(space, &set, best, &passing);
+        let mut best = temperature::lowest_sufficient_degree(best, &passing);
+        let mut indistinguishable = aliases(space, &set, best, &passing);
+        // Of effects that explain the same residual, the one the evidence prefers for its
+        // number of parameters (the lowest ΔBIC) is named: a weak g-sensitivity, whose
+        // pattern anisoelasticity's 15 coefficients also reach, is not anisoelasticity.
+        let simpler = passing
+            .iter()
+            .filter(|o| indistinguishable.contains(&o.0.effect) && o.0.delta_bic < best.0.delta_bic)
+            .min_by(|x, y| x.0.delta_bic.total_cmp(&y.0.delta_bic));
+        if let Some(simpler) = simpler {
+            best = simpler;
+            indistinguishable = aliases(space, &set, best, &passing);
+        }
         let separated_by = indistinguishable.first().and_then(|other| {
             let b = space.effect_params(other);
             separate::separating_run(space, &current, &a.base_fit, &set, &best.1, &b, runs, motions)

@@ -17,7 +17,14 @@
 //!    on that channel's block means ([`crate::estimate::slow::SlowNoise::jumps_between_runs`]).
 //!    That is a turn-on bias, drawn as a shape. The fit already models no slow noise on
 //!    such a channel, so the second diagnosis keeps it systematic while it clears the
-//!    channels that wander; this rule guards the choice all the same.
+//!    channels that wander; this rule guards the choice all the same;
+//! 4. it did not clear all three axes of a sensor whose largest systematic parts, under
+//!    the AR model, sit on one and the same cone harmonic of [`LOCKED_FROM`] or above: a
+//!    residual locked to the motion alike on every axis (the square wave a play-type
+//!    hysteresis leaves beyond the catalogue's terms) is physics. A wander, whose power
+//!    falls as 1/f or 1/f² and is drawn anew on each channel, puts its largest part on a
+//!    high harmonic of one channel now and then (under a strongly coloured model the
+//!    basis fit is loose), on the same one of all three almost never.
 //!
 //! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
 //! this module only chooses.
@@ -71,15 +78,43 @@ pub fn diagnose_with_mode(
     }
 }
 
+/// The lowest cone harmonic whose systematic part counts as locked to the motion (rule 4).
+pub const LOCKED_FROM: usize = 3;
+
 /// The channels (0..6: gyro x..z, accel x..z) still systematic at the end of the ladder.
 fn systematic(d: &Diagnosis) -> Vec<usize> {
-    let last = d.steps.last().map_or(&d.channels, |s| &s.channels);
-    last.iter().filter(|c| c.systematic).map(|c| channel_of(c.sensor, c.axis)).collect()
+    last_channels(d).iter().filter(|c| c.systematic).map(|c| channel_of(c.sensor, c.axis)).collect()
+}
+
+/// The channel reports at the end of the ladder.
+fn last_channels(d: &Diagnosis) -> &[super::ChannelReport] {
+    d.steps.last().map_or(&d.channels, |s| &s.channels)
+}
+
+/// The channels of the sensors whose three axes all have their largest systematic part
+/// on one cone harmonic of [`LOCKED_FROM`] or above, with that harmonic.
+fn locked(d: &Diagnosis) -> Vec<(usize, usize)> {
+    let harmonic = |c: usize| {
+        last_channels(d).iter().find(|r| r.systematic && channel_of(r.sensor, r.axis) == c).and_then(|r| {
+            match r.worst {
+                Some((_, Some(h), _)) if h >= LOCKED_FROM => Some(h),
+                _ => None,
+            }
+        })
+    };
+    [0usize, 3]
+        .into_iter()
+        .filter_map(|first| {
+            let h = harmonic(first)?;
+            (1..3).all(|i| harmonic(first + i) == Some(h)).then(|| (first..first + 3).map(move |c| (c, h)))
+        })
+        .flatten()
+        .collect()
 }
 
 /// The choice (module documentation): the diagnosis with slow noise when it keeps the
-/// first one's effects, clears channels without clearing a turn-on bias, and leaves nothing
-/// new; else the first. The chosen one says why in its warnings.
+/// first one's effects, clears channels without clearing a turn-on bias or a residual
+/// locked to the cone, and leaves nothing new; else the first. The chosen one says why in its warnings.
 fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
     let keeps = first.steps.iter().all(|s| second.steps.iter().any(|t| t.effect == s.effect));
     let (before, after) = (systematic(&first), systematic(&second));
@@ -94,6 +129,15 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
     let name = |c: usize| format!("{} {}", if c < 3 { "gyro" } else { "accel" }, AXES[c % 3]);
     let names = |cs: &[usize]| cs.iter().map(|&c| name(c)).collect::<Vec<_>>().join(", ");
     if !(keeps && fewer) {
+        return first;
+    }
+    let locked: Vec<(usize, usize)> = locked(&first).into_iter().filter(|(c, _)| cleared.contains(c)).collect();
+    if !locked.is_empty() {
+        let said: Vec<String> = locked.iter().map(|&(c, h)| format!("{} (harmonic {h})", name(c))).collect();
+        first.warnings.push(format!(
+            "the systematic residual on {} sits on a harmonic of the cone: locked to the motion, it is not treated as slow noise (--slow-noise on would)",
+            said.join(", ")
+        ));
         return first;
     }
     if jumps.is_empty() {
