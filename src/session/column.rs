@@ -61,6 +61,16 @@ impl Reservation {
     }
 }
 
+impl Reservation {
+    /// Gives back what is held beyond `bytes`.
+    fn shrink_to(&mut self, bytes: usize) {
+        if bytes < self.0 {
+            HEAP_BYTES.fetch_sub(self.0 - bytes, Ordering::Relaxed);
+            self.0 = bytes;
+        }
+    }
+}
+
 impl Drop for Reservation {
     fn drop(&mut self) {
         HEAP_BYTES.fetch_sub(self.0, Ordering::Relaxed);
@@ -292,6 +302,10 @@ impl<T: bytemuck::Pod + Send + Sync> ColumnBuilder<T> {
         }
         match self.spill.take() {
             None => {
+                // The heap grew by doubling: give back the room beyond the samples, to the
+                // allocator and to the budget (the next columns read may need it).
+                self.heap.shrink_to_fit();
+                self.reserved.shrink_to(self.heap.capacity() * std::mem::size_of::<T>());
                 let len = self.heap.len();
                 let store = Store::Heap(std::mem::take(&mut self.heap), std::mem::take(&mut self.reserved));
                 Ok(Column { store: Arc::new(store), start: 0, len })
@@ -430,6 +444,8 @@ mod tests {
         // Within two steps of budget above what other tests hold now: the first step fits.
         let small = built(before + STEP_BYTES, 1000);
         assert!(!small.is_mapped());
+        // A finished heap column holds the budget for its samples only.
+        assert!(matches!(&*small.store, Store::Heap(v, r) if v.capacity() == 1000 && r.0 == 1000 * 24));
         let big = built(before + STEP_BYTES, 2 * STEP_BYTES / 24);
         assert!(big.is_mapped());
         assert_eq!(big[big.len() - 1][0], (big.len() - 1) as f64);
