@@ -6,7 +6,8 @@ use crosscal::estimate::{fit_runs, tracks};
 use crosscal::model::Model;
 use crosscal::motion::DerivativeConfig;
 use crosscal::session::{MotionSpec, Session};
-use crosscal::simulate::SimConfig;
+use crosscal::simulate::{conic_plan, cyclic_mounts, SimConfig};
+use crosscal::units::SensorKind;
 
 const DEG: f64 = std::f64::consts::PI / 180.0;
 const G: f64 = 9.80665;
@@ -68,8 +69,8 @@ fn discovers(effect: &str, values: &[(&str, f64)]) {
     let before: Vec<_> = d.channels.iter().filter(|c| c.sensor == sensor).collect();
     let after: Vec<_> = d.steps.last().unwrap().channels.iter().filter(|c| c.sensor == sensor).collect();
     let noise = match sensor {
-        crosscal::units::SensorKind::Gyro => cfg.gyro_noise_deg_s * DEG,
-        crosscal::units::SensorKind::Accel => cfg.accel_noise_g * G,
+        SensorKind::Gyro => cfg.gyro_noise_deg_s * DEG,
+        SensorKind::Accel => cfg.accel_noise_g * G,
     };
     for a in &after {
         assert!(
@@ -244,28 +245,52 @@ fn a_weak_gyro_g_sensitivity_is_not_named_anisoelasticity() {
     }
 }
 
-/// Issue 36: a play-type hysteresis (backlash: the output holds after each turn of the
-/// input until the input has moved by twice the play) on every gyro axis does not bring a
-/// time delay with it: the delay is never added; the hysteresis is what is named or shown.
+/// Adds a play (backlash) of `half_play` rad/s to every gyro axis: the output holds after
+/// each turn of the input until the input has moved by twice the play.
+fn add_play(s: &mut Session, half_play: f64) {
+    let tr = tracks(s, &DerivativeConfig::default());
+    for (run, track) in s.runs.iter_mut().zip(&tr) {
+        let mut held: Option<[f64; 3]> = None;
+        for (k, g) in run.rec.gyro.make_mut().iter_mut().enumerate() {
+            let w = track.at(k).w_rad_s.xyz;
+            let y = held.map_or(w, |h| std::array::from_fn(|i| h[i].clamp(w[i] - half_play, w[i] + half_play)));
+            for i in 0..3 {
+                g[i] += y[i] - w[i];
+            }
+            held = Some(y);
+        }
+    }
+}
+
+/// Issue 36: a play-type hysteresis of 0.02 °/s on every gyro axis (white noise
+/// 0.002 °/s) does not bring a time delay with it: the delay is never added, nor any effect
+/// but the catalogue's hysteresis; where nothing explains it the shape says hysteresis with
+/// the play's size. No systematic part or noise floor is sized above the residual that
+/// holds it. On the paper's runs (one or two revolutions) the square wave's high harmonics
+/// cannot be told from coloured noise within a run, and the report says so; on runs of
+/// three or more revolutions the noise model is the simulated one (its floor within 2× of
+/// 0.002 °/s, not the play's 0.014 °/s).
 #[test]
 fn a_play_type_hysteresis_brings_no_time_delay() {
     let half_play = 0.02 * DEG;
-    for seed in [1, 2, 3] {
-        let (_, mut s) = hidden("", &[], seed);
-        let tr = tracks(&s, &DerivativeConfig::default());
-        for (run, track) in s.runs.iter_mut().zip(&tr) {
-            let mut held: Option<[f64; 3]> = None;
-            for (k, g) in run.rec.gyro.make_mut().iter_mut().enumerate() {
-                let w = track.at(k).w_rad_s.xyz;
-                let y = held.map_or(w, |h| std::array::from_fn(|i| h[i].clamp(w[i] - half_play, w[i] + half_play)));
-                for i in 0..3 {
-                    g[i] += y[i] - w[i];
-                }
-                held = Some(y);
-            }
+    for (seed, long) in [(1, false), (2, false), (3, true), (4, true)] {
+        let mut cfg = SimConfig::paper();
+        cfg.gyro_noise_deg_s = 0.002;
+        cfg.accel_noise_g = 2e-5;
+        cfg.seed = seed;
+        if long {
+            cfg.runs = conic_plan(&[10.0, -10.0, 20.0], &[10.0, 20.0], &cyclic_mounts(3), 120.0);
         }
+        let mut s = cfg.generate();
+        add_play(&mut s, half_play);
         let d = run_diagnose(&s);
         let named: Vec<&str> = d.steps.iter().map(|st| st.effect.as_str()).collect();
+        let sigma: Vec<String> = d.noise.iter().take(3).map(|n| format!("{:.4}", n.sigma / DEG)).collect();
+        let shapes: Vec<&str> = d.shapes.iter().map(|s| s.words.as_str()).collect();
+        println!(
+            "seed {seed} long {long}: {:?} {named:?} gyro σ {sigma:?} deg/s\n  {shapes:#?}\n  tried {:#?}",
+            d.verdict, d.tried
+        );
         assert!(!named.contains(&"time-delay"), "seed {seed}: named {named:?}");
         assert!(
             d.verdict != Verdict::Adequate && (named.contains(&"gyro-hysteresis") || !d.unexplained.is_empty()),
@@ -273,5 +298,36 @@ fn a_play_type_hysteresis_brings_no_time_delay() {
             d.verdict,
             d.unexplained
         );
+        assert!(named.iter().all(|e| *e == "gyro-hysteresis"), "seed {seed}: named {named:?}");
+        let last = d.steps.last().map_or(&d.channels, |st| &st.channels);
+        for c in last.iter().chain(&d.channels) {
+            assert!(c.systematic_rms <= 1.0001 * c.residual_rms, "seed {seed}: {c:?}");
+            assert!(c.noise_floor <= 1.0001 * c.residual_rms, "seed {seed}: {c:?}");
+        }
+        if long {
+            for n in d.noise.iter().filter(|n| n.sensor == SensorKind::Gyro) {
+                assert!(n.sigma < 2.0 * 0.002 * DEG, "seed {seed}: noise floor {} deg/s", n.sigma / DEG);
+            }
+        } else {
+            assert!(
+                d.warnings.iter().any(|w| w.contains("takes the whole residual")),
+                "seed {seed}: {:#?}",
+                d.warnings
+            );
+        }
+        if named.is_empty() {
+            let gyro = || d.shapes.iter().filter(|s| s.sensor == SensorKind::Gyro);
+            assert_eq!(gyro().map(|s| s.kind.as_str()).collect::<Vec<_>>(), ["hysteresis"; 3], "seed {seed}");
+            for sh in gyro() {
+                let size: f64 = sh
+                    .words
+                    .split(": ")
+                    .nth(1)
+                    .and_then(|w| w.split(' ').next())
+                    .and_then(|v| v.parse().ok())
+                    .unwrap_or(0.0);
+                assert!((size.abs() - 0.02).abs() < 0.005, "seed {seed}: {}", sh.words);
+            }
+        }
     }
 }

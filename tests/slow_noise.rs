@@ -150,6 +150,7 @@ fn clean_units_under_flicker_and_random_walk_are_adequate_on_ten_seeds() {
         let d = crate::diagnose::run_diagnose(&c.generate());
         let mut steps: Vec<String> = d.steps.iter().map(|s| s.effect.clone()).collect();
         steps.extend(d.stand.iter().map(|s| s.message.clone()));
+        println!("seed {seed} warnings: {:?}", d.warnings);
         (seed, d.verdict, steps, d.unexplained.clone(), d.noise.clone())
     });
     let mut bad = Vec::new();

@@ -91,3 +91,25 @@ impl Lsq {
         self.set.iter().position(|&s| s == p).map_or(0.0, |i| self.beta[i])
     }
 }
+
+/// The part of an estimate `c` (covariance `cov`) that stands out of its own noise: in the
+/// eigenbasis of `cov`, a component a_k of variance λ_k is kept only when a_k² > `z2`·λ_k,
+/// and then shrunk to √(a_k² − λ_k) (an unbiased square). A curve fitted under strongly
+/// coloured noise carries large, insignificant low-order terms; its size is that of what
+/// survives, not of the noise.
+pub fn significant_part(c: &DVector<f64>, cov: &DMatrix<f64>, z2: f64) -> DVector<f64> {
+    if c.is_empty() || cov.iter().any(|v| !v.is_finite()) {
+        return c.clone();
+    }
+    let eig = cov.clone().symmetric_eigen();
+    let mut out = DVector::<f64>::zeros(c.len());
+    for (k, &l) in eig.eigenvalues.iter().enumerate() {
+        let v = eig.eigenvectors.column(k);
+        let a = v.dot(c);
+        let l = l.max(0.0);
+        if a * a > z2 * l {
+            out += v * (a.signum() * (a * a - l).sqrt());
+        }
+    }
+    out
+}

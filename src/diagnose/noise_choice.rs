@@ -25,6 +25,14 @@
 //!    falls as 1/f or 1/f² and is drawn anew on each channel, puts its largest part on a
 //!    high harmonic of one channel now and then (under a strongly coloured model the
 //!    basis fit is loose), on the same one of all three almost never.
+//! 5. it did not clear a channel of a sensor on which, under the AR model, a catalogued
+//!    law of the motion alone (rate, angular acceleration, specific force) that the first
+//!    diagnosis did not add still takes residual that left-out runs confirm (rules 1 and 2
+//!    of [`super::select`]): what the other runs' motion predicts in a run is locked to the
+//!    motion, whatever its true form (a play-type hysteresis over runs of one or two
+//!    revolutions, whose fundamental a wander could also be). A wander predicts nothing
+//!    through the motion; through the session clock (a drift from the neighbouring runs)
+//!    it may, so laws of time and temperature do not count.
 //!
 //! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
 //! this module only chooses.
@@ -78,6 +86,11 @@ pub fn diagnose_with_mode(
     }
 }
 
+/// Share of a sensor's whitened χ² the left-out runs must confirm for rule 5: a residual
+/// mostly locked to the motion, not a few hundred of χ² that a many-coefficient effect
+/// picks out of a wander the AR model underrates.
+pub const PREDICTED_SHARE: f64 = 0.02;
+
 /// The lowest cone harmonic whose systematic part counts as locked to the motion (rule 4).
 pub const LOCKED_FROM: usize = 3;
 
@@ -112,6 +125,33 @@ fn locked(d: &Diagnosis) -> Vec<(usize, usize)> {
         .collect()
 }
 
+/// The catalogued effect, not added by `d`, that best predicts left-out runs on the sensor
+/// of channel `c` (rule 5), with its χ² gain there as a share of the sensor's χ².
+fn predicted_by(d: &Diagnosis, c: usize) -> Option<(String, f64)> {
+    let sensor = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
+    d.candidates
+        .iter()
+        .filter(|k| {
+            k.sensor == sensor
+                && motion_law(&k.effect)
+                && k.evidence.predicts()
+                && k.evidence.heldout_gain >= PREDICTED_SHARE * k.rss_before
+                && !d.steps.iter().any(|s| s.effect == k.effect)
+        })
+        .max_by(|a, b| a.evidence.heldout_gain.total_cmp(&b.evidence.heldout_gain))
+        .map(|k| (k.effect.clone(), k.evidence.heldout_gain / k.rss_before))
+}
+
+/// An effect that is a law of the motion alone (rate, angular acceleration, specific
+/// force), not of the session clock or the temperature: a wander carried from run to run
+/// is predicted in a left-out run by a drift from its neighbours, never by the motion.
+fn motion_law(id: &str) -> bool {
+    crate::model::find(id).is_some_and(|e| {
+        let i = e.inputs();
+        (i.rate || i.ang_accel || i.force) && !(i.time || i.temperature || i.temperature_rate)
+    })
+}
+
 /// The choice (module documentation): the diagnosis with slow noise when it keeps the
 /// first one's effects, clears channels without clearing a turn-on bias or a residual
 /// locked to the cone, and leaves nothing new; else the first. The chosen one says why in its warnings.
@@ -137,6 +177,17 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
         first.warnings.push(format!(
             "the systematic residual on {} sits on a harmonic of the cone: locked to the motion, it is not treated as slow noise (--slow-noise on would)",
             said.join(", ")
+        ));
+        return first;
+    }
+    let predicted: Vec<(usize, (String, f64))> =
+        cleared.iter().filter_map(|&c| predicted_by(&first, c).map(|p| (c, p))).collect();
+    if let Some((_, (effect, gain))) = predicted.first() {
+        let predicted: Vec<usize> = predicted.iter().map(|p| p.0).collect();
+        first.warnings.push(format!(
+            "the systematic residual on {} is predicted in left-out runs from the others' motion ({effect} predicts {:.1} % of its whitened χ² on left-out runs): locked to the motion, it is not treated as slow noise (--slow-noise on would)",
+            names(&predicted),
+            100.0 * gain
         ));
         return first;
     }

@@ -14,7 +14,7 @@
 //! saturation the catalogue models by a cubic) fails 2 or 3; noise that the AR model
 //! describes fails 1 and 2.
 
-use super::algebra::{pinv_sym, Lsq};
+use super::algebra::{pinv_sym, significant_part, Lsq};
 use super::space::{RunGram, Universe};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -34,6 +34,9 @@ pub const MAX_SPREAD: f64 = 0.25;
 /// at the true parameter, so runs that see different ranges of the input see different
 /// sizes of it (the refit by variable projection then fits it properly).
 pub const MAX_SPREAD_NONLINEAR: f64 = 1.0;
+
+/// Standard errors a term of a run's systematic curve must exceed to count in its size.
+const SIZE_Z: f64 = 3.0;
 
 /// One fold (a run, or all runs) as a global Gram system.
 #[derive(Debug, Clone)]
@@ -89,6 +92,16 @@ pub struct Evidence {
 }
 
 impl Evidence {
+    /// In-sample support and prediction of left-out runs (rules 1 and 2): the residual it
+    /// takes is locked to the motion, whether or not the effect is its true form.
+    pub fn predicts(&self) -> bool {
+        self.added_params > 0
+            && self.p_value < P_ACCEPT
+            && self.delta_bic < BIC_EVIDENCE
+            && self.heldout_gain > 0.0
+            && self.heldout_gain >= HELDOUT_SHARE * self.delta_q
+    }
+
     /// Why the effect is not accepted (None: accepted).
     pub fn rejection(&self) -> Option<String> {
         if self.added_params == 0 {
@@ -346,7 +359,9 @@ impl Space {
     }
 
     /// The systematic part each channel keeps under the all-run solution `l`: per run the
-    /// GLS fit of the basis to what `l` leaves, pooled as χ² over runs.
+    /// GLS fit of the basis to what `l` leaves, pooled as χ² over runs. Its size is that of
+    /// the fitted curve's terms that stand out of their noise ([`significant_part`]), and
+    /// never more than the run's residual.
     pub fn systematic(&self, l: &Lsq) -> Vec<Leftover> {
         (0..6)
             .map(|c| {
@@ -369,15 +384,22 @@ impl Space {
                         None => gbb.clone(),
                     };
                     let (pinv, rank) = pinv_sym(&bb);
-                    let coef = pinv_sym(&gbb).0 * &z;
+                    let ginv = pinv_sym(&gbb).0;
+                    // The fitted curve and its covariance G⁺ Σ G⁺; its size is that of the
+                    // terms that stand out of the noise (under near-unit-root noise the
+                    // low-order terms alone would be many times the residual).
+                    let raw = &ginv * &z;
+                    let coef = significant_part(&raw, &(&ginv * &bb * &ginv), SIZE_Z * SIZE_Z);
                     out.chi2 += z.dot(&(&pinv * &z));
                     out.dof += rank;
                     let n = rg.noise[c].n as f64;
                     out.n += n;
                     // Mean square of the fitted curve: cᵀ (BᵀB/n) c (the basis is not orthogonal
                     // over a run of one cone period).
-                    let ms = coef.dot(&(&rg.basis_ms * &coef)).max(0.0);
+                    // No part of the residual is larger than the residual.
+                    let ms = coef.dot(&(&rg.basis_ms * &coef)).clamp(0.0, rg.residual_ms[c]);
                     out.ss += n * ms;
+                    out.ss_fitted += n * raw.dot(&(&rg.basis_ms * &raw)).max(0.0);
                     let chi_full = z.dot(&(&pinv * &z));
                     for (feature, cols, amp) in features(&coef, nb, rg.first_harmonic) {
                         // Where it sits: the feature whose removal from the basis loses the
@@ -417,8 +439,11 @@ pub struct Leftover {
     pub chi2: f64,
     /// Its degrees of freedom.
     pub dof: usize,
-    /// Σ n · mean square of the fitted basis curves (SI²).
+    /// Σ n · mean square of the fitted basis curves' significant parts (SI²).
     pub ss: f64,
+    /// The same of the whole fitted curves, noise included: above the recording's
+    /// resolution or not.
+    pub ss_fitted: f64,
     /// Samples.
     pub n: f64,
     /// Largest feature: (run index, feature, amplitude SI, χ² it carries).

@@ -10,7 +10,8 @@
 //! freedom) carries the shape. On it, shapes are fitted to the bin means by weighted least
 //! squares beside the line the fit already absorbs (bias, scale): a knee k·max(x − x₀, 0)
 //! (or below −x₀), a symmetric knee k·(max(x − x₀, 0) + min(x + x₀, 0)) (k ≈ −1: the output
-//! stops growing — saturation), a square and a cube; the one of least BIC =
+//! stops growing — saturation), a square and a cube, and on the own input's rate of change
+//! a step at zero (hysteresis: friction or play); the one of least BIC =
 //! χ² + p ln(bins) is described in words and, when it is a law of the inputs, written as an
 //! effects-file entry ready to paste.
 
@@ -74,8 +75,8 @@ pub struct Shape {
     pub sensor: SensorKind,
     /// Axis.
     pub axis: char,
-    /// `knee`, `saturation`, `symmetric knee`, `square law`, `cube law`, `turn-on bias`,
-    /// `cone-phase pattern` or `unrecognised`.
+    /// `knee`, `saturation`, `symmetric knee`, `square law`, `cube law`, `hysteresis`,
+    /// `turn-on bias`, `cone-phase pattern` or `unrecognised`.
     pub kind: String,
     /// The best-supported shape in words.
     pub words: String,
@@ -90,6 +91,7 @@ pub struct Shape {
 enum Var {
     W(usize),
     AbsW(usize),
+    E(usize),
     A(usize),
     AbsA(usize),
     RateNorm,
@@ -103,6 +105,7 @@ impl Var {
         match self {
             Var::W(i) => s.w[i],
             Var::AbsW(i) => s.w[i].abs(),
+            Var::E(i) => s.e[i],
             Var::A(i) => s.a[i],
             Var::AbsA(i) => s.a[i].abs(),
             Var::RateNorm => (s.w[0] * s.w[0] + s.w[1] * s.w[1] + s.w[2] * s.w[2]).sqrt(),
@@ -117,6 +120,7 @@ impl Var {
         Some(match self {
             Var::W(i) => format!("w_{}", AXES[i]),
             Var::AbsW(i) => format!("abs(w_{})", AXES[i]),
+            Var::E(i) => format!("e_{}", AXES[i]),
             Var::A(i) => format!("a_{}", AXES[i]),
             Var::AbsA(i) => format!("abs(a_{})", AXES[i]),
             Var::RateNorm => "sqrt(w_x^2 + w_y^2 + w_z^2)".into(),
@@ -131,6 +135,7 @@ impl Var {
         match self {
             Var::W(i) => format!("{own}rate ω_{}", AXES[i]),
             Var::AbsW(i) => format!("|{own}rate ω_{}|", AXES[i]),
+            Var::E(i) => format!("{own}angular acceleration ε_{} (the rate's change)", AXES[i]),
             Var::A(i) => format!("{own}specific force a_{}", AXES[i]),
             Var::AbsA(i) => format!("|{own}specific force a_{}|", AXES[i]),
             Var::RateNorm => "rate magnitude |ω|".into(),
@@ -146,6 +151,7 @@ impl Var {
         match self {
             Var::W(_) | Var::AbsW(_) | Var::RateNorm => ("°/s", deg),
             Var::RateSquared => ("(°/s)²", deg * deg),
+            Var::E(_) => ("°/s²", deg),
             Var::A(_) | Var::AbsA(_) => ("g", 1.0 / 9.80665),
             Var::Temp => ("°C", 1.0),
             Var::Phase => ("°", deg),
@@ -157,6 +163,7 @@ impl Var {
         match self {
             Var::W(_) | Var::AbsW(_) | Var::RateNorm | Var::RateSquared => "w0",
             Var::A(_) | Var::AbsA(_) => "a0",
+            Var::E(_) => "e0",
             _ => "x0",
         }
     }
@@ -170,6 +177,7 @@ fn variables(sensor: SensorKind, i: usize, has_temp: bool) -> Vec<(Var, bool)> {
         SensorKind::Gyro => {
             v.push((Var::W(i), true));
             v.push((Var::AbsW(i), true));
+            v.push((Var::E(i), true));
             v.extend((0..3).filter(|&j| !own(j)).map(|j| (Var::W(j), false)));
             v.extend((0..3).map(|j| (Var::A(j), false)));
             v.push((Var::RateNorm, false));
@@ -409,6 +417,12 @@ fn describe(
     consider(c2 + ln, "square", 0.0, q);
     let (c2, cu) = wls(bins, |x| x * x * x);
     consider(c2 + ln, "cube", 0.0, cu);
+    // On the input's rate of change, a step at zero: one offset while it rises, the
+    // opposite while it falls.
+    if matches!(v, Var::E(_)) {
+        let (c2, h) = wls(bins, f64::signum);
+        consider(c2 + ln, "step", 0.0, h);
+    }
     let expr = v.expr();
     let ax = AXES[i];
     let id = |s: &str| format!("{}-{ax}-{s}", sensor.as_str());
@@ -426,6 +440,11 @@ fn describe(
     let away = if x0 >= 0.0 { "knee+" } else { "knee-" };
     if matches!(kind, "knee+" | "knee-") && kind != away {
         (kind, coef) = (away, -coef);
+    }
+    // On the rate's change a symmetric knee beside the line is a ramped step:
+    // k·(x − clamp(x, ±x₀)) less its line is −k·clamp(x, ±x₀), ±k·x₀ beyond ±x₀.
+    if matches!(v, Var::E(_)) && kind == "sym" {
+        (kind, coef) = ("step", -coef * x0);
     }
     match (kind, expr) {
         (_, None) => (format!("follows the {} (see the plot)", v.label(false)), "cone-phase pattern".into(), None),
@@ -467,6 +486,7 @@ fn describe(
             let what = format!("{kind} at ±{:.1} {u} (from diagnose)", x0 * k);
             (words, kind.into(), Some((id(&kind.replace(' ', "-")), expr, vec![(tn.to_string(), x0)], what)))
         }
+        ("step", Some(e)) => step_words(p, sensor, &e, (x0, coef), (tn, u, k), &id("hysteresis")),
         ("square" | "cube", Some(e)) => {
             let (pow, kind) = if kind == "square" { (2, "square law") } else { (3, "cube law") };
             let words = format!("grows as the {} of {} — a {kind}", if pow == 2 { "square" } else { "cube" }, p.label);
@@ -476,6 +496,34 @@ fn describe(
         }
         _ => (format!("depends most on {} (see the plot)", p.label), "unrecognised".into(), None),
     }
+}
+
+/// Words, kind and entry of a step on the own rate's change `e`: ±`h` beyond a ramp of
+/// half-width `x0` (0: a sign), `tn` the ramp's parameter, (`u`, `k`) its display unit.
+fn step_words(
+    p: &PartialResidual,
+    sensor: SensorKind,
+    e: &str,
+    (x0, h): (f64, f64),
+    (tn, u, k): (&str, &str, f64),
+    id: &str,
+) -> (String, String, Option<Entry>) {
+    let (ru, rk) = sensor.display_unit();
+    let axis = e.trim_start_matches("e_");
+    let ramp = if x0 > 0.0 { format!(", changing over |ε_{axis}| < {:.2} {u}", x0 * k) } else { String::new() };
+    let words = format!(
+        "{:+.3e} {ru} while the own rate rises, {:+.3e} {ru} while it falls{ramp} — hysteresis (friction, or \
+         play when the change is gradual: the output holds after each turn of the input before it follows)",
+        h * rk,
+        -h * rk,
+    );
+    let what = format!("step of {:+.3e} {ru} with the sign of {} (from diagnose)", h * rk, p.label);
+    let (expr, params) = if x0 > 0.0 {
+        (format!("k * max(min({e} / {tn}, 1), -1)"), vec![(tn.to_string(), x0)])
+    } else {
+        (format!("k * sign({e})"), Vec::new())
+    };
+    (words, "hysteresis".into(), Some((id.to_string(), expr, params, what)))
 }
 
 /// The hinge's term at x for a threshold x0.

@@ -8,8 +8,13 @@
 //! 1. takes the residual r of the base fit and removes its per-run *systematic basis*
 //!    (Legendre polynomials P0…P3 of time, and for conic runs cos/sin hθ, h = 1…6 of the
 //!    cone phase) to leave the noise;
-//! 2. fits the noise an AR(p) model (order by BIC, [`crate::stats::ArModel`]) and looks
-//!    for narrow-band lines in its Welch spectrum;
+//! 2. looks for narrow-band lines in its Welch spectrum, removes them and, on a conic run
+//!    of [`FOLD_REVOLUTIONS`] or more, the mean per bin of the cone phase ([`FOLD_BINS`] bins: every harmonic of the cone up
+//!    to about half of them — a hysteresis's square wave has them all), and fits what is
+//!    left an AR(p) model (order by BIC, [`crate::stats::ArModel`]). The fold's bins sit at
+//!    the cone's harmonics, where coloured noise has far less power than at zero frequency:
+//!    their share of the noise is added back at the model's spectrum there ([`Fold`]), the
+//!    basis's at its long-run variance;
 //! 3. prewhitens the universe's columns, the basis and r with that AR filter, scales them
 //!    to unit innovation variance, and accumulates their Gram matrix.
 //!
@@ -238,6 +243,9 @@ pub struct RunGram {
     pub cone_hz: Option<f64>,
     /// Mean square of each channel's recorded output (for the recording's resolution).
     pub output_ms: [f64; 6],
+    /// Mean square of each channel's base residual: no noise or systematic part of it is
+    /// larger.
+    pub residual_ms: [f64; 6],
     /// BᵀB / n of the basis over the run (unwhitened): the mean square of a fitted curve
     /// with coefficients c is cᵀ (BᵀB/n) c.
     pub basis_ms: DMatrix<f64>,
@@ -302,6 +310,19 @@ impl RunBasis {
         basis_row((t_s - self.t0) / self.half - 1.0, self.phase.map(|p| p.theta(t_s)), self.first, out);
     }
 
+    /// Bins of the phase fold of a run of `n` samples: at least 16 samples a bin, and none
+    /// unless the run turns [`FOLD_REVOLUTIONS`] times (a bin seen once is a stretch of the
+    /// run, and its mean the slow noise there, not what follows the phase).
+    pub fn fold_bins(&self, n: usize) -> usize {
+        let revolutions = self.phase.map_or(0.0, |p| p.rate_rad_s.abs() * 2.0 * self.half / std::f64::consts::TAU);
+        let bins = if revolutions >= FOLD_REVOLUTIONS { FOLD_BINS.min(n / 16) } else { 0 };
+        if bins > 2 * HARMONICS + 1 {
+            bins
+        } else {
+            0
+        }
+    }
+
     /// The cone frequency, Hz (None unless the basis has harmonics).
     pub fn cone_hz(&self) -> Option<f64> {
         self.phase.map(|p| p.rate_rad_s.abs() / std::f64::consts::TAU)
@@ -324,6 +345,10 @@ pub struct RunNoiseStats {
     pub lines: Vec<RunLine>,
     /// Mean square of each channel's recorded output.
     pub output_ms: [f64; 6],
+    /// Mean square of each channel's base residual.
+    pub residual_ms: [f64; 6],
+    /// What the phase fold removed (None: no fold).
+    pub fold: Option<Fold>,
 }
 
 /// The first look at one run (module documentation, steps 1–2): `r` is the base residual
@@ -361,11 +386,19 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
             cl[k] = r[c][k] - (0..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
         }
     }
+    let bins = basis.fold_bins(n);
+    let mut fold = PhaseFold::new(bins);
     for (c, mut clean) in cleaned.into_iter().enumerate() {
         // Lines are not noise: their sinusoids leave before the noise is modelled.
         let here = run_lines(c, &clean, t, fs_hz);
         for l in &here {
             crate::stats::spectrum::remove_sinusoid(&mut clean, t, l.frequency_hz);
+        }
+        // Nor is what follows the cone phase beyond the basis's harmonics (the square wave
+        // of a hysteresis has them all): modelled as noise it would make the AR model
+        // resonate at low frequency and hide the very effect that leaves it.
+        if let Some(phase) = basis.phase {
+            fold.remove(&mut clean, t, phase);
         }
         acov.push(crate::stats::ar::autocovariances(&clean, crate::stats::ar::MAX_ORDER));
         found.extend(here);
@@ -379,7 +412,81 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
             }
         }
     }
-    RunNoiseStats { basis, basis_ms, acov, n, lines: found, output_ms }
+    let fold = (bins > 0).then(|| Fold {
+        cone_hz: basis.cone_hz().unwrap_or(0.0),
+        fs_hz,
+        harmonics: (HARMONICS + 1, bins / 2),
+    });
+    let residual_ms = std::array::from_fn(|c| r[c].iter().map(|v| v * v).sum::<f64>() / n.max(1) as f64);
+    RunNoiseStats { basis, basis_ms, acov, n, lines: found, output_ms, residual_ms, fold }
+}
+
+/// The cone harmonics a run's phase fold took from its noise beyond the basis's.
+#[derive(Debug, Clone, Copy)]
+pub struct Fold {
+    cone_hz: f64,
+    fs_hz: f64,
+    /// First and last harmonic removed.
+    harmonics: (usize, usize),
+}
+
+impl Fold {
+    /// What the fold took from the autocovariances γ̂₀…γ̂_{lags−1} of a run of `n` samples
+    /// under noise `ar`: each harmonic h a pair of sinusoids, (2/n)·S(f_h)·cos(2π f_h l / fs)
+    /// with S(f) = psd(f)·fs/2 the variance per degree of freedom at f.
+    fn bias(&self, ar: &ArModel, n: usize, lags: usize) -> Vec<f64> {
+        let mut out = vec![0.0; lags];
+        for h in self.harmonics.0..=self.harmonics.1 {
+            let f = h as f64 * self.cone_hz;
+            let s = ar.psd(f, self.fs_hz) * self.fs_hz / 2.0;
+            for (l, o) in out.iter_mut().enumerate() {
+                *o += 2.0 / n.max(1) as f64 * s * (std::f64::consts::TAU * f * l as f64 / self.fs_hz).cos();
+            }
+        }
+        out
+    }
+}
+
+/// Phase bins of the fold of a conic run's noise (module documentation, step 2).
+pub const FOLD_BINS: usize = 64;
+/// Revolutions a run needs for its fold: each bin's mean then averages that many passes.
+pub const FOLD_REVOLUTIONS: f64 = 3.0;
+
+/// The mean of a series per bin of the cone phase, removed: every harmonic of the cone up
+/// to about half the bins at once.
+struct PhaseFold {
+    sum: Vec<f64>,
+    count: Vec<f64>,
+}
+
+impl PhaseFold {
+    fn new(bins: usize) -> Self {
+        Self { sum: vec![0.0; bins], count: vec![0.0; bins] }
+    }
+
+    fn bin(&self, theta: f64) -> usize {
+        let b = self.sum.len();
+        ((theta.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * b as f64) as usize).min(b - 1)
+    }
+
+    fn remove(&mut self, x: &mut [f64], t: &[f64], phase: PhaseLine) {
+        if self.sum.is_empty() {
+            return;
+        }
+        self.sum.iter_mut().for_each(|v| *v = 0.0);
+        self.count.iter_mut().for_each(|v| *v = 0.0);
+        for (v, &tk) in x.iter().zip(t) {
+            let b = self.bin(phase.theta(tk));
+            self.sum[b] += v;
+            self.count[b] += 1.0;
+        }
+        for (s, c) in self.sum.iter_mut().zip(&self.count) {
+            *s /= c.max(1.0);
+        }
+        for (v, &tk) in x.iter_mut().zip(t) {
+            *v -= self.sum[self.bin(phase.theta(tk))];
+        }
+    }
 }
 
 /// One AR model per channel for the whole session (the noise of a channel is one process
@@ -404,7 +511,15 @@ pub fn pooled_noise(stats: &[RunNoiseStats]) -> Vec<ArModel> {
             let mut ar = ArModel::from_autocov(&gamma, n);
             for _ in 0..3 {
                 let lrv = long_run_variance(&ar).min(1e3 * ar.marginal_var.max(f64::MIN_POSITIVE));
-                let corrected: Vec<f64> = gamma.iter().map(|g| g + share * lrv).collect();
+                let mut corrected: Vec<f64> = gamma.iter().map(|g| g + share * lrv).collect();
+                for st in stats {
+                    if let Some(f) = st.fold {
+                        let w = st.n as f64 / n.max(1) as f64;
+                        for (g, b) in corrected.iter_mut().zip(f.bias(&ar, st.n, lags)) {
+                            *g += w * b;
+                        }
+                    }
+                }
                 ar = ArModel::from_autocov(&corrected, n);
             }
             ar
@@ -445,11 +560,18 @@ pub fn run_gram(
             // The run's own autocovariances, with its basis's share of the bias added back.
             let share = b.size as f64 / n.max(1) as f64;
             let lrv = long_run_variance(&pooled[c]);
-            let g: Vec<f64> = stats.acov[c].iter().map(|g| g + share * lrv).collect();
+            let mut g: Vec<f64> = stats.acov[c].iter().map(|g| g + share * lrv).collect();
+            if let Some(f) = stats.fold {
+                for (g, b) in g.iter_mut().zip(f.bias(&pooled[c], n, stats.acov[c].len())) {
+                    *g += b;
+                }
+            }
+            // The bias added back estimates what the basis took from the noise; under a
+            // near-unit-root model it can exceed the whole residual, which holds the noise.
             let ar = ArModel {
                 phi: pooled[c].phi.clone(),
                 innovation_var: pooled[c].innovation_of(&g),
-                marginal_var: g.first().copied().unwrap_or(0.0),
+                marginal_var: g.first().copied().unwrap_or(0.0).min(stats.residual_ms[c]),
             };
             RunNoise { ar, n }
         })
@@ -465,6 +587,7 @@ pub fn run_gram(
         noise,
         slow: slow_cov,
         output_ms: stats.output_ms,
+        residual_ms: stats.residual_ms,
         // A line must also stand out of the noise model's spectrum: a steep continuum (AR
         // noise at low frequency) fools a running median, not the model.
         lines: stats
@@ -509,6 +632,7 @@ pub fn design_gram(
         noise,
         slow: Vec::new(),
         output_ms: [0.0; 6],
+        residual_ms: [0.0; 6],
         lines: Vec::new(),
         cone_hz: b.cone_hz(),
         run_basis: b,
