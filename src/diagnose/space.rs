@@ -9,9 +9,10 @@
 //!    (Legendre polynomials P0…P3 of time, and for conic runs cos/sin hθ, h = 1…6 of the
 //!    cone phase) to leave the noise;
 //! 2. looks for narrow-band lines in its Welch spectrum, removes them and, on a conic run
-//!    of [`FOLD_REVOLUTIONS`] or more, the mean per bin of the cone phase ([`FOLD_BINS`] bins: every harmonic of the cone up
-//!    to about half of them — a hysteresis's square wave has them all), and fits what is
-//!    left an AR(p) model (order by BIC, [`crate::stats::ArModel`]). The fold's bins sit at
+//!    of [`FOLD_REVOLUTIONS`] or more, the mean per bin of the cone phase ([`FOLD_BINS`]
+//!    bins: every harmonic of the cone up to about half of them — a hysteresis's square
+//!    wave has them all), and fits what is left an AR(p) model (order by BIC,
+//!    [`crate::stats::ArModel`]). The fold's bins sit at
 //!    the cone's harmonics, where coloured noise has far less power than at zero frequency:
 //!    their share of the noise is added back at the model's spectrum there ([`Fold`]), the
 //!    basis's at its long-run variance;
