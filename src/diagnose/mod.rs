@@ -756,21 +756,19 @@ fn set_aside(channels: &[ChannelReport], steps: &mut Vec<Step>, first_round: &mu
     let mut tried = Vec::new();
     let last = steps.last().map_or(channels, |st| &st.channels);
     let chasing: Vec<bool> = (0..2).map(|s| last[3 * s..3 * s + 3].iter().any(|c| c.systematic)).collect();
-    let before = steps.len();
+    let mut listed = Vec::new();
     steps.retain(|st| {
         let s = usize::from(st.score.sensor == SensorKind::Accel);
         if chasing[s] {
             tried.push(tried_line(&st.score));
+            listed.push(st.score.effect.clone());
         }
         !chasing[s]
     });
     not_proposed(first_round, &chasing);
-    let listed: Vec<String> = tried.iter().filter_map(|t: &String| t.split(':').next()).map(String::from).collect();
+    let set_aside = !listed.is_empty();
     for c in first_round.iter().filter(|c| {
-        chasing[usize::from(c.sensor == SensorKind::Accel)]
-            && c.evidence.predicts()
-            && c.evidence.heldout_gain >= noise_choice::PREDICTED_SHARE * c.rss_before
-            && !listed.contains(&c.effect)
+        chasing[usize::from(c.sensor == SensorKind::Accel)] && noise_choice::confirmed(c) && !listed.contains(&c.effect)
     }) {
         tried.push(format!(
             "{}: would take {:.1} % of the {} residual's whitened χ² and predicts left-out runs, but {}",
@@ -780,7 +778,7 @@ fn set_aside(channels: &[ChannelReport], steps: &mut Vec<Step>, first_round: &mu
             c.rejected.as_deref().unwrap_or("is not proposed"),
         ));
     }
-    (tried, steps.len() < before)
+    (tried, set_aside)
 }
 
 /// Channels whose noise model reaches the whole residual (its σ is bounded there) while a

@@ -37,7 +37,7 @@
 //! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
 //! this module only chooses.
 
-use super::{channel_of, diagnose, Diagnosis, Verdict};
+use super::{channel_of, diagnose, Candidate, Diagnosis, Verdict};
 use crate::estimate::{EstimateError, FitOptions, FitRun};
 use crate::units::{SensorKind, AXES};
 use serde::{Deserialize, Serialize};
@@ -125,6 +125,12 @@ fn locked(d: &Diagnosis) -> Vec<(usize, usize)> {
         .collect()
 }
 
+/// Whether left-out runs confirm at least [`PREDICTED_SHARE`] of the sensor's χ² for
+/// candidate `k` (rules 1 and 2 of [`super::select`] on a residual mostly its own).
+pub(super) fn confirmed(k: &Candidate) -> bool {
+    k.evidence.predicts() && k.evidence.heldout_gain >= PREDICTED_SHARE * k.rss_before
+}
+
 /// The catalogued effect, not added by `d`, that best predicts left-out runs on the sensor
 /// of channel `c` (rule 5), with its χ² gain there as a share of the sensor's χ².
 fn predicted_by(d: &Diagnosis, c: usize) -> Option<(String, f64)> {
@@ -132,11 +138,7 @@ fn predicted_by(d: &Diagnosis, c: usize) -> Option<(String, f64)> {
     d.candidates
         .iter()
         .filter(|k| {
-            k.sensor == sensor
-                && motion_law(&k.effect)
-                && k.evidence.predicts()
-                && k.evidence.heldout_gain >= PREDICTED_SHARE * k.rss_before
-                && !d.steps.iter().any(|s| s.effect == k.effect)
+            k.sensor == sensor && motion_law(&k.effect) && confirmed(k) && !d.steps.iter().any(|s| s.effect == k.effect)
         })
         .max_by(|a, b| a.evidence.heldout_gain.total_cmp(&b.evidence.heldout_gain))
         .map(|k| (k.effect.clone(), k.evidence.heldout_gain / k.rss_before))

@@ -95,15 +95,11 @@ impl Evidence {
     /// In-sample support and prediction of left-out runs (rules 1 and 2): the residual it
     /// takes is locked to the motion, whether or not the effect is its true form.
     pub fn predicts(&self) -> bool {
-        self.added_params > 0
-            && self.p_value < P_ACCEPT
-            && self.delta_bic < BIC_EVIDENCE
-            && self.heldout_gain > 0.0
-            && self.heldout_gain >= HELDOUT_SHARE * self.delta_q
+        self.unsupported().is_none()
     }
 
-    /// Why the effect is not accepted (None: accepted).
-    pub fn rejection(&self) -> Option<String> {
+    /// Why rules 1 and 2 fail (None: both hold).
+    fn unsupported(&self) -> Option<String> {
         if self.added_params == 0 {
             return Some("these runs cannot identify it".into());
         }
@@ -115,6 +111,14 @@ impl Evidence {
                 "does not predict left-out runs (χ² gain {:.1} there against {:.1} in the fit)",
                 self.heldout_gain, self.delta_q
             ));
+        }
+        None
+    }
+
+    /// Why the effect is not accepted (None: accepted).
+    pub fn rejection(&self) -> Option<String> {
+        if let Some(why) = self.unsupported() {
+            return Some(why);
         }
         let limit = if self.nonlinear { MAX_SPREAD_NONLINEAR } else { MAX_SPREAD };
         if self.heterogeneity_p < P_HETEROGENEITY && self.spread > limit {
