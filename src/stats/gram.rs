@@ -30,6 +30,24 @@ pub fn add_block_lower(gram: &mut Mat<f64>, block: &[f64], ld: usize, rows: usiz
     );
 }
 
+/// `w[i] = scale·(x[p+i] − φ_1 x[p+i−1] − … − φ_p x[i])` for i < w.len(), x holding p
+/// samples of history first, the sum in that order: one pass over the block per lag. A
+/// function of its own so that the slices are known not to overlap (the passes vectorise).
+#[inline(never)]
+fn ar_filter(w: &mut [f64], x: &[f64], phi: &[f64], scale: f64) {
+    let (p, rows) = (phi.len(), w.len());
+    debug_assert!(x.len() >= p + rows, "history and block");
+    w.copy_from_slice(&x[p..p + rows]);
+    for (l, &f) in phi.iter().enumerate() {
+        for (o, &v) in w.iter_mut().zip(&x[p - 1 - l..p - 1 - l + rows]) {
+            *o -= f * v;
+        }
+    }
+    for o in w.iter_mut() {
+        *o *= scale;
+    }
+}
+
 /// The Gram of prewhitened columns, filled a block of samples at a time: the caller writes
 /// each column's values for the block ([`Self::column`]), then [`Self::commit`] whitens
 /// them with the AR filter — x_i − Σ φ_l x_{i−l}, scaled to unit innovation variance,
@@ -83,29 +101,11 @@ impl WhitenedGram {
         }
         let skip = p.saturating_sub(self.seen).min(len);
         let rows = len - skip;
+        let start = p + skip;
         for col in 0..m {
             let x = &self.raw[col * ld..(col + 1) * ld];
             let w = &mut self.white[col * self.block..][..rows];
-            // Four samples at a time (independent chains the processor overlaps), each the
-            // sum x_i − φ_1 x_{i−1} − … − φ_p x_{i−p} in that order, then scaled.
-            let at = |i: usize| p + skip + i;
-            let mut i = 0;
-            while i < rows {
-                let mut v = [0.0; 4];
-                let lanes = (rows - i).min(4);
-                for (j, vj) in v.iter_mut().enumerate().take(lanes) {
-                    *vj = x[at(i + j)];
-                }
-                for (l, &f) in self.phi.iter().enumerate() {
-                    for (j, vj) in v.iter_mut().enumerate().take(lanes) {
-                        *vj -= f * x[at(i + j) - 1 - l];
-                    }
-                }
-                for (o, vj) in w[i..i + lanes].iter_mut().zip(v) {
-                    *o = vj * self.scale;
-                }
-                i += lanes;
-            }
+            ar_filter(w, &x[start - p..start + rows], &self.phi, self.scale);
         }
         add_block_lower(&mut self.gram, &self.white, self.block, rows, 1.0);
         // The last p samples (history and block together) are the next block's history.
