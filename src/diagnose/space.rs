@@ -359,32 +359,50 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
     let t = &run.track.t_s[..n];
     let basis = RunBasis::new(t, motion);
     let nb = basis.size;
-    let mut bb = DMatrix::<f64>::zeros(nb, nb);
-    let mut br = DMatrix::<f64>::zeros(nb, 6);
+    // BᵀB and BᵀR a block of rows at a time (one product each, by faer), then the
+    // residual less its basis fit, each channel's column less one basis column at a time.
+    const ROWS: usize = 256;
+    let mut rows = vec![0.0; ROWS * nb];
     let mut row = vec![0.0; nb];
-    for k in 0..n {
-        basis.row(t[k], &mut row);
-        for i in 0..nb {
-            for j in 0..=i {
-                bb[(i, j)] += row[i] * row[j];
-            }
-            for c in 0..6 {
-                br[(i, c)] += row[i] * r[c][k];
+    let mut fill_rows = |k0: usize, len: usize, rows: &mut [f64]| {
+        for i in 0..len {
+            basis.row(t[k0 + i], &mut row);
+            for (b, v) in row.iter().enumerate() {
+                rows[b * ROWS + i] = *v;
             }
         }
+    };
+    let mut bb = faer::Mat::<f64>::zeros(nb, nb);
+    let mut br = faer::Mat::<f64>::zeros(nb, 6);
+    let mut rr = vec![0.0; ROWS * 6];
+    for k0 in (0..n).step_by(ROWS) {
+        let len = (n - k0).min(ROWS);
+        fill_rows(k0, len, &mut rows);
+        for (c, rc) in r.iter().enumerate() {
+            rr[c * ROWS..][..len].copy_from_slice(&rc[k0..k0 + len]);
+        }
+        crate::stats::gram::add_block_lower(&mut bb, &rows, ROWS, len, 1.0);
+        crate::stats::gram::add_block_cross(&mut br, &rows, &rr, ROWS, len, 1.0);
     }
-    bb.fill_upper_triangle_with_lower_triangle();
+    let bb = DMatrix::from_fn(nb, nb, |i, j| if i >= j { bb[(i, j)] } else { bb[(j, i)] });
+    let br = DMatrix::from_fn(nb, 6, |i, c| br[(i, c)]);
     let basis_ms = &bb / n.max(1) as f64;
     let coef = crate::diagnose::algebra::solve_sym(&bb, &br);
     let span = t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0);
     let fs_hz = if n > 1 { (n - 1) as f64 / span.max(f64::MIN_POSITIVE) } else { 1.0 };
     let mut acov = Vec::with_capacity(6);
     let mut found = Vec::new();
-    let mut cleaned: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
-    for k in 0..n {
-        basis.row(t[k], &mut row);
+    let mut cleaned: Vec<Vec<f64>> = r.iter().map(|rc| rc[..n].to_vec()).collect();
+    for k0 in (0..n).step_by(ROWS) {
+        let len = (n - k0).min(ROWS);
+        fill_rows(k0, len, &mut rows);
         for (c, cl) in cleaned.iter_mut().enumerate() {
-            cl[k] = r[c][k] - (0..nb).map(|i| row[i] * coef[(i, c)]).sum::<f64>();
+            for b in 0..nb {
+                let w = coef[(b, c)];
+                for (o, v) in cl[k0..k0 + len].iter_mut().zip(&rows[b * ROWS..][..len]) {
+                    *o -= w * v;
+                }
+            }
         }
     }
     let bins = basis.fold_bins(n);
@@ -796,10 +814,28 @@ fn channel_grams(
     let predict = [0, 1].map(|si| Predictor::new(&terms[si], &u.values[si]));
     let mut chans: Vec<WhitenedGram> =
         (0..6).map(|c| WhitenedGram::new(u.width(c) + nb + 1, &noise[c].ar, BLOCK)).collect();
+    // Each term column as a weighted sum of the block's regressors (worked out once per
+    // run); each regressor a column needs, evaluated once per block for all channels.
+    let recipes: Vec<Vec<Vec<(usize, f64)>>> = (0..6)
+        .map(|c| {
+            let (si, ch) = (c / 3, c % 3);
+            let recipe = |src: &Source| match *src {
+                Source::Term(k) => term_recipe(&terms[si], &u.values[si], &k_matrix[si], ch, k),
+                Source::Secant(..) => Vec::new(),
+            };
+            u.columns[c].iter().map(|(_, src)| recipe(src)).collect()
+        })
+        .collect();
+    let needed: [Vec<usize>; 2] = [0, 1].map(|si| {
+        let mut v: Vec<usize> = recipes[3 * si..3 * si + 3].iter().flatten().flatten().map(|p| p.0).collect();
+        v.sort_unstable();
+        v.dedup();
+        v
+    });
+    let mut regs: [Vec<f64>; 2] = [0, 1].map(|si| vec![0.0; terms[si].len() * BLOCK]);
     let mut states: Vec<State> = Vec::with_capacity(BLOCK);
     let mut basis_rows = DMatrix::<f64>::zeros(BLOCK, nb);
     let mut row = vec![0.0; nb];
-    let mut phi = vec![0.0; BLOCK];
     let mut secant_block = SecantBlock::default();
     let t = &run.track.t_s;
     let mut k0 = 0;
@@ -817,22 +853,29 @@ fn channel_grams(
                 basis_rows[(i, b)] = *v;
             }
         }
+        for si in 0..2 {
+            for &ti in &needed[si] {
+                terms[si][ti].regressors(&states, &mut regs[si][ti * BLOCK..][..len]);
+            }
+        }
         for (c, chn) in chans.iter_mut().enumerate() {
-            let (si, ch) = (c / 3, c % 3);
+            let si = c / 3;
             let width = u.width(c);
             for (j, &(_, src)) in u.columns[c].iter().enumerate() {
                 match src {
-                    Source::Term(k) => {
-                        term_column(
-                            &terms[si][k],
-                            &terms[si],
-                            &u.values[si],
-                            &k_matrix[si],
-                            ch,
-                            &states,
-                            &mut phi[..len],
-                        );
-                        chn.column(j, len).copy_from_slice(&phi[..len]);
+                    Source::Term(_) => {
+                        let recipe = &recipes[c][j];
+                        let out = chn.column(j, len);
+                        if let [(ti, 1.0)] = recipe.as_slice() {
+                            out.copy_from_slice(&regs[si][ti * BLOCK..][..len]);
+                            continue;
+                        }
+                        out.fill(0.0);
+                        for &(ti, w) in recipe {
+                            for (o, v) in out.iter_mut().zip(&regs[si][ti * BLOCK..][..len]) {
+                                *o += w * v;
+                            }
+                        }
                     }
                     Source::Secant(e, pi) => {
                         for (o, s) in chn.column(j, len).iter_mut().zip(&secant_block.cols[e][pi]) {
@@ -852,44 +895,28 @@ fn channel_grams(
     chans.into_iter().map(WhitenedGram::finish).collect()
 }
 
-/// The Gauss–Newton column of term `t` in output channel `ch`: its regressor for an
-/// output-side term; K_i·(its input perturbation) for an input-side term (eq. u = K(x+Δ));
-/// for an entry K_ij of the scale matrix, x_j plus the input perturbation Δ_j the model's
-/// input-side terms put on axis j.
-fn term_column(
-    t: &TermRef<'_>,
-    terms: &[TermRef<'_>],
-    values: &[f64],
-    k: &[[f64; 3]; 3],
-    ch: usize,
-    states: &[State],
-    out: &mut [f64],
-) {
+/// The Gauss–Newton column of term `ti` (of `terms`) in output channel `ch`, as a weighted
+/// sum Σ w·regressor(term) over `terms`: its regressor for an output-side term; K_i·(its
+/// input perturbation) for an input-side term (eq. u = K(x+Δ)); for an entry K_ij of the
+/// scale matrix, x_j plus the input perturbation Δ_j the model's input-side terms (fitted
+/// `values`) put on axis j. An effect's terms are consecutive in `terms`.
+fn term_recipe(terms: &[TermRef<'_>], values: &[f64], k: &[[f64; 3]; 3], ch: usize, ti: usize) -> Vec<(usize, f64)> {
+    let t = &terms[ti];
     let comps = t.input_components();
-    if comps.is_empty() {
-        t.regressors(states, out);
+    let mut out: Vec<(usize, f64)> = if comps.is_empty() {
+        vec![(ti, 1.0)]
     } else {
-        out.iter_mut().for_each(|o| *o = 0.0);
-        let mut tmp = vec![0.0; states.len()];
-        for (j, kj) in comps {
-            t.effect.regressors(kj, states, &mut tmp);
-            for (o, v) in out.iter_mut().zip(&tmp) {
-                *o += k[ch][j] * v;
-            }
-        }
-    }
+        comps.iter().map(|&(j, kj)| (ti - t.index + kj, k[ch][j])).collect()
+    };
     if let Role::Scale(j) = t.term.role {
-        for (o_t, v) in terms.iter().zip(values) {
+        for (oi, (o_t, v)) in terms.iter().zip(values).enumerate() {
             if *v == 0.0 || o_t.term.channel != ch {
                 continue;
             }
-            for (jj, kj) in o_t.input_components() {
-                if jj == j {
-                    for (out_k, s) in out.iter_mut().zip(states) {
-                        *out_k += v * o_t.effect.regressor(kj, s);
-                    }
-                }
-            }
+            out.extend(
+                o_t.input_components().into_iter().filter(|c| c.0 == j).map(|(_, kj)| (oi - o_t.index + kj, *v)),
+            );
         }
     }
+    out
 }

@@ -76,11 +76,39 @@ impl Effect for LeverArm {
     #[inline]
     fn regressor(&self, k: usize, s: &State) -> f64 {
         let (i, j) = ((k / 3) % 3, k % 3);
-        // (ε × e_j)_i
-        let mut ej = [0.0; 3];
-        ej[j] = 1.0;
-        let cross = [s.e[1] * ej[2] - s.e[2] * ej[1], s.e[2] * ej[0] - s.e[0] * ej[2], s.e[0] * ej[1] - s.e[1] * ej[0]];
+        // (ε × e_j)_i = ε_{i+1} when j = i+2, −ε_{i+2} when j = i+1, else 0 (indices mod 3).
+        let cross = if j == (i + 2) % 3 {
+            s.e[(i + 1) % 3]
+        } else if j == (i + 1) % 3 {
+            -s.e[(i + 2) % 3]
+        } else {
+            0.0
+        };
         let w2 = s.w[0] * s.w[0] + s.w[1] * s.w[1] + s.w[2] * s.w[2];
-        cross[i] + s.w[i] * s.w[j] - if i == j { w2 } else { 0.0 }
+        cross + s.w[i] * s.w[j] - if i == j { w2 } else { 0.0 }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each regressor is component i of ε × e_j + ω × (ω × e_j) (the acceleration of a point
+    /// at unit distance along axis j), written out with the full cross products.
+    #[test]
+    fn regressors_are_the_rigid_body_acceleration_of_a_unit_arm() {
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+        };
+        let s = State { w: [0.3, -1.1, 0.7], e: [2.0, 0.5, -3.0], ..State::default() };
+        let e = LeverArm::new();
+        for k in 0..27 {
+            let (i, j) = ((k / 3) % 3, k % 3);
+            let mut ej = [0.0; 3];
+            ej[j] = 1.0;
+            let want = cross(s.e, ej)[i] + cross(s.w, cross(s.w, ej))[i];
+            let got = e.regressor(k, &s);
+            assert!((got - want).abs() < 1e-14, "term {k}: {got} vs {want}");
+        }
     }
 }

@@ -30,6 +30,20 @@ pub fn add_block_lower(gram: &mut Mat<f64>, block: &[f64], ld: usize, rows: usiz
     );
 }
 
+/// `out += alpha·AᵀB` for A and B
+/// the first `rows` rows of the column-major blocks `a` and `b` (leading dimension `ld`;
+/// `out.nrows()` and `out.ncols()` columns): one product by faer, no transposed copy.
+pub fn add_block_cross(out: &mut Mat<f64>, a: &[f64], b: &[f64], ld: usize, rows: usize, alpha: f64) {
+    let (ma, mb) = (out.nrows(), out.ncols());
+    let rows = rows.min(ld);
+    if rows == 0 || ma == 0 || mb == 0 || a.len() < ld * (ma - 1) + rows || b.len() < ld * (mb - 1) + rows {
+        return;
+    }
+    let a = MatRef::from_column_major_slice_with_stride(a, rows, ma, ld);
+    let b = MatRef::from_column_major_slice_with_stride(b, rows, mb, ld);
+    faer::linalg::matmul::matmul(out.as_mut(), Accum::Add, a.transpose(), b, alpha, Par::Seq);
+}
+
 /// `w[i] = scale·(x[p+i] − φ_1 x[p+i−1] − … − φ_p x[i])` for i < w.len(), x holding p
 /// samples of history first, the sum in that order: one pass over the block per lag. A
 /// function of its own so that the slices are known not to overlap (the passes vectorise).
