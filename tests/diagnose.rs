@@ -192,6 +192,29 @@ fn an_uncatalogued_wobble_is_reported_as_unexplained() {
     assert!(d.unexplained.iter().any(|u| u.starts_with("gyro y") && u.contains("harmonic 3")), "{:?}", d.unexplained);
 }
 
+/// A shape locked to the cone above the harmonics a run's basis fits (here harmonic 23,
+/// 0.004 °/s on gyro y: the sharp edges of a play or a stand's gear ripple) is held by
+/// nothing in the model: the verdict is unexplained and names the harmonic, not adequate.
+#[test]
+fn a_cone_harmonic_above_the_basis_is_unexplained_not_adequate() {
+    let (_, mut s) = hidden("", &[], 78);
+    for run in &mut s.runs {
+        if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = run.spec.motion {
+            let c = crosscal::motion::Conic::from_deg(cone_angle_deg, rate_deg_s, phase_deg);
+            let t_s = run.rec.t_s.clone();
+            for (k, g) in run.rec.gyro.make_mut().iter_mut().enumerate() {
+                g[1] += 0.004 * DEG * (23.0 * c.theta(t_s[k]) + 0.3).sin();
+            }
+        }
+    }
+    let d = run_diagnose(&s);
+    assert_eq!(d.verdict, Verdict::Unexplained, "{:#?} {:?}", d.steps, d.lines);
+    assert!(d.proposal.is_empty() && d.steps.is_empty(), "{:?}", d.steps);
+    let said = d.unexplained.iter().find(|u| u.starts_with("gyro y") && u.contains("harmonic 23"));
+    assert!(said.is_some_and(|u| u.contains("beyond what the model holds")), "{:?}", d.unexplained);
+    assert!(d.unexplained.iter().all(|u| u.starts_with("gyro y")), "{:?}", d.unexplained);
+}
+
 /// Two candidates the runs cannot tell apart are one finding, with the runs that would
 /// separate them; recording those runs separates them.
 #[test]

@@ -28,6 +28,7 @@ mod noise_choice;
 pub mod picture;
 pub mod protocol;
 pub mod report;
+mod secants;
 pub mod select;
 pub mod separate;
 pub mod shape;
@@ -494,8 +495,11 @@ fn conclude(
         .filter(|l| l.amplitude > 10.0 * res[channel(l)])
         .collect();
     let remaining: Vec<&ChannelReport> = picture_now.iter().filter(|c| c.systematic).collect();
-    let off_cone: Vec<&Line> = found.iter().filter(|l| l.cone_harmonic.is_none()).collect();
-    let verdict = if !remaining.is_empty() || !off_cone.is_empty() {
+    // A line no effect of the model holds: off the cone (a resonance, vibration, pick-up),
+    // or on a cone harmonic above those the runs' bases fit (a shape locked to the motion
+    // with edges sharper than the basis, e.g. the rest of a play's square wave).
+    let unheld: Vec<&Line> = found.iter().filter(|l| l.cone_harmonic.is_none_or(|h| h > space::HARMONICS)).collect();
+    let verdict = if !remaining.is_empty() || !unheld.is_empty() {
         Verdict::Unexplained
     } else if steps.is_empty() {
         Verdict::Adequate
@@ -503,7 +507,10 @@ fn conclude(
         Verdict::Explained
     };
     let mut unexplained: Vec<String> = remaining.iter().map(|c| describe_leftover(c)).collect();
-    unexplained.extend(off_cone.iter().map(|l| l.describe()));
+    unexplained.extend(unheld.iter().map(|l| match l.cone_harmonic {
+        Some(_) => format!("{}: locked to the motion, beyond what the model holds", l.describe()),
+        None => l.describe(),
+    }));
     let final_noise = noise_reports(&a.space);
     let shapes = draw_shapes(&a, model, &steps, runs, motions, &remaining, &final_noise);
     let unidentifiable = unidentifiable(&final_fit, &first_round);

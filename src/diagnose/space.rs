@@ -24,10 +24,11 @@
 //! algebra on these Grams (generalised least squares, honest under coloured noise), with
 //! no further pass over the samples.
 
+use super::secants::{Nonlinear, SecantBlock, Secants};
 use crate::estimate::slow::SlowNoise;
-use crate::estimate::{seen_tracks, CoefStatus, Fit, FitRun};
+use crate::estimate::{CoefStatus, Fit, FitRun};
 use crate::model::{catalog, scale_matrix, CatalogEffect, Model, Predictor, Role, State, TermRef};
-use crate::motion::{cone_phase, Track};
+use crate::motion::cone_phase;
 use crate::session::MotionSpec;
 use crate::stats::gram::WhitenedGram;
 use crate::stats::spectrum::{lines, refine_frequency, welch};
@@ -75,7 +76,7 @@ pub struct Universe {
     /// Global parameters.
     pub params: Vec<Param>,
     /// Nonlinear candidates and the secant step of each of their parameters.
-    nonlinear: Vec<(crate::model::NonlinearEntry, Vec<f64>, bool)>,
+    nonlinear: Vec<Nonlinear>,
     /// Per channel: (global parameter index, source) of each local column.
     columns: [Vec<(usize, Source)>; 6],
     /// Augmented term values per sensor (base fit values, candidates at nominal).
@@ -595,7 +596,7 @@ pub fn run_gram(
             RunNoise { ar, n }
         })
         .collect();
-    let secants = Secants::new(u, base, fit, run);
+    let secants = Secants::new(&u.nonlinear, base, fit, run);
     let gram = channel_grams(u, run, &noise, &b, r, &secants);
     let basis = super::slow::Basis { size: b.size, cone_hz: b.cone_hz(), row: &|t, out: &mut [f64]| b.row(t, out) };
     let slow_cov = super::slow::basis_covariances(&basis, &run.track.t_s[..n], &stats.basis_ms, slow.0, slow.1);
@@ -641,7 +642,7 @@ pub fn design_gram(
     let t = &run.track.t_s[..n];
     let b = RunBasis::new(t, motion);
     let noise: Vec<RunNoise> = noise.iter().map(|x| RunNoise { ar: x.ar.clone(), n }).collect();
-    let secants = Secants::new(u, base, fit, run);
+    let secants = Secants::new(&u.nonlinear, base, fit, run);
     let zero: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
     let gram = channel_grams(u, run, &noise, &b, &zero, &secants);
     RunGram {
@@ -683,116 +684,6 @@ fn run_lines(channel: usize, clean: &[f64], t: &[f64], fs_hz: f64) -> Vec<RunLin
             RunLine { channel, frequency_hz: f, amplitude: a, ratio: l.ratio, power: psd.power[l.bin], fs_hz }
         })
         .collect()
-}
-
-/// The secant columns of the nonlinear candidates in one run: per candidate and parameter
-/// the change of each channel's model output per unit parameter. The motions are held
-/// (lazily evaluated tracks); the columns are worked out a block at a time.
-struct Secants {
-    /// The motion each sensor sees under the model's own nonlinear effects.
-    seen: [Option<Track>; 2],
-    /// Per candidate, per parameter: the motion per sensor with that parameter stepped
-    /// (None: the candidate does not act on that sensor), and the step.
-    moved: Vec<Vec<([Option<Track>; 2], f64)>>,
-}
-
-/// One block of secant columns: the model's output per sensor, and per candidate and
-/// parameter the columns (buffers reused from block to block).
-#[derive(Default)]
-struct SecantBlock {
-    /// Per sensor the states of the motion it sees, and the model's output there.
-    states: [Vec<State>; 2],
-    start: [Vec<[f64; 3]>; 2],
-    /// Scratch: a moved motion's states, the output there, a regressor block.
-    moved: Vec<State>,
-    out: Vec<[f64; 3]>,
-    tmp: Vec<f64>,
-    cols: Vec<Vec<Vec<[f64; 6]>>>,
-}
-
-impl Secants {
-    fn new(u: &Universe, base: &Model, fit: &Fit, run: &FitRun<'_>) -> Self {
-        let seen: [Option<Track>; 2] =
-            SensorKind::BOTH.map(|s| seen_tracks(base, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
-        let moved = u
-            .nonlinear
-            .iter()
-            .map(|(entry, steps, in_base)| {
-                (0..steps.len())
-                    .map(|pi| {
-                        let mut p = entry.values.clone();
-                        p[pi] += steps[pi];
-                        // A base parameter moves inside the model's own chain of nonlinear
-                        // effects; a candidate's acts on the motion the model already sees.
-                        let shifted = in_base.then(|| {
-                            let mut f = fit.clone();
-                            for q in f.nonlinear.iter_mut().filter(|q| q.effect == entry.effect.id()) {
-                                if let Some(i) = entry.effect.params().iter().position(|d| d.name == q.name) {
-                                    q.value = p[i];
-                                }
-                            }
-                            f
-                        });
-                        let tracks = [0, 1].map(|si| {
-                            let sensor = SensorKind::BOTH[si];
-                            if entry.effect.sensor().is_some_and(|s| s != sensor) {
-                                return None;
-                            }
-                            let from = seen[si].as_ref().unwrap_or(run.track);
-                            Some(match &shifted {
-                                Some(f) => seen_tracks(base, f, sensor, std::slice::from_ref(run))
-                                    .and_then(|mut v| v.pop())
-                                    .unwrap_or_else(|| from.clone()),
-                                None => entry.effect.transform(&p, from),
-                            })
-                        });
-                        (tracks, steps[pi])
-                    })
-                    .collect()
-            })
-            .collect();
-        Self { seen, moved }
-    }
-
-    /// The columns over the samples from `k0` whose run states are `base` into
-    /// `out[candidate][parameter][i]` (resized), with `predict` the model's outputs per
-    /// sensor. The model is evaluated a block at a time ([`Predictor::block`]); every motion's
-    /// states come from those it is derived from ([`FitRun::seen_states`]: a stepped motion
-    /// that is the seen one with a map more, a dead zone, takes the seen states through it).
-    fn fill(&self, predict: &[Predictor<'_>; 2], run: &FitRun<'_>, k0: usize, base: &[State], out: &mut SecantBlock) {
-        let len = base.len();
-        let from = |si: usize| self.seen[si].as_ref().unwrap_or(run.track);
-        out.tmp.resize(len, 0.0);
-        out.out.resize(len, [0.0; 3]);
-        // The model's output on the motion it sees, once per sensor (every secant starts
-        // there), its states from the run's (`base`).
-        for si in 0..2 {
-            run.seen_states(&run.seen_from(self.seen[si].as_ref()), base, k0, &mut out.states[si]);
-            out.start[si].resize(len, [0.0; 3]);
-            predict[si].block(&out.states[si], &mut out.start[si], &mut out.tmp);
-        }
-        out.cols.resize_with(self.moved.len(), Vec::new);
-        for (e, params) in self.moved.iter().enumerate() {
-            out.cols[e].resize_with(params.len(), Vec::new);
-            for (pi, (tracks, step)) in params.iter().enumerate() {
-                let col = &mut out.cols[e][pi];
-                col.clear();
-                col.resize(len, [0.0; 6]);
-                for (si, moved) in tracks.iter().enumerate() {
-                    let Some(moved) = moved else { continue };
-                    let seen = FitRun { track: from(si), ..*run };
-                    seen.seen_states(&seen.seen_from(Some(moved)), &out.states[si], k0, &mut out.moved);
-                    predict[si].block(&out.moved, &mut out.out, &mut out.tmp);
-                    for (i, c) in col.iter_mut().enumerate() {
-                        let (u0, u1) = (out.start[si][i], out.out[i]);
-                        for ch in 0..3 {
-                            c[3 * si + ch] = (u1[ch] - u0[ch]) / step;
-                        }
-                    }
-                }
-            }
-        }
-    }
 }
 
 /// The whitened Grams of the six channels of one run, built block by block: the states
