@@ -173,19 +173,25 @@ fn clean_sessions_are_adequate_over_20_seeds() {
     }
 }
 
-#[test]
-fn an_uncatalogued_wobble_is_reported_as_unexplained() {
-    let (_, mut s) = hidden("", &[], 77);
-    // A 3rd-harmonic wobble of 0.01 °/s on gyro y only, phase 40°, in every conic run.
+/// Adds `amp_rad_s`·sin(h·θ + phase) to gyro axis `axis` of every conic run (θ the cone
+/// angle at each sample): a residual locked to the cone's harmonic h.
+fn add_cone_harmonic(s: &mut Session, axis: usize, h: f64, amp_rad_s: f64, phase: f64) {
     for run in &mut s.runs {
         if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = run.spec.motion {
             let c = crosscal::motion::Conic::from_deg(cone_angle_deg, rate_deg_s, phase_deg);
             let t_s = run.rec.t_s.clone();
             for (k, g) in run.rec.gyro.make_mut().iter_mut().enumerate() {
-                g[1] += 0.01 * DEG * (3.0 * c.theta(t_s[k]) + 0.7).sin();
+                g[axis] += amp_rad_s * (h * c.theta(t_s[k]) + phase).sin();
             }
         }
     }
+}
+
+#[test]
+fn an_uncatalogued_wobble_is_reported_as_unexplained() {
+    let (_, mut s) = hidden("", &[], 77);
+    // A 3rd-harmonic wobble of 0.01 °/s on gyro y only, phase 40°, in every conic run.
+    add_cone_harmonic(&mut s, 1, 3.0, 0.01 * DEG, 0.7);
     let d = run_diagnose(&s);
     assert_eq!(d.verdict, Verdict::Unexplained, "{:#?}", d.steps);
     assert!(d.proposal.is_empty());
@@ -198,15 +204,7 @@ fn an_uncatalogued_wobble_is_reported_as_unexplained() {
 #[test]
 fn a_cone_harmonic_above_the_basis_is_unexplained_not_adequate() {
     let (_, mut s) = hidden("", &[], 78);
-    for run in &mut s.runs {
-        if let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = run.spec.motion {
-            let c = crosscal::motion::Conic::from_deg(cone_angle_deg, rate_deg_s, phase_deg);
-            let t_s = run.rec.t_s.clone();
-            for (k, g) in run.rec.gyro.make_mut().iter_mut().enumerate() {
-                g[1] += 0.004 * DEG * (23.0 * c.theta(t_s[k]) + 0.3).sin();
-            }
-        }
-    }
+    add_cone_harmonic(&mut s, 1, 23.0, 0.004 * DEG, 0.3);
     let d = run_diagnose(&s);
     assert_eq!(d.verdict, Verdict::Unexplained, "{:#?} {:?}", d.steps, d.lines);
     assert!(d.proposal.is_empty() && d.steps.is_empty(), "{:?}", d.steps);
