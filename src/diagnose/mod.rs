@@ -508,7 +508,11 @@ fn conclude(
     };
     let mut unexplained: Vec<String> = remaining.iter().map(|c| describe_leftover(c)).collect();
     unexplained.extend(unheld.iter().map(|l| match l.cone_harmonic {
-        Some(_) => format!("{}: locked to the motion, beyond what the model holds", l.describe()),
+        Some(_) => format!(
+            "{}: locked to the motion, beyond what the model holds (edges sharper than a smooth \
+             shape follows, or the stand's speed rippling at that harmonic)",
+            l.describe()
+        ),
         None => l.describe(),
     }));
     let final_noise = noise_reports(&a.space);

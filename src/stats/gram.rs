@@ -30,9 +30,9 @@ pub fn add_block_lower(gram: &mut Mat<f64>, block: &[f64], ld: usize, rows: usiz
     );
 }
 
-/// `out += alpha·AᵀB` for A and B
-/// the first `rows` rows of the column-major blocks `a` and `b` (leading dimension `ld`;
-/// `out.nrows()` and `out.ncols()` columns): one product by faer, no transposed copy.
+/// `out += alpha·AᵀB` for A and B the first `rows` rows of the column-major blocks `a` and
+/// `b` (leading dimension `ld`; `out.nrows()` and `out.ncols()` columns): one product by
+/// faer, no transposed copy.
 pub fn add_block_cross(out: &mut Mat<f64>, a: &[f64], b: &[f64], ld: usize, rows: usize, alpha: f64) {
     let (ma, mb) = (out.nrows(), out.ncols());
     let rows = rows.min(ld);
