@@ -312,6 +312,17 @@ impl RunBasis {
         basis_row((t_s - self.t0) / self.half - 1.0, self.phase.map(|p| p.theta(t_s)), self.first, out);
     }
 
+    /// The rows at stamps `t` into the column-major block `out` (leading dimension `ld`:
+    /// function b of sample i at `out[b·ld + i]`); `row` is scratch of the basis's size.
+    pub fn rows_into(&self, t: &[f64], row: &mut [f64], out: &mut [f64], ld: usize) {
+        for (i, &ti) in t.iter().enumerate() {
+            self.row(ti, row);
+            for (b, v) in row.iter().enumerate() {
+                out[b * ld + i] = *v;
+            }
+        }
+    }
+
     /// Bins of the phase fold of a run of `n` samples: at least 16 samples a bin, and none
     /// unless the run turns [`FOLD_REVOLUTIONS`] times (a bin seen once is a stretch of the
     /// run, and its mean the slow noise there, not what follows the phase).
@@ -365,20 +376,12 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
     const ROWS: usize = 256;
     let mut rows = vec![0.0; ROWS * nb];
     let mut row = vec![0.0; nb];
-    let mut fill_rows = |k0: usize, len: usize, rows: &mut [f64]| {
-        for i in 0..len {
-            basis.row(t[k0 + i], &mut row);
-            for (b, v) in row.iter().enumerate() {
-                rows[b * ROWS + i] = *v;
-            }
-        }
-    };
     let mut bb = faer::Mat::<f64>::zeros(nb, nb);
     let mut br = faer::Mat::<f64>::zeros(nb, 6);
     let mut rr = vec![0.0; ROWS * 6];
     for k0 in (0..n).step_by(ROWS) {
         let len = (n - k0).min(ROWS);
-        fill_rows(k0, len, &mut rows);
+        basis.rows_into(&t[k0..k0 + len], &mut row, &mut rows, ROWS);
         for (c, rc) in r.iter().enumerate() {
             rr[c * ROWS..][..len].copy_from_slice(&rc[k0..k0 + len]);
         }
@@ -396,7 +399,7 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
     let mut cleaned: Vec<Vec<f64>> = r.iter().map(|rc| rc[..n].to_vec()).collect();
     for k0 in (0..n).step_by(ROWS) {
         let len = (n - k0).min(ROWS);
-        fill_rows(k0, len, &mut rows);
+        basis.rows_into(&t[k0..k0 + len], &mut row, &mut rows, ROWS);
         for (c, cl) in cleaned.iter_mut().enumerate() {
             for b in 0..nb {
                 let w = coef[(b, c)];
@@ -738,12 +741,7 @@ fn channel_grams(
         if !u.nonlinear.is_empty() {
             secants.fill(&predict, run, k0, &states, &mut secant_block);
         }
-        for i in 0..len {
-            basis.row(t[k0 + i], &mut row);
-            for (b, v) in row.iter().enumerate() {
-                basis_rows[(i, b)] = *v;
-            }
-        }
+        basis.rows_into(&t[k0..k1], &mut row, basis_rows.as_mut_slice(), BLOCK);
         for si in 0..2 {
             for &ti in &needed[si] {
                 terms[si][ti].regressors(&states, &mut regs[si][ti * BLOCK..][..len]);
