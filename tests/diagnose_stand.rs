@@ -62,7 +62,9 @@ fn a_cone_angle_off_its_label_is_the_stand() {
         let d = stand_only(&["cone=0.3"], seed);
         within(finding(&d, &["cone-angle"]), "cone angle offset", 0.3);
         assert!(
-            d.stand[0].message.contains("10.300") && d.stand[0].message.contains("--stand"),
+            d.stand[0].message.contains("not 10°")
+                && d.stand[0].message.contains("--stand")
+                && !d.stand[0].message.contains("± 0.000°"),
             "{}",
             d.stand[0].message
         );

@@ -245,7 +245,8 @@ fn script(b: &Block, bin_dir: &Path) -> String {
                     } else {
                         // `cargo test` builds the examples; a filtered run (`--test main`) does not.
                         eprintln!("skipped: {} is not built (run the whole `cargo test`)", exe.display());
-                        String::new()
+                        // A no-op, not an empty line: the block may be wrapped in braces.
+                        ":".to_string()
                     }
                 }
                 None => l,

@@ -67,15 +67,20 @@ fn refit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Result<Fit, E
     Ok(crate::estimate::fit(&FitRequest::runs(model, runs).options(*opts))?.fit)
 }
 
-/// The conic runs whose declared mount is wrong: (run index, the mount that fits, finding).
+/// A run recorded on another mount than declared: (run index, the mount that fits, finding).
+pub type WrongMount = (usize, Mount, StandFinding);
+
+/// The conic runs whose declared mount is wrong, and the fit on all runs as declared that
+/// judged them (none with fewer than three runs): the diagnosis starts from that fit when
+/// no mount is wrong.
 pub fn wrong_mounts(
     model: &Model,
     runs: &[FitRun<'_>],
     motions: &[&MotionSpec],
     opts: &FitOptions,
-) -> Result<Vec<(usize, Mount, StandFinding)>, EstimateError> {
+) -> Result<(Vec<WrongMount>, Option<Fit>), EstimateError> {
     if runs.len() < 3 {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), None));
     }
     let all = refit(model, runs, opts)?;
     let scores: Vec<f64> = runs.iter().map(|r| run_score(model, &all, r, r.track, r.len().div_ceil(SAMPLES))).collect();
@@ -85,7 +90,7 @@ pub fn wrong_mounts(
         .filter(|&i| scores[i] > SUSPECT_RATIO * median.max(f64::MIN_POSITIVE) && runs[i].track.mount().is_some())
         .collect();
     if suspects.is_empty() || suspects.len() * 2 > runs.len() {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), Some(all)));
     }
     let others: Vec<FitRun<'_>> = (0..runs.len()).filter(|i| !suspects.contains(i)).map(|i| runs[i]).collect();
     let rest = refit(model, &others, opts)?;
@@ -138,5 +143,5 @@ pub fn wrong_mounts(
             out.push((i, mount, finding));
         }
     }
-    Ok(out)
+    Ok((out, Some(all)))
 }

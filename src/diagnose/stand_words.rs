@@ -45,6 +45,29 @@ pub struct ParamContext {
     pub label: f64,
 }
 
+/// Decimals that show a standard error `se` to one significant digit (two when it starts
+/// with 1), at least `min` and at most 8: an estimate is never printed "± 0.000".
+fn decimals(se: f64, min: usize) -> usize {
+    if !(se > 0.0 && se.is_finite()) {
+        return min;
+    }
+    let mut d = (-se.log10()).ceil().max(0.0) as usize;
+    if (se * 10f64.powi(d.min(8) as i32)).round() < 2.0 {
+        d += 1;
+    }
+    d.clamp(min, 8)
+}
+
+/// `v ± se` with [`decimals`] (`+` on positive values when `signed`).
+fn pm(v: f64, se: f64, min: usize, signed: bool) -> String {
+    let d = decimals(se, min);
+    if signed {
+        format!("{v:+.d$} ± {se:.d$}")
+    } else {
+        format!("{v:.d$} ± {se:.d$}")
+    }
+}
+
 fn value(name: String, v: f64, se: f64, unit: &str) -> StandValue {
     StandValue { name, value: v, std_error: se, unit: unit.to_string() }
 }
@@ -74,7 +97,7 @@ pub fn finding(
             let mut angles: Vec<f64> = labels.iter().map(|l| deg(l.0)).collect();
             angles.sort_by(f64::total_cmp);
             angles.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
-            let each: Vec<String> = angles.iter().map(|a| format!("{:.3} ± {s:.3}°, not {a}°", a + d)).collect();
+            let each: Vec<String> = angles.iter().map(|a| format!("{}°, not {a}°", pm(a + d, s, 3, false))).collect();
             (
                 vec![value("cone angle offset (every conic run)".into(), d, s, "deg")],
                 format!("the stand: cone angle {} (every conic run {d:+.3}°): {FIX}", each.join("; ")),
@@ -88,7 +111,7 @@ pub fn finding(
             let each: Vec<String> = rates.iter().map(|r| format!("{:.4} °/s, not {r} °/s", r * (1.0 + v[0]))).collect();
             (
                 vec![value("rate error (every conic run)".into(), d, s, "%")],
-                format!("the stand: rate {d:+.3} ± {s:.3} % off the manifest ({}): {FIX}", each.join("; ")),
+                format!("the stand: rate {} % off the manifest ({}): {FIX}", pm(d, s, 3, true), each.join("; ")),
             )
         }
         "cone-angle-per-run" | "stand-rate-per-run" | "phase-per-run" => {
@@ -109,16 +132,15 @@ pub fn finding(
                 let run = c.run.as_deref().unwrap_or("?");
                 match id {
                     "cone-angle-per-run" => {
-                        format!("{run} {:.3} ± {:.3}°, not {}°", deg(c.label) + x.value, x.std_error, deg(c.label))
+                        format!("{run} {}°, not {}°", pm(deg(c.label) + x.value, x.std_error, 3, false), deg(c.label))
                     }
                     "stand-rate-per-run" => format!(
-                        "{run} {:.4} °/s ({:+.3} ± {:.3} %), not {} °/s",
+                        "{run} {:.4} °/s ({} %), not {} °/s",
                         deg(c.label) * (1.0 + x.value / 100.0),
-                        x.value,
-                        x.std_error,
+                        pm(x.value, x.std_error, 3, true),
                         deg(c.label)
                     ),
-                    _ => format!("{run} {:+.2} ± {:.2}°", x.value, x.std_error),
+                    _ => format!("{run} {}°", pm(x.value, x.std_error, 2, true)),
                 }
             });
             let fix = if id == "phase-per-run" { "declare phase_deg per run or fit with --stand" } else { FIX };
@@ -131,9 +153,9 @@ pub fn finding(
                 value("base tilt about y".into(), y, deg(se[1]), "deg"),
             ];
             let message = format!(
-                "the stand: its base is tilted {x:+.3} ± {:.3}° about x and {y:+.3} ± {:.3}° about y ({:.3}° from level): level the stand or fit with --stand",
-                deg(se[0]),
-                deg(se[1]),
+                "the stand: its base is tilted {}° about x and {}° about y ({:.3}° from level): level the stand or fit with --stand",
+                pm(x, deg(se[0]), 3, true),
+                pm(y, deg(se[1]), 3, true),
                 x.hypot(y)
             );
             (values, message)
@@ -148,7 +170,9 @@ pub fn finding(
                 value(format!("speed ripple {times} per revolution, phase"), psi, se_psi, "deg"),
             ];
             let message = format!(
-                "the stand: its speed ripples {times} per revolution by {r:.3} ± {se_r:.3} % of the rate (phase {psi:.0} ± {se_psi:.0}°): log the stand's angle (angle_column) or fit with --stand"
+                "the stand: its speed ripples {times} per revolution by {} % of the rate (phase {}°): log the stand's angle (angle_column) or fit with --stand",
+                pm(r, se_r, 3, false),
+                pm(psi, se_psi, 0, false)
             );
             (values, message)
         }
@@ -159,7 +183,8 @@ pub fn finding(
                 value("cone-axis wobble, phase".into(), psi, se_psi, "deg"),
             ];
             let message = format!(
-                "the stand: its cone angle wobbles once per revolution by {amp:.3} ± {se_a:.3}° (phase {psi:.0}°): fit with --stand or repair the stand's bearing"
+                "the stand: its cone angle wobbles once per revolution by {}° (phase {psi:.0}°): fit with --stand or repair the stand's bearing",
+                pm(amp, se_a, 3, false)
             );
             (values, message)
         }
@@ -181,18 +206,33 @@ fn earth(v: &[f64], se: &[f64], has_conic: bool) -> (Vec<StandValue>, String) {
     let lat = (up / EARTH_RAD_S).clamp(-1.0, 1.0).asin().to_degrees();
     let lat_se = (up_se / EARTH_RAD_S / (1.0 - (up / EARTH_RAD_S).powi(2)).max(1e-6).sqrt()).to_degrees();
     let mut message = format!(
-        "the environment: the Earth's rotation, not declared in the manifest: vertical part {:.2} ± {:.2} °/h (latitude {lat:.0} ± {lat_se:.0}°)",
-        up * DEG_H,
-        up_se * DEG_H
+        "the environment: the Earth's rotation, not declared in the manifest: vertical part {} °/h (latitude {}°)",
+        pm(up * DEG_H, up_se * DEG_H, 2, false),
+        pm(lat, lat_se, 0, false)
     );
     if let Some((h, hs)) = horizontal {
         values.push(value("Earth's rate, horizontal (stand base)".into(), h * DEG_H, hs * DEG_H, "deg/h"));
         message.push_str(&format!(
-            ", horizontal part {:.2} ± {:.2} °/h (its direction depends on the heading)",
-            h * DEG_H,
-            hs * DEG_H
+            ", horizontal part {} °/h (its direction depends on the heading)",
+            pm(h * DEG_H, hs * DEG_H, 2, false)
         ));
     }
     message.push_str(": declare earth_rate on the static runs (or fit with --stand); it is not a gyro g-sensitivity");
     (values, message)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_estimate_shows_its_error_to_one_or_two_significant_digits() {
+        assert_eq!(pm(10.30021, 0.00037, 3, false), "10.3002 ± 0.0004");
+        assert_eq!(pm(0.2, 0.0012, 3, true), "+0.2000 ± 0.0012");
+        assert_eq!(pm(-0.1, 0.03, 3, true), "-0.100 ± 0.030");
+        assert_eq!(pm(41.7, 12.0, 0, false), "42 ± 12");
+        assert_eq!(pm(1.0, 0.0, 3, false), "1.000 ± 0.000");
+        assert_eq!(pm(1.0, f64::NAN, 2, false), "1.00 ± NaN");
+        assert_eq!(decimals(1e-12, 3), 8);
+    }
 }

@@ -123,7 +123,8 @@ pub(super) fn diagnose(
     opts: &FitOptions,
     has_temp: bool,
 ) -> Result<Diagnosis, EstimateError> {
-    for (i, mount, finding) in super::mount::wrong_mounts(model, runs, motions, opts)? {
+    let (wrong, mut as_declared) = super::mount::wrong_mounts(model, runs, motions, opts)?;
+    for (i, mount, finding) in wrong {
         suspect.set_mount(i, mount, finding);
     }
     for _ in 0..=MAX_STAND_FINDINGS {
@@ -131,7 +132,12 @@ pub(super) fn diagnose(
         let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
         let owned = suspect.motions(motions);
         let now: Vec<&crate::session::MotionSpec> = owned.iter().collect();
-        let a = analyse(model, refit(model, &moved, opts)?, &moved, &now, has_temp);
+        // While the motion is as declared, the mount check's fit is this fit.
+        let fit = match as_declared.take() {
+            Some(f) if !suspect.changed() => f,
+            _ => refit(model, &moved, opts)?,
+        };
+        let a = analyse(model, fit, &moved, &now, has_temp);
         let check = StandCheck { suspect: &mut suspect, declared: runs };
         if let Some(d) = conclude(a, model, &moved, &now, opts, has_temp, Some(check))? {
             return Ok(d);

@@ -159,7 +159,7 @@ impl StandAt {
     /// reused from `cone` ([`Self::cone_trig`] of a motion at the same θ) when its α is this
     /// motion's: many nearby motions at one sample (a stand parameter nudged at a time)
     /// then cost one or two sines, the same numbers as [`Self::at_angle`].
-    #[inline]
+    #[inline(always)]
     pub fn at_angle_trig(&self, an: Angle, (st, ct): (f64, f64), cone: Option<(f64, f64, f64)>) -> Kinematics {
         let Angle { theta: _, rate: td, accel: tdd } = an;
         let m = &self.motion;
