@@ -179,10 +179,9 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
             outln!("\nverdict: the model is adequate: residuals are at the noise floor; nothing to add.")
         }
         Verdict::Explained => outln!(
-            "\nverdict: add {} — then the residual is at the noise floor. Fit it with: crosscal fit {} {}",
+            "\nverdict: add {} — then the residual is at the noise floor. Fit it with: {}",
             d.proposal.join(", "),
-            a.session.display(),
-            d.proposal.iter().map(|e| format!("--effect {e}")).collect::<Vec<_>>().join(" ")
+            d.fit_command(&a.session.display().to_string())
         ),
         Verdict::Unexplained => {
             outln!("\nverdict: a systematic residual remains that no catalogued effect explains:");

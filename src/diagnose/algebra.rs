@@ -50,6 +50,21 @@ pub fn pinv_sym(a: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
     (inv, rank)
 }
 
+/// The information on parameter `p` of the Gram matrix `g` that is left after projecting
+/// out every other column (the Schur complement g_pp − g_p,r g_rr⁺ g_r,p, at least 0):
+/// zero when another combination of columns moves the outputs exactly as `p` does.
+pub fn left_information(g: &DMatrix<f64>, p: usize) -> f64 {
+    let n = g.nrows();
+    if p >= n {
+        return 0.0;
+    }
+    let rest: Vec<usize> = (0..n).filter(|&i| i != p).collect();
+    let grr = g.select_rows(&rest).select_columns(&rest);
+    let grp = DVector::from_fn(rest.len(), |i, _| g[(rest[i], p)]);
+    let (pinv, _) = pinv_sym(&grr);
+    (g[(p, p)] - grp.dot(&(&pinv * &grp))).max(0.0)
+}
+
 /// A least-squares solution on a subset of the columns of a Gram system.
 #[derive(Debug, Clone)]
 pub struct Lsq {

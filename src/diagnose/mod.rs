@@ -241,6 +241,27 @@ pub struct Diagnosis {
     pub stand: Vec<StandFinding>,
 }
 
+impl Diagnosis {
+    /// The command that fits the proposed effects on the session at `session`, with
+    /// `--stand` when the stand moved otherwise than its manifest says (a fit on the
+    /// declared motion would put the stand's error into the unit's coefficients); a wrong
+    /// mount is corrected in the manifest, which the command then says first.
+    pub fn fit_command(&self, session: &str) -> String {
+        let mut cmd = format!("crosscal fit {session}");
+        for e in &self.proposal {
+            cmd.push_str(&format!(" --effect {e}"));
+        }
+        if self.stand.iter().any(|f| f.id != "mount") {
+            cmd.push_str(" --stand");
+        }
+        if self.stand.iter().any(|f| f.id == "mount") {
+            format!("correct the run's mount in the manifest (above), then {cmd}")
+        } else {
+            cmd
+        }
+    }
+}
+
 /// The analysed session: the base fit, the feature space and the runs' names.
 struct Analysis {
     base_fit: Fit,

@@ -147,10 +147,9 @@ pub fn html(
             "The stand explains the residual; with it, the unit's model is adequate.".to_string()
         }
         Verdict::Explained => format!(
-            "Add {}: the residual then sits at the noise floor. Fit it with: <code>crosscal fit {} {}</code>",
+            "Add {}: the residual then sits at the noise floor. Fit it with: <code>{}</code>",
             d.proposal.join(", "),
-            esc(session),
-            d.proposal.iter().map(|e| format!("--effect {}", esc(e))).collect::<Vec<_>>().join(" ")
+            esc(&d.fit_command(session))
         ),
         Verdict::Unexplained => {
             format!(

@@ -20,7 +20,7 @@
 //! found is reported with its value ± standard error, from the joint generalised
 //! least-squares solution of all of them with the model's coefficients.
 
-use super::algebra::{pinv_sym, Lsq};
+use super::algebra::{left_information, pinv_sym, Lsq};
 use super::knobs::{knob, Dir, Knobs, BLOCK, KNOBS};
 use super::select::Evidence;
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
@@ -42,6 +42,9 @@ const COMMON: usize = 3;
 const MAX_STEPS: usize = 8;
 /// The Earth's rotation rate, rad/s.
 const EARTH_RAD_S: f64 = 7.292_115e-5;
+/// Share of a parameter's own information that must be left beyond every other column for
+/// it to be told apart (the fit's `--stand` holds a parameter below the same share).
+const SEPARABLE: f64 = 1e-6;
 
 pub use super::stand_words::{StandFinding, StandValue};
 
@@ -670,6 +673,17 @@ impl Suspect {
         }
         let (g, _) = reduce(&sys.total, sys.base, &joint);
         let (pinv, _) = pinv_sym(&g);
+        // A parameter another combination of columns (the unit's model, the other groups)
+        // moves the outputs as exactly has no standard error: the pseudo-inverse would give
+        // it a small one on the arbitrary split (the Earth's vertical rate beside a gyro
+        // g-sensitivity's diagonal, on conic runs alone).
+        let se_of = |p: usize| {
+            if left_information(&g, p) > SEPARABLE * g[(p, p)] {
+                pinv[(p, p)].max(0.0).sqrt()
+            } else {
+                f64::INFINITY
+            }
+        };
         let labels = self.labels();
         // A group none of whose parameters stands out of its standard error in the joint
         // solution (|v| ≤ 3 SE: a per-run group with no run off its label) is not a finding:
@@ -679,7 +693,7 @@ impl Suspect {
             .zip(spans)
             .filter_map(|((gi, ev), span)| {
                 let group = &self.groups[*gi];
-                let se: Vec<f64> = span.map(|j| pinv[(sys.base + j, sys.base + j)].max(0.0).sqrt()).collect();
+                let se: Vec<f64> = span.map(|j| se_of(sys.base + j)).collect();
                 let values: Vec<f64> = group.params.iter().map(|c| self.departure(c)).collect();
                 let stands_out = values.iter().zip(&se).any(|(v, s)| v.abs() > 3.0 * s);
                 let ctx = self.context(group, names);

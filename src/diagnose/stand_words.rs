@@ -24,8 +24,9 @@ pub struct StandValue {
     pub name: String,
     /// Estimated value (unit below).
     pub value: f64,
-    /// Standard error.
-    pub std_error: f64,
+    /// Standard error; none when the runs cannot tell it from the unit's model (another
+    /// combination of the model's coefficients moves the outputs exactly as it does).
+    pub std_error: Option<f64>,
     /// Unit (`deg`, `%`, `deg/h`).
     pub unit: String,
 }
@@ -58,8 +59,12 @@ fn decimals(se: f64, min: usize) -> usize {
     d.clamp(min, 8)
 }
 
-/// `v ± se` with [`decimals`] (`+` on positive values when `signed`).
+/// `v ± se` with [`decimals`] (`+` on positive values when `signed`); an infinite `se` (a
+/// parameter the runs cannot tell from the unit's model) says so.
 fn pm(v: f64, se: f64, min: usize, signed: bool) -> String {
+    if se.is_infinite() {
+        return format!("{v:.min$} (not separable from the unit's model on these runs)");
+    }
     let d = decimals(se, min);
     if signed {
         format!("{v:+.d$} ± {se:.d$}")
@@ -69,13 +74,17 @@ fn pm(v: f64, se: f64, min: usize, signed: bool) -> String {
 }
 
 fn value(name: String, v: f64, se: f64, unit: &str) -> StandValue {
-    StandValue { name, value: v, std_error: se, unit: unit.to_string() }
+    StandValue { name, value: v, std_error: se.is_finite().then_some(se), unit: unit.to_string() }
 }
 
 /// Runs whose value stands out of its error (|v| > 3 SE), as `run v ± se unit` (the first six).
 fn listed(values: &[StandValue], ctx: &[ParamContext], show: impl Fn(&StandValue, &ParamContext) -> String) -> String {
-    let off: Vec<String> =
-        values.iter().zip(ctx).filter(|(v, _)| v.value.abs() > 3.0 * v.std_error).map(|(v, c)| show(v, c)).collect();
+    let off: Vec<String> = values
+        .iter()
+        .zip(ctx)
+        .filter(|(v, _)| v.std_error.is_some_and(|s| v.value.abs() > 3.0 * s))
+        .map(|(v, c)| show(v, c))
+        .collect();
     let more = if off.len() > 6 { format!(" and {} more", off.len() - 6) } else { String::new() };
     format!("{} of {} runs: {}{more}", off.len(), values.len(), off.into_iter().take(6).collect::<Vec<_>>().join("; "))
 }
@@ -132,15 +141,19 @@ pub fn finding(
                 let run = c.run.as_deref().unwrap_or("?");
                 match id {
                     "cone-angle-per-run" => {
-                        format!("{run} {}°, not {}°", pm(deg(c.label) + x.value, x.std_error, 3, false), deg(c.label))
+                        format!(
+                            "{run} {}°, not {}°",
+                            pm(deg(c.label) + x.value, x.std_error.unwrap_or(f64::INFINITY), 3, false),
+                            deg(c.label)
+                        )
                     }
                     "stand-rate-per-run" => format!(
                         "{run} {:.4} °/s ({} %), not {} °/s",
                         deg(c.label) * (1.0 + x.value / 100.0),
-                        pm(x.value, x.std_error, 3, true),
+                        pm(x.value, x.std_error.unwrap_or(f64::INFINITY), 3, true),
                         deg(c.label)
                     ),
-                    _ => format!("{run} {}°", pm(x.value, x.std_error, 2, true)),
+                    _ => format!("{run} {}°", pm(x.value, x.std_error.unwrap_or(f64::INFINITY), 2, true)),
                 }
             });
             let fix = if id == "phase-per-run" { "declare phase_deg per run or fit with --stand" } else { FIX };
@@ -205,11 +218,18 @@ fn earth(v: &[f64], se: &[f64], has_conic: bool) -> (Vec<StandValue>, String) {
     let mut values = vec![value("Earth's rate, vertical".into(), up * DEG_H, up_se * DEG_H, "deg/h")];
     let lat = (up / EARTH_RAD_S).clamp(-1.0, 1.0).asin().to_degrees();
     let lat_se = (up_se / EARTH_RAD_S / (1.0 - (up / EARTH_RAD_S).powi(2)).max(1e-6).sqrt()).to_degrees();
-    let mut message = format!(
-        "the environment: the Earth's rotation, not declared in the manifest: vertical part {} °/h (latitude {}°)",
-        pm(up * DEG_H, up_se * DEG_H, 2, false),
-        pm(lat, lat_se, 0, false)
-    );
+    let vertical = if up_se.is_finite() {
+        format!(
+            "vertical part {} °/h (latitude {}°)",
+            pm(up * DEG_H, up_se * DEG_H, 2, false),
+            pm(lat, lat_se, 0, false)
+        )
+    } else {
+        // A gyro g-sensitivity's diagonal follows gravity as the vertical rate does: only
+        // the latitude tells them apart.
+        "vertical part not separable on these runs from the unit's model (it follows gravity as a gyro g-sensitivity's diagonal does; the latitude, declared as earth_rate, separates them)".to_string()
+    };
+    let mut message = format!("the environment: the Earth's rotation, not declared in the manifest: {vertical}");
     if let Some((h, hs)) = horizontal {
         values.push(value("Earth's rate, horizontal (stand base)".into(), h * DEG_H, hs * DEG_H, "deg/h"));
         message.push_str(&format!(
@@ -217,7 +237,11 @@ fn earth(v: &[f64], se: &[f64], has_conic: bool) -> (Vec<StandValue>, String) {
             pm(h * DEG_H, hs * DEG_H, 2, false)
         ));
     }
-    message.push_str(": declare earth_rate on the static runs (or fit with --stand); it is not a gyro g-sensitivity");
+    message.push_str(if up_se.is_finite() {
+        ": declare earth_rate on the static runs (or fit with --stand); it is not a gyro g-sensitivity"
+    } else {
+        ": declare earth_rate on the runs (or fit with --stand)"
+    });
     (values, message)
 }
 
@@ -234,5 +258,6 @@ mod tests {
         assert_eq!(pm(1.0, 0.0, 3, false), "1.000 ± 0.000");
         assert_eq!(pm(1.0, f64::NAN, 2, false), "1.00 ± NaN");
         assert_eq!(decimals(1e-12, 3), 8);
+        assert_eq!(pm(0.5, f64::INFINITY, 3, false), "0.500 (not separable from the unit's model on these runs)");
     }
 }
