@@ -42,6 +42,9 @@ const COMMON: usize = 3;
 const MAX_STEPS: usize = 8;
 /// The Earth's rotation rate, rad/s.
 const EARTH_RAD_S: f64 = 7.292_115e-5;
+/// Share of the whitened χ² the noise does not explain that a stand group must take to be
+/// the explanation ([`Systems::material`]).
+const MIN_SHARE: f64 = 0.1;
 /// Share of a parameter's own information that must be left beyond every other column for
 /// it to be told apart (the fit's `--stand` holds a parameter below the same share).
 const SEPARABLE: f64 = 1e-6;
@@ -101,6 +104,9 @@ pub struct Suspect {
     width: usize,
     groups: Vec<Group>,
     accepted: Vec<(usize, Evidence)>,
+    /// Groups whose estimate on the whole motion left what a stand does (picked on the
+    /// linearisation around the labels, then run off to an implausible value): not tried again.
+    refused: Vec<usize>,
     mounts: Vec<StandFinding>,
 }
 
@@ -202,7 +208,16 @@ impl Suspect {
             p.extend(horizontals);
             groups.push(Group { id: "earth-rotation", params: p });
         }
-        Some(Self { runs: out, g_m_s2, locals, width, groups, accepted: Vec::new(), mounts: Vec::new() })
+        Some(Self {
+            runs: out,
+            g_m_s2,
+            locals,
+            width,
+            groups,
+            accepted: Vec::new(),
+            refused: Vec::new(),
+            mounts: Vec::new(),
+        })
     }
 
     /// Whether any stand parameter or mount has been changed from the labels.
@@ -443,6 +458,18 @@ fn reduce(s: &Fold, base: usize, group: &[Combo]) -> (DMatrix<f64>, DVector<f64>
 }
 
 impl Systems {
+    /// Whether a group with evidence `ev` and raw ΔBIC `raw_bic` takes a material share
+    /// ([`MIN_SHARE`]) of what the noise model does not explain: the whitened χ² in excess
+    /// of the sample count, less twice its spread under the noise alone (√(2n)). A residual
+    /// no effect explains (a gyro that clips) leaves a few χ² on the cone's harmonics that a
+    /// stand group takes with a p-value far below the rule's, without explaining it.
+    fn material(&self, ev: &Evidence, raw_bic: f64) -> bool {
+        let n = self.samples.max(2) as f64;
+        let delta_q = -(raw_bic - ev.added_params as f64 * n.ln());
+        let excess = self.raw.yy - n - 2.0 * (2.0 * n).sqrt();
+        excess <= 0.0 || delta_q >= MIN_SHARE * excess
+    }
+
     /// The evidence for a group (channels weighed by their dispersion), its values and
     /// standard errors (all-run GLS), and its ΔBIC without the dispersion (the sensor
     /// candidates' scale, for ranking against them).
@@ -538,7 +565,11 @@ impl Suspect {
         let mut passed: Vec<&str> = Vec::new();
         for (gi, g) in self.groups.iter().enumerate() {
             let (ev, values, raw_bic) = sys.evidence(&g.params);
-            if ev.rejection().is_some() || !self.plausible(g.id, &values) {
+            if ev.rejection().is_some()
+                || !self.plausible(g.id, &values)
+                || self.refused.contains(&gi)
+                || !sys.material(&ev, raw_bic)
+            {
                 continue;
             }
             passed.push(g.id);
@@ -581,7 +612,10 @@ impl Suspect {
     }
 
     /// Estimates the picked group by Gauss–Newton on the whole motion (the model refitted
-    /// at every step) and records it. `runs` are the runs with their declared tracks.
+    /// at every step) and records it (true). `runs` are the runs with their declared
+    /// tracks. When the estimate leaves what a stand or the Earth does (a residual the
+    /// linearisation around the labels took for the stand, e.g. a gyro that clips), the
+    /// motion is left as it was, the group is not tried again, and the answer is false.
     pub fn accept(
         &mut self,
         pick: Pick,
@@ -589,25 +623,32 @@ impl Suspect {
         runs: &[FitRun<'_>],
         noise: &[RunNoiseModel],
         opts: &FitOptions,
-    ) -> Result<(), EstimateError> {
+    ) -> Result<bool, EstimateError> {
         // Every group found so far moves with the new one (joint Gauss–Newton): one at a
         // time would leave each biased by what the others still hold.
         let mut groups: Vec<usize> = self.accepted.iter().map(|a| a.0).collect();
         if !groups.contains(&pick.group) {
             groups.push(pick.group);
         }
-        self.estimate(&groups, model, runs, noise, opts)?;
+        let before = self.runs.clone();
+        let se = self.estimate(&groups, model, runs, noise, opts)?;
+        if !self.all_plausible(&groups, &se) {
+            self.runs = before;
+            self.refused.push(pick.group);
+            return Ok(false);
+        }
         if !self.accepted.iter().any(|a| a.0 == pick.group) {
             self.accepted.push((pick.group, pick.evidence));
         }
-        Ok(())
+        Ok(true)
     }
 
     /// Estimates every group found again, jointly, under `model` (the end of the ladder)
     /// and `noise` (the final residual's noise models): a group accepted early was
     /// estimated under the noise model of a residual that still held its misfit, which
     /// weighs the samples inefficiently — unbiased, but scattered far beyond the standard
-    /// error the final systems report.
+    /// error the final systems report. An estimate that leaves what a stand does (a
+    /// residual no effect explains pulls it) is an error, and the motion stays as it was.
     pub fn polish(
         &mut self,
         model: &Model,
@@ -619,10 +660,31 @@ impl Suspect {
         if groups.is_empty() {
             return Ok(());
         }
-        self.estimate(&groups, model, runs, noise, opts)
+        let before = self.runs.clone();
+        let se = self.estimate(&groups, model, runs, noise, opts)?;
+        if !self.all_plausible(&groups, &se) {
+            self.runs = before;
+            return Err(EstimateError::NotConverged(
+                "the stand's groups estimated again under the final model left what a stand does".into(),
+            ));
+        }
+        Ok(())
     }
 
-    /// Gauss–Newton on the groups' parameters, the model refitted at every step.
+    /// Whether every group's departure from the labels is something a stand does, with the
+    /// standard errors `se` of their parameters in order.
+    fn all_plausible(&self, groups: &[usize], se: &[f64]) -> bool {
+        let mut se = se.iter();
+        groups.iter().all(|&g| {
+            let group = &self.groups[g];
+            let values: Vec<(f64, f64)> =
+                group.params.iter().map(|c| (self.departure(c), se.next().copied().unwrap_or(0.0))).collect();
+            self.plausible(group.id, &values)
+        })
+    }
+
+    /// Gauss–Newton on the groups' parameters, the model refitted at every step; the
+    /// standard error of each parameter (in the groups' order) at the last step.
     fn estimate(
         &mut self,
         groups: &[usize],
@@ -630,14 +692,16 @@ impl Suspect {
         runs: &[FitRun<'_>],
         noise: &[RunNoiseModel],
         opts: &FitOptions,
-    ) -> Result<(), EstimateError> {
+    ) -> Result<Vec<f64>, EstimateError> {
         let params: Vec<Combo> = groups.iter().flat_map(|&g| self.groups[g].params.iter().cloned()).collect();
+        let mut last_se = vec![0.0; params.len()];
         for _ in 0..MAX_STEPS {
             let tracks = self.tracks(runs);
             let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
             let fit = crate::estimate::fit(&FitRequest::runs(model, &moved).options(*opts))?.fit;
             let sys = self.systems(model, &fit, &moved, noise);
             let (_, values, _) = sys.evidence(&params);
+            last_se = values.iter().map(|v| v.1).collect();
             let mut worst = 0.0f64;
             for (combo, (v, se)) in params.iter().zip(&values) {
                 for &(gi, w) in combo {
@@ -651,7 +715,7 @@ impl Suspect {
                 break;
             }
         }
-        Ok(())
+        Ok(last_se)
     }
 
     /// The findings so far, each group's values ± standard errors from the joint solution

@@ -68,8 +68,7 @@ impl StandCheck<'_, '_, '_> {
             Some(pick) => {
                 // The dispersion decides whether a group is evidence; the estimate weighs each
                 // channel by its noise model alone (the misfit it had is what the group removes).
-                self.suspect.accept(pick, current, self.declared, &plain(&noise), opts)?;
-                Ok(true)
+                self.suspect.accept(pick, current, self.declared, &plain(&noise), opts)
             }
             None => Ok(false),
         }
