@@ -14,11 +14,14 @@
 //! run and channel as [`super::space`]), and the stand's *groups* — cone angle (common or
 //! per run), rate (common or per run), phase per run, base tilt, ripple ×1, ripple ×2,
 //! cone wobble, Earth rotation — are judged by the rules of [`super::select`] (χ² gain
-//! with p and ΔBIC, gain on left-out runs). A group that passes, is physically plausible
-//! and beats the best sensor candidate on BIC is estimated (Gauss–Newton on the whole
-//! motion) and the diagnosis starts again on the corrected motion; at the end every group
-//! found is reported with its value ± standard error, from the joint generalised
-//! least-squares solution of all of them with the model's coefficients.
+//! with p and ΔBIC, gain on left-out runs). A group that passes, is physically plausible,
+//! takes a material share of the χ² the noise does not explain (`MIN_SHARE`) and beats
+//! the best sensor candidate on BIC is estimated (Gauss–Newton on the whole motion); if the
+//! estimate stays plausible the diagnosis starts again on the corrected motion, else the
+//! motion is kept and the group not tried again. At the end every group found is reported
+//! with its value ± standard error, from the joint generalised least-squares solution of
+//! all of them with the model's coefficients; a parameter that solution cannot separate
+//! from the model's coefficients (`SEPARABLE`) gets no value.
 
 use super::algebra::{left_information, pinv_sym, Lsq};
 use super::knobs::{knob, Dir, Knobs, BLOCK, KNOBS};
@@ -459,7 +462,7 @@ fn reduce(s: &Fold, base: usize, group: &[Combo]) -> (DMatrix<f64>, DVector<f64>
 
 impl Systems {
     /// Whether a group with evidence `ev` and raw ΔBIC `raw_bic` takes a material share
-    /// ([`MIN_SHARE`]) of what the noise model does not explain: the whitened χ² in excess
+    /// (`MIN_SHARE`) of what the noise model does not explain: the whitened χ² in excess
     /// of the sample count, less twice its spread under the noise alone (√(2n)). A residual
     /// no effect explains (a gyro that clips) leaves a few χ² on the cone's harmonics that a
     /// stand group takes with a p-value far below the rule's, without explaining it.
