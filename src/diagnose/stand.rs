@@ -566,13 +566,9 @@ impl Suspect {
     pub fn pick(&self, sys: &Systems, sensor_bic: Option<f64>) -> Option<Pick> {
         let mut best: Option<Pick> = None;
         let mut passed: Vec<&str> = Vec::new();
-        for (gi, g) in self.groups.iter().enumerate() {
+        for (gi, g) in self.groups.iter().enumerate().filter(|(gi, _)| !self.refused.contains(gi)) {
             let (ev, values, raw_bic) = sys.evidence(&g.params);
-            if ev.rejection().is_some()
-                || !self.plausible(g.id, &values)
-                || self.refused.contains(&gi)
-                || !sys.material(&ev, raw_bic)
-            {
+            if ev.rejection().is_some() || !self.plausible(g.id, &values) || !sys.material(&ev, raw_bic) {
                 continue;
             }
             passed.push(g.id);
