@@ -43,11 +43,22 @@ impl std::fmt::Display for ProposedRun {
         write!(
             f,
             "a conic run at cone angle {}°, rate {} °/s, mount [{}] ({:.0} s)",
-            self.cone_angle_deg,
-            self.rate_deg_s,
+            hundredths(self.cone_angle_deg),
+            hundredths(self.rate_deg_s),
             self.mount.join(", "),
             self.duration_s
         )
+    }
+}
+
+/// `x` rounded to two decimals, for a number a user sets on a stand: a proposal built
+/// from a corrected motion (cone 19.74999882…°) reads 19.75, and 20.0 reads 20.
+fn hundredths(x: f64) -> f64 {
+    let r = (x * 100.0).round() / 100.0;
+    if r == 0.0 {
+        0.0
+    } else {
+        r
     }
 }
 
@@ -245,6 +256,19 @@ pub fn separating_run(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_proposed_run_prints_numbers_a_user_can_set() {
+        let run = ProposedRun {
+            cone_angle_deg: 19.74999882553065,
+            rate_deg_s: -0.0000001,
+            mount: ["+x".into(), "+y".into(), "+z".into()],
+            duration_s: 60.2,
+        };
+        assert_eq!(run.to_string(), "a conic run at cone angle 19.75°, rate 0 °/s, mount [+x, +y, +z] (60 s)");
+        let run = ProposedRun { cone_angle_deg: 20.0, rate_deg_s: 10.0, ..run };
+        assert!(run.to_string().starts_with("a conic run at cone angle 20°, rate 10 °/s"), "{run}");
+    }
 
     #[test]
     fn canonical_correlation_of_two_coefficients_is_their_correlation() {
