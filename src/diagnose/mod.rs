@@ -610,13 +610,7 @@ fn refit_reduced(
             .collect();
         refit(model, &reduced, opts)?
     };
-    let mut held = model.clone();
-    for e in model.nonlinear() {
-        let values: Vec<f64> =
-            searched.nonlinear.iter().filter(|p| p.effect == e.effect.id()).map(|p| p.value).collect();
-        let _ = held.fix_nonlinear(e.effect.id(), values);
-    }
-    let mut f = refit(&held, runs, opts)?;
+    let mut f = refit(&crate::estimate::held_at_fit(model, &searched), runs, opts)?;
     f.nonlinear = searched.nonlinear;
     warnings.push(format!(
         "nonlinear parameters searched on every {k}th sample ({} of {total}), then held while the rest was fitted on all; `crosscal fit` refines them on all samples",

@@ -287,6 +287,20 @@ impl Suspect {
     /// The whitened systems of every run around `model` and its fit, with the noise models
     /// `noise[run][channel]`.
     pub fn systems(&self, model: &Model, fit: &Fit, runs: &[FitRun<'_>], noise: &[RunNoiseModel]) -> Systems {
+        self.systems_of(model, fit, runs, noise, None)
+    }
+
+    /// [`Self::systems`] with the columns of only the global stand parameters `only`
+    /// (every one when None): the others' rows and columns stay zero, so a solution on the
+    /// parameters kept is the same, for a fraction of the nudged evaluations.
+    fn systems_of(
+        &self,
+        model: &Model,
+        fit: &Fit,
+        runs: &[FitRun<'_>],
+        noise: &[RunNoiseModel],
+        only: Option<&[usize]>,
+    ) -> Systems {
         // The base model's columns at the parameters the fit estimated (a knee at its
         // fitted rate): at their start values the residual would carry the knee's misfit,
         // which a stand term (the Earth's vertical rate) could take.
@@ -295,7 +309,11 @@ impl Suspect {
         let layout = BaseLayout::new(model, fit);
         let (folds, raws): (Vec<Fold>, Vec<Fold>) = (0..runs.len())
             .into_par_iter()
-            .map(|r| self.run_system(r, model, fit, &layout, &runs[r], &noise[r]))
+            .map(|r| {
+                let locals: Vec<(usize, Dir)> =
+                    self.locals[r].iter().filter(|l| only.is_none_or(|o| o.contains(&l.0))).copied().collect();
+                self.run_system(r, &locals, model, fit, &layout, &runs[r], &noise[r])
+            })
             .unzip();
         let p = layout.count + self.width;
         let sum = |fs: &[Fold]| {
@@ -312,9 +330,11 @@ impl Suspect {
         Systems { folds, total, raw, base: layout.count, samples }
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn run_system(
         &self,
         r: usize,
+        locals: &[(usize, Dir)],
         model: &Model,
         fit: &Fit,
         layout: &BaseLayout,
@@ -322,7 +342,6 @@ impl Suspect {
         noise: &RunNoiseModel,
     ) -> (Fold, Fold) {
         let n = run.len();
-        let locals = &self.locals[r];
         let nl = locals.len();
         let terms: [Vec<TermRef<'_>>; 2] = SensorKind::BOTH.map(|s| model.terms(s));
         let values: [Vec<f64>; 2] = SensorKind::BOTH.map(|s| {
@@ -694,11 +713,14 @@ impl Suspect {
     ) -> Result<Vec<f64>, EstimateError> {
         let params: Vec<Combo> = groups.iter().flat_map(|&g| self.groups[g].params.iter().cloned()).collect();
         let mut last_se = vec![0.0; params.len()];
+        let mut used: Vec<usize> = params.iter().flatten().map(|&(gi, _)| gi).collect();
+        used.sort_unstable();
+        used.dedup();
         for _ in 0..MAX_STEPS {
             let tracks = self.tracks(runs);
             let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
             let fit = crate::estimate::fit(&FitRequest::runs(model, &moved).options(*opts))?.fit;
-            let sys = self.systems(model, &fit, &moved, noise);
+            let sys = self.systems_of(model, &fit, &moved, noise, Some(&used));
             let (_, values, _) = sys.evidence(&params);
             last_se = values.iter().map(|v| v.1).collect();
             let mut worst = 0.0f64;

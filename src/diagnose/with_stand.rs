@@ -68,7 +68,12 @@ impl StandCheck<'_, '_, '_> {
             Some(pick) => {
                 // The dispersion decides whether a group is evidence; the estimate weighs each
                 // channel by its noise model alone (the misfit it had is what the group removes).
-                self.suspect.accept(pick, current, self.declared, &plain(&noise), opts)
+                // The unit's nonlinear parameters are held where the fit put them: the
+                // estimate refits the model at each of its steps, and a search on every
+                // sample at each (a dead zone's thresholds) would cost far more than the
+                // stand's small change of motion moves them.
+                let held = crate::estimate::held_at_fit(current, &a.base_fit);
+                self.suspect.accept(pick, &held, self.declared, &plain(&noise), opts)
             }
             None => Ok(false),
         }
@@ -92,6 +97,8 @@ pub(super) fn findings(
             for s in steps {
                 let _ = m.add_effect(&s.effect);
             }
+            // Nonlinear parameters held at the final fit's values (as in the check above).
+            let m = crate::estimate::held_at_fit(&m, final_fit);
             let noise = noise_models(a);
             // The groups estimated again under the final noise model, so that their values
             // are the estimates whose standard errors the final systems give; if that fails

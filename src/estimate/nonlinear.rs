@@ -171,6 +171,19 @@ pub fn fitted_values(model: &Model, fit: &Fit) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// `model` with every nonlinear parameter held at the value `fit` estimated (the model's
+/// own where the fit carries none): a fit of it solves only the linear coefficients, one
+/// pass over the samples instead of a search, for re-solving around a motion that moved
+/// little (the stand's corrections) once the nonlinear parameters are known.
+pub fn held_at_fit(model: &Model, fit: &Fit) -> Model {
+    let mut m = model.clone();
+    for (e, values) in model.nonlinear().iter().zip(fitted_values(model, fit)) {
+        // The entry is the model's own, so holding it cannot fail.
+        let _ = m.fix_nonlinear(e.effect.id(), values);
+    }
+    m
+}
+
 /// `model` with the linear parts of its user effects at the parameters `fit` estimated
 /// (a knee's coefficient column at the fitted knee rate), for evaluating the fit's residual;
 /// a plain clone when no linear part depends on a parameter.
