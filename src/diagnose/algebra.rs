@@ -65,6 +65,16 @@ pub fn left_information(g: &DMatrix<f64>, p: usize) -> f64 {
     (g[(p, p)] - grp.dot(&(&pinv * &grp))).max(0.0)
 }
 
+/// The Wald statistic vᵀ C⁻¹ v of the values `v` of parameters `idx` whose joint
+/// covariance is the block of `cov` on them (pseudo-inverse: a direction without
+/// information adds nothing). Under v = 0 it is χ² with as many degrees of freedom as
+/// the block's rank.
+pub fn wald(cov: &DMatrix<f64>, idx: &[usize], v: &DVector<f64>) -> (f64, usize) {
+    let block = DMatrix::from_fn(idx.len(), idx.len(), |i, j| cov[(idx[i], idx[j])]);
+    let (inv, rank) = pinv_sym(&block);
+    (v.dot(&(&inv * v)).max(0.0), rank)
+}
+
 /// A least-squares solution on a subset of the columns of a Gram system.
 #[derive(Debug, Clone)]
 pub struct Lsq {

@@ -412,10 +412,23 @@ pub fn diagnose(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
 ) -> Result<Diagnosis, EstimateError> {
+    diagnose_from(model, runs, motions, opts, None).map(|d| d.0)
+}
+
+/// [`diagnose`], with the stand starting from `start` (a suspect carried from a diagnosis
+/// under another noise model) and the stand suspect at the end.
+fn diagnose_from(
+    model: &Model,
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    opts: &FitOptions,
+    start: Option<stand::Suspect>,
+) -> Result<(Diagnosis, Option<stand::Suspect>), EstimateError> {
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
-    let Some(suspect) = stand::Suspect::new(runs, motions) else {
+    let Some(suspect) = start.or_else(|| stand::Suspect::new(runs, motions)) else {
         let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
         return conclude(a, model, runs, motions, opts, has_temp, None)?
+            .map(|d| (d, None))
             .ok_or_else(|| EstimateError::NotConverged("the diagnosis did not settle".into()));
     };
     with_stand::diagnose(suspect, model, runs, motions, opts, has_temp)

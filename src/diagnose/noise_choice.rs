@@ -35,9 +35,15 @@
 //!    it may, so laws of time and temperature do not count.
 //!
 //! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
-//! this module only chooses.
+//! this module only chooses. The second starts from the motion the first corrected (its
+//! stand suspect carried over): the slow noise is measured on the residual, and a base
+//! tilt's once per revolution on runs of a few revolutions is as slow as a wander, so on
+//! the declared motion it would take in the stand's error and let sensor effects explain
+//! the rest. The carried groups are judged again under the slow noise (a Wald test of their
+//! departure from the labels, [`super::stand::Suspect::rejudge`]); one that no longer
+//! passes goes back to its labels.
 
-use super::{channel_of, diagnose, Candidate, Diagnosis, Verdict};
+use super::{channel_of, diagnose, diagnose_from, Candidate, Diagnosis, Verdict};
 use crate::estimate::{EstimateError, FitOptions, FitRun};
 use crate::units::{SensorKind, AXES};
 use serde::{Deserialize, Serialize};
@@ -69,13 +75,17 @@ pub fn diagnose_with_mode(
         SlowNoiseMode::On => diagnose(model, runs, motions, &with(true)),
         SlowNoiseMode::Off => diagnose(model, runs, motions, &with(false)),
         SlowNoiseMode::Auto => {
-            let first = diagnose(model, runs, motions, &with(false))?;
+            let (first, stand) = diagnose_from(model, runs, motions, &with(false), None)?;
             if first.verdict != Verdict::Unexplained {
                 return Ok(first);
             }
+            // The second starts from the motion the first corrected, its stand groups
+            // judged again under the slow noise: measured on the residual of the declared
+            // motion, the slow noise would take in the stand's error (a base tilt's once per
+            // revolution is as slow as a wander on runs of a few revolutions) and hide it.
             // The first answer stands when the second cannot be had, and says so.
-            match diagnose(model, runs, motions, &with(true)) {
-                Ok(second) => Ok(choose(first, second)),
+            match diagnose_from(model, runs, motions, &with(true), stand.map(super::stand::Suspect::carried_over)) {
+                Ok((second, _)) => Ok(choose(first, second)),
                 Err(e) => {
                     let mut first = first;
                     first.warnings.push(format!("slow noise was not tried: {e}"));

@@ -64,6 +64,9 @@ impl StandCheck<'_, '_, '_> {
     ) -> Result<bool, EstimateError> {
         let noise = noise_models(a);
         let sys = self.suspect.systems(current, &a.base_fit, runs, &noise);
+        if self.suspect.carried() && self.suspect.rejudge(&sys) {
+            return Ok(true);
+        }
         match self.suspect.pick(&sys, sensor_bic) {
             Some(pick) => {
                 // The dispersion decides whether a group is evidence; the estimate weighs each
@@ -120,7 +123,10 @@ pub(super) fn findings(
     }
 }
 
-/// Diagnoses `model` on `runs` with the stand as a suspect.
+/// Diagnoses `model` on `runs` with the stand as a suspect, with the suspect at the end
+/// (None when the diagnosis fell back to the declared motion). A suspect carried from
+/// another diagnosis ([`stand::Suspect::carried_over`]) keeps its mounts and starts from
+/// its motion.
 pub(super) fn diagnose(
     mut suspect: stand::Suspect,
     model: &Model,
@@ -128,10 +134,14 @@ pub(super) fn diagnose(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
     has_temp: bool,
-) -> Result<Diagnosis, EstimateError> {
-    let (wrong, mut as_declared) = super::mount::wrong_mounts(model, runs, motions, opts)?;
-    for (i, mount, finding) in wrong {
-        suspect.set_mount(i, mount, finding);
+) -> Result<(Diagnosis, Option<stand::Suspect>), EstimateError> {
+    let mut as_declared = None;
+    if !suspect.carried() {
+        let (wrong, fit) = super::mount::wrong_mounts(model, runs, motions, opts)?;
+        as_declared = fit;
+        for (i, mount, finding) in wrong {
+            suspect.set_mount(i, mount, finding);
+        }
     }
     for _ in 0..=MAX_STAND_FINDINGS {
         let tracks = suspect.tracks(runs);
@@ -146,14 +156,14 @@ pub(super) fn diagnose(
         let a = analyse(model, fit, &moved, &now, has_temp);
         let check = StandCheck { suspect: &mut suspect, declared: runs };
         if let Some(d) = conclude(a, model, &moved, &now, opts, has_temp, Some(check))? {
-            return Ok(d);
+            return Ok((d, Some(suspect)));
         }
     }
     // The stand kept explaining more (a residual no stand group removes, e.g. a unit outside
     // its profile's temperature range): the diagnosis of the declared motion, without the
     // stand as a suspect, is the honest answer.
     let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
-    conclude(a, model, runs, motions, opts, has_temp, None)?.ok_or_else(|| {
+    conclude(a, model, runs, motions, opts, has_temp, None)?.map(|d| (d, None)).ok_or_else(|| {
         EstimateError::NotConverged(format!(
             "the stand kept explaining more after {MAX_STAND_FINDINGS} corrections; check the runs' labels"
         ))

@@ -54,6 +54,8 @@ const SEPARABLE: f64 = 1e-6;
 
 pub use super::stand_words::{StandFinding, StandValue};
 
+mod rejudge;
+
 /// A run's noise model as the stand's systems weigh it: the AR filter per channel, and the
 /// slow noise's random effect on the run's basis ([`super::slow`]; `slow[c]` empty or zero
 /// without one).
@@ -111,6 +113,9 @@ pub struct Suspect {
     /// linearisation around the labels, then run off to an implausible value): not tried again.
     refused: Vec<usize>,
     mounts: Vec<StandFinding>,
+    /// Carried from a diagnosis under another noise model: its groups are judged again
+    /// at the first check ([`Self::rejudge`]).
+    carried: bool,
 }
 
 /// The whitened system of one run (global stand parameters after the model's).
@@ -220,6 +225,7 @@ impl Suspect {
             accepted: Vec::new(),
             refused: Vec::new(),
             mounts: Vec::new(),
+            carried: false,
         })
     }
 

@@ -1,0 +1,58 @@
+//! The stand's groups carried from a diagnosis under another noise model (the one
+//! without slow noise) into the next, and judged again there.
+
+use super::{pinv_sym, reduce, Combo, Suspect, Systems};
+use nalgebra::DVector;
+
+impl Suspect {
+    /// This suspect, to start a diagnosis under another noise model from the motion this
+    /// one corrected (the slow noise is then measured on a residual without the stand's
+    /// error, which it would otherwise absorb); its groups are judged again there.
+    pub fn carried_over(self) -> Self {
+        Self { carried: true, ..self }
+    }
+
+    /// Whether the groups were carried from another diagnosis and not yet judged again.
+    pub fn carried(&self) -> bool {
+        self.carried
+    }
+
+    /// The carried groups judged again on `sys` (this diagnosis's noise model): a group
+    /// whose departure from the labels v no longer passes what a new group must (Wald
+    /// χ² = vᵀC⁻¹v, C its block of the joint solution of every accepted group with the
+    /// model's coefficients: p < `P_ACCEPT` and k ln n − χ² < `BIC_EVIDENCE`) goes back to
+    /// its labels and is not tried again. Whether any did (the motion changed).
+    pub fn rejudge(&mut self, sys: &Systems) -> bool {
+        use statrs::distribution::{ChiSquared, ContinuousCDF};
+        self.carried = false;
+        let per_run_found =
+            |id: &str| self.accepted.iter().any(|(g, _)| self.groups[*g].id.strip_suffix("-per-run") == Some(id));
+        let groups: Vec<usize> =
+            self.accepted.iter().map(|a| a.0).filter(|&g| !per_run_found(self.groups[g].id)).collect();
+        let joint: Vec<Combo> = groups.iter().flat_map(|&g| self.groups[g].params.iter().cloned()).collect();
+        let (cov, _) = pinv_sym(&reduce(&sys.total, sys.base, &joint).0);
+        let ln_n = (sys.samples.max(2) as f64).ln();
+        let (mut start, mut dropped) = (sys.base, Vec::new());
+        for &gi in &groups {
+            let params = &self.groups[gi].params;
+            let idx: Vec<usize> = (start..start + params.len()).collect();
+            start += params.len();
+            let v = DVector::from_iterator(params.len(), params.iter().map(|c| self.departure(c)));
+            let (w, k) = crate::diagnose::algebra::wald(&cov, &idx, &v);
+            let p = ChiSquared::new(k.max(1) as f64).map_or(1.0, |d| d.sf(w));
+            if !(p < crate::diagnose::select::P_ACCEPT && k as f64 * ln_n - w < crate::diagnose::select::BIC_EVIDENCE) {
+                dropped.push(gi);
+            }
+        }
+        for &gi in &dropped {
+            let id = self.groups[gi].id;
+            for x in self.groups[gi].params.concat().into_iter().map(|p| p.0).collect::<Vec<_>>() {
+                self.nudge(x, -self.departure(&vec![(x, 1.0)]));
+            }
+            let common = id.strip_suffix("-per-run").unwrap_or(id);
+            self.accepted.retain(|(g, _)| self.groups[*g].id != id && self.groups[*g].id != common);
+            self.refused.push(gi);
+        }
+        !dropped.is_empty()
+    }
+}
