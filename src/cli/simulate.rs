@@ -115,7 +115,8 @@ pub struct Args {
     /// conic run, in turn), tilt=DEG,DEG (base tilt about x, y), ripple1=REL,PHASE_DEG and
     /// ripple2=REL,PHASE_DEG (speed ripple once and twice per revolution), wobble=DEG,PHASE_DEG
     /// (cone-axis wobble), mount=RUN:+y,+x,-z (a run recorded on another mount),
-    /// earth=LAT_DEG,HEADING_DEG (the Earth's rotation, undeclared); and encoder=RES_DEG: the
+    /// earth=LAT_DEG,HEADING_DEG (the Earth's rotation, undeclared), spinup=S (each conic
+    /// run recorded from rest, the stand at speed after S seconds); and encoder=RES_DEG: the
     /// stand logs its angle with this resolution (0: exact) in a `theta_deg` column of each
     /// conic run, named by the run's `angle_column` (the fit then follows it).
     #[arg(long = "stand", value_name = "KEY=VALUE")]

@@ -62,8 +62,44 @@ pub enum SlowNoiseMode {
 }
 
 /// Diagnoses `model` on `runs` with slow noise treated as `mode` says (`opts.slow_noise`
-/// is set by the mode).
+/// is set by the mode). Conic runs recorded while the stand was not at its speed are
+/// diagnosed without those seconds, and a warning says so ([`crate::estimate::spin`]).
 pub fn diagnose_with_mode(
+    model: &crate::model::Model,
+    runs: &[FitRun<'_>],
+    motions: &super::RunMotions<'_>,
+    opts: &FitOptions,
+    mode: SlowNoiseMode,
+) -> Result<Diagnosis, EstimateError> {
+    let off = crate::estimate::spin::off_speed(runs, motions);
+    if off.is_empty() {
+        return by_mode(model, runs, motions, opts, mode);
+    }
+    let tracks: Vec<crate::motion::Track> = runs
+        .iter()
+        .enumerate()
+        .map(|(i, r)| match off.iter().find(|o| o.run == i) {
+            Some(o) => r.track.range(o.head, r.len() - o.tail),
+            None => r.track.clone(),
+        })
+        .collect();
+    let steady: Vec<FitRun<'_>> = runs
+        .iter()
+        .zip(&tracks)
+        .enumerate()
+        .map(|(i, (r, t))| match off.iter().find(|o| o.run == i) {
+            Some(o) => r.part(t, o.head, r.len() - o.tail),
+            None => *r,
+        })
+        .collect();
+    let mut d = by_mode(model, &steady, motions, opts, mode)?;
+    let names: Vec<&str> = runs.iter().map(|r| r.name).collect();
+    d.warnings.insert(0, crate::estimate::spin::warning(&off, &names, "the diagnosis leaves those seconds out"));
+    Ok(d)
+}
+
+/// [`diagnose_with_mode`] on runs as given.
+fn by_mode(
     model: &crate::model::Model,
     runs: &[FitRun<'_>],
     motions: &super::RunMotions<'_>,

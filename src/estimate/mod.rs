@@ -33,6 +33,7 @@ mod result;
 mod robust;
 pub(crate) mod runs;
 pub mod slow;
+pub mod spin;
 mod stand;
 mod stream;
 

@@ -280,7 +280,17 @@ fn fit_session(req: &FitRequest<'_>, full: &Session) -> Result<FitOutcome, Estim
         memory::fit_in_memory(&model, &fit_runs(&session, &tr), &req.options)?
     };
     check_strict(req, &fit)?;
-    let warnings = session.warnings();
+    let mut warnings = session.warnings();
+    let motions: Vec<&crate::session::MotionSpec> = session.runs.iter().map(|r| &r.spec.motion).collect();
+    let off = super::spin::off_speed(&fit_runs(&session, &tr), &motions);
+    if !off.is_empty() {
+        let names: Vec<&str> = session.runs.iter().map(|r| r.spec.name.as_str()).collect();
+        warnings.push(super::spin::warning(
+            &off,
+            &names,
+            "the fit uses those seconds as declared, and its coefficients carry their misfit",
+        ));
+    }
     let mut notes = warnings.clone();
     for (run, t) in session.runs.iter().zip(&tr) {
         notes.push(format!("run {}: ε reference {}", run.spec.name, t.epsilon_source));

@@ -61,7 +61,24 @@ pub struct FitRun<'a> {
     pub start_s: Option<f64>,
 }
 
-impl FitRun<'_> {
+impl<'a> FitRun<'a> {
+    /// Samples `k0..k1` of the run on `track` (this run's track so cut, [`Track::range`]);
+    /// its session clock unchanged (the start moves with the first sample kept).
+    pub fn part(&self, track: &'a Track, k0: usize, k1: usize) -> FitRun<'a> {
+        let k1 = k1.min(self.len());
+        let k0 = k0.min(k1);
+        let t = &self.track.t_s;
+        let shift = if k0 < k1 { t[k0] - t[0] } else { 0.0 };
+        FitRun {
+            track,
+            gyro: &self.gyro[k0..k1],
+            accel: &self.accel[k0..k1],
+            temp_c: self.temp_c.and_then(|c| c.get(k0.min(c.len())..k1.min(c.len()))),
+            start_s: self.start_s.map(|s| s + shift),
+            ..*self
+        }
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.track.t_s.len().min(self.gyro.len()).min(self.accel.len())

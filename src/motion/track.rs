@@ -257,6 +257,26 @@ impl Track {
         }
     }
 
+    /// Samples `k0..k1` (clamped to the track), with the same source and time stamps: a
+    /// run with a stretch left out at either end.
+    pub fn range(&self, k0: usize, k1: usize) -> Track {
+        let k1 = k1.min(self.len());
+        let k0 = k0.min(k1);
+        let source = match &self.source {
+            Source::Sampled { w, e, a } => {
+                Source::Sampled { w: w[k0..k1].into(), e: e[k0..k1].into(), a: a[k0..k1].into() }
+            }
+            other => other.clone(),
+        };
+        Track {
+            t_s: self.t_s.slice(k0, k1),
+            source,
+            maps: self.maps.clone(),
+            epsilon_source: self.epsilon_source.clone(),
+            temp_rate_c_s: self.temp_rate_c_s.as_ref().map(|r| r[k0..k1].into()),
+        }
+    }
+
     /// Every `step`-th sample (from the first), with the same source: for searches on
     /// reduced data.
     pub fn every(&self, step: usize) -> Track {

@@ -35,6 +35,10 @@ pub struct StandErrors {
     /// conic run's CSV gets a `theta_deg` column, named by the run's `angle_column` in the
     /// manifest. Not an imperfection: it is what lets a fit follow the others.
     pub encoder_deg: Option<f64>,
+    /// Each conic run is recorded from rest: the stand's rate rises from 0 to its own over
+    /// this many seconds (raised cosine, θ̇ = ω (1 − cos(π t/T))/2), so that its angle then
+    /// lags the manifest's by ω T/2. 0: at speed from the first sample.
+    pub spin_up_s: f64,
 }
 
 impl StandErrors {
@@ -59,6 +63,25 @@ impl StandErrors {
         let horizontal = EARTH_RATE_RAD_S * lat.cos();
         // North is `heading` to the left of x (x = heading east of north), y = x rotated 90° left.
         [horizontal * h.cos(), horizontal * h.sin(), EARTH_RATE_RAD_S * lat.sin()]
+    }
+
+    /// The stand's angle at `t_s` since the run's first sample on motion `m`, with the
+    /// spin-up from rest ([`Self::spin_up_s`]) when there is one.
+    pub fn angle_at(&self, m: &StandMotion, t_s: f64) -> crate::motion::stand::Angle {
+        let big_t = self.spin_up_s;
+        if big_t.is_nan() || big_t <= 0.0 || t_s >= big_t {
+            // After the spin-up the stand runs at speed, ω T/2 behind.
+            return m.angle(t_s - big_t.max(0.0) / 2.0);
+        }
+        // The mean rate's angle law with the ramp's: θ = φ + ω (t/2 − T/(2π) sin(πt/T))
+        // (no ripple during the ramp).
+        let (w, k) = (m.rate_rad_s, std::f64::consts::PI / big_t);
+        let (sn, cs) = (k * t_s).sin_cos();
+        crate::motion::stand::Angle {
+            theta: m.phase_rad + w * (t_s / 2.0 - sn / (2.0 * k)),
+            rate: w * (1.0 - cs) / 2.0,
+            accel: w * k * sn / 2.0,
+        }
     }
 
     /// The stand's true motion of conic run number `conic_index` declared as `declared`
@@ -111,7 +134,7 @@ impl StandErrors {
     /// Parses the `simulate` flag values: `--stand KEY=VALUE` with keys `cone` (deg),
     /// `rate` (relative), `phase` (deg, comma list), `tilt` (deg,deg), `ripple1` and
     /// `ripple2` (relative,phase deg), `wobble` (deg,phase deg), `earth` (lat,heading deg)
-    /// and `mount` (RUN:+y,+x,-z).
+    /// `mount` (RUN:+y,+x,-z) and `spinup` (s).
     pub fn set(&mut self, spec: &str) -> Result<(), String> {
         let (key, value) =
             spec.split_once('=').ok_or_else(|| format!("'{spec}': expected KEY=VALUE, e.g. cone=0.3"))?;
@@ -141,6 +164,12 @@ impl StandErrors {
                 }
                 self.encoder_deg = Some(res);
             }
+            "spinup" => {
+                self.spin_up_s = nums(value, 1)?[0];
+                if self.spin_up_s < 0.0 {
+                    return Err(format!("spinup: {value} s: expected a duration ≥ 0"));
+                }
+            }
             "mount" => {
                 let (run, m) =
                     value.split_once(':').ok_or_else(|| format!("mount: '{value}': expected RUN:+y,+x,-z"))?;
@@ -150,7 +179,7 @@ impl StandErrors {
             }
             _ => {
                 return Err(format!(
-                    "'{key}': expected one of cone, rate, phase, tilt, ripple1, ripple2, wobble, earth, mount, encoder"
+                    "'{key}': expected one of cone, rate, phase, tilt, ripple1, ripple2, wobble, earth, mount, encoder, spinup"
                 ))
             }
         }
