@@ -31,7 +31,9 @@ pub struct StandMotion {
     pub rate_rad_s: f64,
     /// Phase φ at t = 0, rad.
     pub phase_rad: f64,
-    /// Base tilt about the base's x and y axes, rad: up = (sin τ_y cos τ_x, −sin τ_x, cos τ_y cos τ_x).
+    /// Base tilt about the base's x and y axes, rad: the base turned right-handed from level
+    /// by τ_x about its x axis, then τ_y about its y axis (base → level = Rx(τ_x)·Ry(τ_y)),
+    /// so that up in base axes = Ry(τ_y)ᵀ Rx(τ_x)ᵀ e_z = (−sin τ_y cos τ_x, sin τ_x, cos τ_y cos τ_x).
     pub tilt_rad: [f64; 2],
     /// Angle ripple (cos, sin) once and twice per revolution, rad of θ.
     pub ripple_rad: [[f64; 2]; 2],
@@ -80,7 +82,7 @@ impl StandMotion {
     /// The base's up direction (unit).
     pub fn up(&self) -> [f64; 3] {
         let [tx, ty] = self.tilt_rad;
-        [ty.sin() * tx.cos(), -tx.sin(), ty.cos() * tx.cos()]
+        [-ty.sin() * tx.cos(), tx.sin(), ty.cos() * tx.cos()]
     }
 
     /// Kinematics at time `t_s` in stand (platform) axes, gravity `g_m_s2`.
