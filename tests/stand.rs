@@ -135,6 +135,9 @@ fn a_logged_stand_angle_makes_speed_ripple_cost_nothing() {
     cfg.stand.set("ripple1=0.01,30").unwrap();
     cfg.stand.set("ripple2=0.004,-50").unwrap();
     cfg.stand.set("encoder=0").unwrap();
+    // On one session clock (each run's stamps go on from the last's): the logged angle is
+    // the stand's at those stamps, not at the time since the run began.
+    cfg.realism.session_clock_gap_s = Some(5.0);
     let logged = cfg.generate();
     assert!(logged
         .runs

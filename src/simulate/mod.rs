@@ -406,7 +406,7 @@ impl SimConfig {
         let t0 = t_s.first().copied().unwrap_or(0.0);
         Some(
             t_s.iter()
-                .map(|&t| self.stand.logged_deg(self.stand.angle_at(&m, t - t0).theta).unwrap_or(f64::NAN).to_radians())
+                .map(|&t| self.stand.logged_deg(self.stand.angle_at(&m, t, t0).theta).unwrap_or(f64::NAN).to_radians())
                 .collect(),
         )
     }
@@ -429,7 +429,7 @@ impl SimConfig {
                 let fixed = m.fixed(self.g_m_s2);
                 let t0 = rec.t_s.first().copied().unwrap_or(0.0);
                 let states: Vec<crate::motion::Kinematics> =
-                    rec.t_s.iter().map(|&t| fixed.at_angle(self.stand.angle_at(&m, t - t0))).collect();
+                    rec.t_s.iter().map(|&t| fixed.at_angle(self.stand.angle_at(&m, t, t0))).collect();
                 tr.on_logged(&states, &mount, "exact (stand spinning up)".into())
             }
             Some(m) => tr.on_stand(m, self.g_m_s2, mount),

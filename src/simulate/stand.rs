@@ -65,20 +65,25 @@ impl StandErrors {
         [horizontal * h.cos(), horizontal * h.sin(), EARTH_RATE_RAD_S * lat.sin()]
     }
 
-    /// The stand's angle at `t_s` since the run's first sample on motion `m`, with the
-    /// spin-up from rest ([`Self::spin_up_s`]) when there is one.
-    pub fn angle_at(&self, m: &StandMotion, t_s: f64) -> crate::motion::stand::Angle {
+    /// The stand's angle at `t_s` on motion `m` (the run's first sample at `t0_s`), with the
+    /// spin-up from rest ([`Self::spin_up_s`]) when there is one: the motion's own angle
+    /// otherwise.
+    pub fn angle_at(&self, m: &StandMotion, t_s: f64, t0_s: f64) -> crate::motion::stand::Angle {
         let big_t = self.spin_up_s;
-        if big_t.is_nan() || big_t <= 0.0 || t_s >= big_t {
-            // After the spin-up the stand runs at speed, ω T/2 behind.
-            return m.angle(t_s - big_t.max(0.0) / 2.0);
+        let tau = t_s - t0_s;
+        if big_t.is_nan() || big_t <= 0.0 {
+            return m.angle(t_s);
         }
-        // The mean rate's angle law with the ramp's: θ = φ + ω (t/2 − T/(2π) sin(πt/T))
-        // (no ripple during the ramp).
+        if tau >= big_t {
+            // After the spin-up the stand runs at speed, ω T/2 behind.
+            return m.angle(t_s - big_t / 2.0);
+        }
+        // From the steady angle at the first sample, the ramp's law:
+        // θ = θ(t0) + ω (τ/2 − T/(2π) sin(πτ/T)) (no ripple during the ramp).
         let (w, k) = (m.rate_rad_s, std::f64::consts::PI / big_t);
-        let (sn, cs) = (k * t_s).sin_cos();
+        let (sn, cs) = (k * tau).sin_cos();
         crate::motion::stand::Angle {
-            theta: m.phase_rad + w * (t_s / 2.0 - sn / (2.0 * k)),
+            theta: m.phase_rad + w * t0_s + w * (tau / 2.0 - sn / (2.0 * k)),
             rate: w * (1.0 - cs) / 2.0,
             accel: w * k * sn / 2.0,
         }
@@ -133,7 +138,7 @@ impl StandErrors {
 
     /// Parses the `simulate` flag values: `--stand KEY=VALUE` with keys `cone` (deg),
     /// `rate` (relative), `phase` (deg, comma list), `tilt` (deg,deg), `ripple1` and
-    /// `ripple2` (relative,phase deg), `wobble` (deg,phase deg), `earth` (lat,heading deg)
+    /// `ripple2` (relative,phase deg), `wobble` (deg,phase deg), `earth` (lat,heading deg),
     /// `mount` (RUN:+y,+x,-z) and `spinup` (s).
     pub fn set(&mut self, spec: &str) -> Result<(), String> {
         let (key, value) =
