@@ -45,10 +45,6 @@ pub struct OffSpeed {
     pub tail_s: f64,
 }
 
-fn norm(v: [f64; 3]) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
-}
-
 /// The conic runs (`motions[i]` run i's declared motion) with a stretch off speed.
 pub fn off_speed(runs: &[FitRun<'_>], motions: &[&MotionSpec]) -> Vec<OffSpeed> {
     runs.iter()
@@ -77,8 +73,8 @@ fn run_off_speed(i: usize, r: &FitRun<'_>) -> Option<OffSpeed> {
             let (k0, k1) = (j * w, if j + 1 == windows { n } else { (j + 1) * w });
             let (mut meas, mut truth) = (0.0, 0.0);
             for k in k0..k1 {
-                meas += norm(r.gyro[k]);
-                truth += norm(r.track.at(k).w_rad_s.xyz);
+                meas += crate::stats::norm3(r.gyro[k]);
+                truth += crate::stats::norm3(r.track.at(k).w_rad_s.xyz);
             }
             if truth > 0.0 {
                 meas / truth
@@ -91,7 +87,7 @@ fn run_off_speed(i: usize, r: &FitRun<'_>) -> Option<OffSpeed> {
         return None;
     }
     let med = crate::stats::median(&mut ratio.clone())?;
-    let spread = 1.4826 * crate::stats::median(&mut ratio.iter().map(|x| (x - med).abs()).collect::<Vec<_>>())?;
+    let spread = crate::stats::robust_sigma(&ratio, med)?;
     if med <= 0.0 {
         return None;
     }

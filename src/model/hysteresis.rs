@@ -32,10 +32,6 @@ impl Hysteresis {
     }
 }
 
-fn norm(v: [f64; 3]) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
-}
-
 impl Effect for Hysteresis {
     fn id(&self) -> &'static str {
         Self::id_of(self.sensor)
@@ -75,11 +71,11 @@ impl Effect for Hysteresis {
         // below 1e-6 of it is zero (no direction), not a sign drawn from rounding (the z
         // axis of a conic stand sees ω×a = 0 up to rounding).
         let (d, scale) = match self.sensor {
-            SensorKind::Gyro => (s.e[k % 3], norm(s.e)),
+            SensorKind::Gyro => (s.e[k % 3], crate::stats::norm3(s.e)),
             SensorKind::Accel => {
                 let (w, a) = (s.w, s.a);
                 let c = [w[1] * a[2] - w[2] * a[1], w[2] * a[0] - w[0] * a[2], w[0] * a[1] - w[1] * a[0]];
-                (-c[k % 3], norm(w) * norm(a))
+                (-c[k % 3], crate::stats::norm3(w) * crate::stats::norm3(a))
             }
         };
         let tol = 1e-6 * scale;

@@ -42,6 +42,12 @@ pub fn median(v: &mut [f64]) -> Option<f64> {
     Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
+/// The Euclidean length of a 3-vector.
+#[inline]
+pub fn norm3(v: [f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
 /// Robust standard deviation of `v` about `centre`: [`MAD_TO_SIGMA`] times the median of
 /// |v − centre| (reorders a copy); `None` when `v` is empty.
 pub fn robust_sigma(v: &[f64], centre: f64) -> Option<f64> {

@@ -2,8 +2,8 @@
 //! through a known angle about a known axis, each one observation of the linear model.
 
 use super::{
-    accel_kb, inflate_to_floor, median_dt, norm, pose_mean_noise, protocol_error, rms, state_track, GyroCal,
-    PoseResidual, ProtocolOptions, ProtocolReport, TurnResidual,
+    accel_kb, inflate_to_floor, median_dt, pose_mean_noise, protocol_error, rms, state_track, GyroCal, PoseResidual,
+    ProtocolOptions, ProtocolReport, TurnResidual,
 };
 use crate::estimate::memory::fit_in_memory as fit;
 use crate::estimate::{EstimateError, Fit, FitOptions, FitRun};
@@ -93,7 +93,7 @@ fn classic_biases(model: &Model, obs: &[Obs<'_>]) -> Result<Model, EstimateError
         let face = |sign: f64| {
             poses.iter().find(|o| {
                 let a = o.track.at(0).a_m_s2;
-                let n = norm(a.xyz);
+                let n = crate::stats::norm3(a.xyz);
                 n > 0.0 && (a[i] / n - sign).abs() < 1e-6
             })
         };
@@ -233,7 +233,7 @@ fn report(
                 run: o.run.spec.name.clone(),
                 start: 0,
                 end: o.run.rec.len(),
-                gravity_error_m_s2: norm(a) - g,
+                gravity_error_m_s2: crate::stats::norm3(a) - g,
                 rate_at_rest_deg_s: cal.rate(o.gyro[0], a).map(f64::to_degrees),
                 motion: motion(o),
                 rate_se_deg_s: rate_se(o),

@@ -192,10 +192,6 @@ pub struct ProtocolReport {
     pub pose_params: [usize; 2],
 }
 
-fn norm(v: [f64; 3]) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
-}
-
 fn protocol_error(msg: impl Into<String>) -> EstimateError {
     EstimateError::Protocol(msg.into())
 }

@@ -75,8 +75,9 @@ fn ellipsoid_guess(means: &[[f64; 3]], g: f64) -> [f64; 9] {
         }
     }
     let centre = mean3(means);
-    let r = means.iter().map(|m| super::norm([m[0] - centre[0], m[1] - centre[1], m[2] - centre[2]])).sum::<f64>()
-        / n as f64;
+    let r =
+        means.iter().map(|m| crate::stats::norm3([m[0] - centre[0], m[1] - centre[1], m[2] - centre[2]])).sum::<f64>()
+            / n as f64;
     let s = g / r.max(f64::MIN_POSITIVE);
     [s, 0.0, 0.0, s, 0.0, s, centre[0], centre[1], centre[2]]
 }
