@@ -151,12 +151,12 @@ fn a_logged_stand_angle_makes_speed_ripple_cost_nothing() {
     let rms: Vec<f64> = f.gyro.channels.iter().map(|c| c.residual_rms).collect();
     println!("logged angle: worst |error|/se {worst:.2}, gyro residual rms / noise {:?}", rms.map_or_each(noise));
     assert!(rms.iter().all(|r| *r < 1.02 * noise), "{rms:?}");
-    // `fit --stand` on it: the rate, phase and ripple follow the logged angle (held, said
+    // `fit --stand` on it: the rate, phase, drift and ripple follow the logged angle (held, said
     // so); the cone angle and tilt are still estimated.
     let fs = fit_with_stand(&model, &logged).unwrap();
     let held: Vec<&String> = fs.stand.iter().flat_map(|p| &p.held).collect();
     println!("held per run: {:?}\nheld common: {:?}", &held[..2], fs.stand_base.as_ref().map(|b| &b.held));
-    assert_eq!(held.len(), 2 * fs.stand.len(), "{held:?}");
+    assert_eq!(held.len(), 3 * fs.stand.len(), "{held:?}");
     assert!(held.iter().all(|h| h.contains("logged angle")), "{held:?}");
     let base = fs.stand_base.as_ref().unwrap();
     assert_eq!(base.held.len(), 4, "{:?}", base.held);
@@ -172,6 +172,33 @@ fn a_logged_stand_angle_makes_speed_ripple_cost_nothing() {
     let rms: Vec<f64> = g.gyro.channels.iter().map(|c| c.residual_rms).collect();
     println!("declared motion: gyro residual rms / noise {:?}", rms.map_or_each(noise));
     assert!(rms.iter().all(|r| *r > 5.0 * noise), "{rms:?}");
+}
+
+/// A stand whose rate drifts within each run (a different drift per run, from each run's
+/// first sample, some runs steady): `fit --stand` recovers every run's drift within 3
+/// standard errors, and the coefficients with it.
+#[test]
+fn a_rate_drifting_within_each_run_is_estimated_per_run() {
+    let mut cfg = noisy_paper(31, 36.0, 100.0);
+    let drifts = [-1.4e-4, 0.0, 2e-4, 0.0, 8e-5, -5e-5];
+    cfg.stand.set("drift=-1.4e-4,0,2e-4,0,8e-5,-5e-5").unwrap();
+    let s = cfg.generate();
+    let f = fit_with_stand(&Model::default_model(), &s).unwrap();
+    let worst = worst_z(&f, &cfg);
+    println!("coefficients: worst |error|/se = {worst:.2}");
+    assert!(worst < 4.0, "worst |error|/se {worst}");
+    let mut worst_drift = 0.0f64;
+    for (i, p) in f.stand.iter().enumerate() {
+        let z = (p.rate_drift_per_s - drifts[i % 6]) / p.rate_drift_se_per_s;
+        worst_drift = worst_drift.max(z.abs());
+        // The rate and phase stay at their labels: the drift is counted from the first sample.
+        for k in 1..3 {
+            let zk = (p.value.get(k) - p.nominal.get(k)) / p.std_error.get(k);
+            assert!(zk.abs() < 4.0, "{}: {k} {zk}", p.run);
+        }
+    }
+    println!("rate drift: worst |error|/se = {worst_drift:.2} over {} runs", f.stand.len());
+    assert!(worst_drift < 4.0, "{worst_drift}");
 }
 
 /// Ratios of each value to `by`.
@@ -219,7 +246,7 @@ fn fit_stand_recovers_tilt_and_ripple_with_the_settings() {
     println!("held: {:?}", b.held);
     assert!(b.held.is_empty(), "{:?}", b.held);
     let first = cfg.runs.iter().find(|r| matches!(r.motion, MotionSpec::Conic { .. })).unwrap();
-    let truth = cfg.stand.conic_motion(&first.motion, 0).unwrap();
+    let truth = cfg.stand.conic_motion(&first.motion, 0, 0.0).unwrap();
     let got =
         [b.tilt_rad[0], b.tilt_rad[1], b.ripple_rad[0][0], b.ripple_rad[0][1], b.ripple_rad[1][0], b.ripple_rad[1][1]];
     let se = [
@@ -257,7 +284,7 @@ fn fit_stand_recovers_tilt_and_ripple_with_the_settings() {
     println!("coefficients: worst |error|/se = {worst:.2}");
     for (k, st) in f.stand.iter().enumerate() {
         let plan = cfg.runs.iter().filter(|r| matches!(r.motion, MotionSpec::Conic { .. })).nth(k).unwrap();
-        let t = cfg.stand.conic_motion(&plan.motion, k).unwrap();
+        let t = cfg.stand.conic_motion(&plan.motion, k, 0.0).unwrap();
         let want = [t.cone_angle_rad.to_degrees(), t.rate_rad_s.to_degrees(), t.phase_rad.to_degrees()];
         for (j, w) in want.into_iter().enumerate() {
             let z = (st.value.get(j) - w) / st.std_error.get(j);

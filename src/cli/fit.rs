@@ -43,7 +43,7 @@ pub struct Args {
     /// held-out errors and reduction factors are stored in the profile.
     #[arg(long)]
     holdout: Vec<String>,
-    /// Estimate each conic run's actual cone angle, rate and phase with the coefficients
+    /// Estimate each conic run's actual cone angle, rate, phase and rate drift with the coefficients
     /// (for a stand that does not sit exactly at its nominal settings).
     #[arg(long)]
     stand: bool,

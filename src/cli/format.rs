@@ -171,12 +171,17 @@ pub fn stand(params: &[crosscal::estimate::StandParams], base: Option<&crosscal:
         return s;
     }
     let _ = writeln!(s, "stand settings (estimated ± 2σ; label in brackets):");
-    let _ =
-        writeln!(s, "  {:<20} {:>26} {:>28} {:>24}", "run", "cone angle α (deg)", "rate ω_s (deg/s)", "phase φ (deg)");
+    let _ = writeln!(
+        s,
+        "  {:<20} {:>26} {:>28} {:>24} {:>24}",
+        "run", "cone angle α (deg)", "rate ω_s (deg/s)", "phase φ (deg)", "rate drift (%/min)"
+    );
     for p in params {
         let cell =
             |k: usize| format!("{:.5} ± {:.1e} [{}]", p.value.get(k), 2.0 * p.std_error.get(k), p.nominal.get(k));
-        let _ = writeln!(s, "  {:<20} {:>26} {:>28} {:>24}", p.run, cell(0), cell(1), cell(2));
+        // The drift in % of the rate per minute, from the run's first sample.
+        let drift = format!("{:+.4} ± {:.1e}", 6000.0 * p.rate_drift_per_s, 12000.0 * p.rate_drift_se_per_s);
+        let _ = writeln!(s, "  {:<20} {:>26} {:>28} {:>24} {:>24}", p.run, cell(0), cell(1), cell(2), drift);
         for h in &p.held {
             let _ = writeln!(s, "    held: {h}");
         }

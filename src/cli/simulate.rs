@@ -111,7 +111,8 @@ pub struct Args {
     #[arg(long = "disturb", value_parser = crosscal::simulate::realism::Disturbance::parse)]
     disturb: Vec<crosscal::simulate::realism::Disturbance>,
     /// The stand moved otherwise than the manifest says (repeatable, KEY=VALUE): cone=DEG
-    /// (added to every cone angle), rate=REL (−0.005: 0.5 % slow), phase=DEG[,DEG…] (per
+    /// (added to every cone angle), rate=REL (−0.005: 0.5 % slow), drift=REL_PER_S[,…] (per
+    /// conic run, in turn: its rate changes by this share per second from its first sample), phase=DEG[,DEG…] (per
     /// conic run, in turn), tilt=DEG,DEG (base tilt about x, y), ripple1=REL,PHASE_DEG and
     /// ripple2=REL,PHASE_DEG (speed ripple once and twice per revolution), wobble=DEG,PHASE_DEG
     /// (cone-axis wobble), mount=RUN:+y,+x,-z (a run recorded on another mount),

@@ -6,12 +6,15 @@ use crate::frames::Mount;
 use crate::model::{Predictor, State};
 use crate::motion::stand::{to_sensor, StandAt, StandMotion};
 
-/// Motion parameters of a conic run: cone, rate (relative), phase, tilt ×2, ripple ×4,
-/// wobble ×2, Earth ×3.
-pub(super) const KNOBS: usize = 14;
-/// Forward-difference step of each knob (rad, relative, rad/s for the Earth's rate).
+/// Motion parameters of a conic run: its own cone, rate (relative), phase and rate drift
+/// (relative per second), then the common tilt ×2, ripple ×4, wobble ×2, Earth ×3.
+pub(super) const KNOBS: usize = 15;
+/// Knobs of one run's own (before the common ones).
+pub(super) const PER_RUN: usize = 4;
+/// Forward-difference step of each knob (rad, relative, 1/s for the drift, rad/s for the
+/// Earth's rate).
 pub(super) const STEP: [f64; KNOBS] =
-    [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-8, 1e-8, 1e-8];
+    [1e-6, 1e-6, 1e-6, 1e-7, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-8, 1e-8, 1e-8];
 /// Samples per whitened block.
 pub(super) const BLOCK: usize = 256;
 
@@ -108,8 +111,8 @@ impl<'m> Knobs<'m> {
             match (dir, &self.stand, &at) {
                 (Dir::Knob(kn), Some((_, nudged, mount)), Some((an0, sc0, cone0))) => {
                     let m = &nudged[j];
-                    // Rate, phase and ripple move the stand's angle; the others keep it.
-                    let x = if matches!(kn, 1 | 2 | 5..=8) {
+                    // Rate, phase, drift and ripple move the stand's angle; the others keep it.
+                    let x = if matches!(kn, 1..=3 | 6..=9) {
                         let an = m.motion.angle(t_s);
                         m.at_angle_trig(an, sincos_near(an.theta, an0.theta, *sc0), Some(*cone0))
                     } else {
@@ -213,10 +216,11 @@ pub(super) fn knob(m: &mut StandMotion, declared_rate: f64, k: usize, d: f64) {
         0 => m.cone_angle_rad += d,
         1 => m.rate_rad_s += d * declared_rate,
         2 => m.phase_rad += d,
-        3 | 4 => m.tilt_rad[k - 3] += d,
-        5..=8 => m.ripple_rad[(k - 5) / 2][(k - 5) % 2] += d,
-        9 | 10 => m.wobble_rad[k - 9] += d,
-        _ => m.earth_rad_s[k - 11] += d,
+        3 => m.rate_drift_per_s += d,
+        4 | 5 => m.tilt_rad[k - 4] += d,
+        6..=9 => m.ripple_rad[(k - 6) / 2][(k - 6) % 2] += d,
+        10 | 11 => m.wobble_rad[k - 10] += d,
+        _ => m.earth_rad_s[k - 12] += d,
     }
 }
 

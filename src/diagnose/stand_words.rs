@@ -33,6 +33,10 @@ pub struct StandValue {
 
 /// The fix of a stand finding the manifest can carry.
 const FIX: &str = "correct the manifest or fit with --stand";
+/// The fix of a rate that drifts within a run (no manifest field carries it).
+const DRIFT_FIX: &str = "check the stand's speed control, log its angle (angle_column) or fit with --stand";
+/// Relative per second → % per minute.
+const PCT_MIN: f64 = 100.0 * 60.0;
 const EARTH_RAD_S: f64 = 7.292_115e-5;
 /// rad/s → °/h.
 const DEG_H: f64 = 180.0 / std::f64::consts::PI * 3600.0;
@@ -132,41 +136,18 @@ pub fn finding(
                 format!("the stand: rate {} % off the manifest ({}): {FIX}", pm(d, s, 3, true), each.join("; ")),
             )
         }
-        "cone-angle-per-run" | "stand-rate-per-run" | "phase-per-run" => {
-            let (what, unit, k) = match id {
-                "cone-angle-per-run" => ("cone angle", "deg", deg(1.0)),
-                "stand-rate-per-run" => ("rate error", "%", 100.0),
-                _ => ("starting phase", "deg", deg(1.0)),
-            };
-            let values: Vec<StandValue> = v
-                .iter()
-                .zip(se)
-                .zip(ctx)
-                .map(|((x, s), c)| {
-                    value(format!("{what} of run {}", c.run.as_deref().unwrap_or("?")), k * x, k * s, unit)
-                })
-                .collect();
-            let words = listed(&values, ctx, |x, c| {
-                let run = c.run.as_deref().unwrap_or("?");
-                match id {
-                    "cone-angle-per-run" => {
-                        format!(
-                            "{run} {}°, not {}°",
-                            pm(deg(c.label) + x.value, x.std_error.unwrap_or(f64::INFINITY), 3, false),
-                            deg(c.label)
-                        )
-                    }
-                    "stand-rate-per-run" => format!(
-                        "{run} {:.4} °/s ({} %), not {} °/s",
-                        deg(c.label) * (1.0 + x.value / 100.0),
-                        pm(x.value, x.std_error.unwrap_or(f64::INFINITY), 3, true),
-                        deg(c.label)
-                    ),
-                    _ => format!("{run} {}°", pm(x.value, x.std_error.unwrap_or(f64::INFINITY), 2, true)),
-                }
-            });
-            let fix = if id == "phase-per-run" { "declare phase_deg per run or fit with --stand" } else { FIX };
-            (values, format!("the stand: {what} off the manifest in {words}: {fix}"))
+        "stand-rate-drift" => {
+            let (d, s) = (PCT_MIN * v[0], PCT_MIN * se[0]);
+            (
+                vec![value("rate drift (every conic run)".into(), d, s, "%/min")],
+                format!(
+                    "the stand: its rate drifts {} % of the rate per minute within every conic run (from the run's first sample): {DRIFT_FIX}",
+                    pm(d, s, 3, true)
+                ),
+            )
+        }
+        "cone-angle-per-run" | "stand-rate-per-run" | "phase-per-run" | "stand-rate-drift-per-run" => {
+            per_run(id, v, se, ctx)
         }
         "base-tilt" => {
             let (x, y) = (deg(v[0]), deg(v[1]));
@@ -213,6 +194,51 @@ pub fn finding(
         _ => earth(v, se, !labels.is_empty()),
     };
     StandFinding { id: id.to_string(), values, message, evidence }
+}
+
+/// A per-run group's values (one per conic run) and the runs off their labels in words.
+fn per_run(id: &str, v: &[f64], se: &[f64], ctx: &[ParamContext]) -> (Vec<StandValue>, String) {
+    let deg = f64::to_degrees;
+    let (what, unit, k) = match id {
+        "cone-angle-per-run" => ("cone angle", "deg", deg(1.0)),
+        "stand-rate-per-run" => ("rate error", "%", 100.0),
+        "stand-rate-drift-per-run" => ("rate drift", "%/min", PCT_MIN),
+        _ => ("starting phase", "deg", deg(1.0)),
+    };
+    let values: Vec<StandValue> = v
+        .iter()
+        .zip(se)
+        .zip(ctx)
+        .map(|((x, s), c)| value(format!("{what} of run {}", c.run.as_deref().unwrap_or("?")), k * x, k * s, unit))
+        .collect();
+    let words = listed(&values, ctx, |x, c| {
+        let run = c.run.as_deref().unwrap_or("?");
+        match id {
+            "cone-angle-per-run" => {
+                format!(
+                    "{run} {}°, not {}°",
+                    pm(deg(c.label) + x.value, x.std_error.unwrap_or(f64::INFINITY), 3, false),
+                    deg(c.label)
+                )
+            }
+            "stand-rate-per-run" => format!(
+                "{run} {:.4} °/s ({} %), not {} °/s",
+                deg(c.label) * (1.0 + x.value / 100.0),
+                pm(x.value, x.std_error.unwrap_or(f64::INFINITY), 3, true),
+                deg(c.label)
+            ),
+            "stand-rate-drift-per-run" => {
+                format!("{run} {} %/min", pm(x.value, x.std_error.unwrap_or(f64::INFINITY), 3, true))
+            }
+            _ => format!("{run} {}°", pm(x.value, x.std_error.unwrap_or(f64::INFINITY), 2, true)),
+        }
+    });
+    let fix = match id {
+        "phase-per-run" => "declare phase_deg per run or fit with --stand",
+        "stand-rate-drift-per-run" => DRIFT_FIX,
+        _ => FIX,
+    };
+    (values, format!("the stand: {what} off the manifest in {words}: {fix}"))
 }
 
 /// The Earth's rotation: the conic runs' base-frame (x, y, up) then, per static pose, its

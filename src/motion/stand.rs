@@ -17,7 +17,9 @@
 //! offset, a base tilt (two angles), a once- and twice-per-revolution speed ripple (the
 //! angle's deviation from uniform turning θ = θ₀ + Σₕ cₕ cos hθ₀ + sₕ sin hθ₀, θ₀ = ω_s t + φ,
 //! so the speed's relative ripple is h·√(cₕ² + sₕ²)), a wobble of the cone axis (α = α₀ +
-//! w_c cos θ + w_s sin θ) and the Earth's rotation.
+//! w_c cos θ + w_s sin θ), a drift of the rate within a run (θ₀ = ω_s (t + ½ d (t − t_d)²) + φ
+//! for t ≥ t_d, the run's first sample: the stand starts at its rate and its speed changes
+//! by the share d per second, θ̇₀ = ω_s (1 + d (t − t_d))) and the Earth's rotation.
 
 use super::{Kinematics, SensorKinematics};
 use crate::frames::{Mount, Stand, V3};
@@ -41,6 +43,10 @@ pub struct StandMotion {
     pub wobble_rad: [f64; 2],
     /// The Earth's rate in base axes (x, y horizontal, z up), rad/s.
     pub earth_rad_s: [f64; 3],
+    /// Drift of the rate within the run: its relative change per second, 1/s.
+    pub rate_drift_per_s: f64,
+    /// When the drift starts (the run's first sample), s on the run's clock.
+    pub drift_from_s: f64,
 }
 
 /// The stand's angle and its first two time derivatives at one instant.
@@ -60,11 +66,19 @@ impl StandMotion {
         Self { cone_angle_rad, rate_rad_s, phase_rad, ..Self::default() }
     }
 
-    /// The stand's angle at time `t_s` (uniform turning plus the ripple).
+    /// The stand's angle at time `t_s` (turning at the drifting rate, plus the ripple):
+    /// θ = θ₀ + Σₕ cₕ cos hθ₀ + sₕ sin hθ₀, so θ̇ = θ̇₀ θ′ and θ̈ = θ̇₀² θ″ + θ̈₀ θ′ (primes:
+    /// derivatives in θ₀).
     #[inline]
     pub fn angle(&self, t_s: f64) -> Angle {
         let w = self.rate_rad_s;
-        let th0 = w * t_s + self.phase_rad;
+        let d = self.rate_drift_per_s;
+        let (th0, w0, e0) = if d == 0.0 {
+            (w * t_s + self.phase_rad, w, 0.0)
+        } else {
+            let tau = t_s - self.drift_from_s;
+            (w * (t_s + 0.5 * d * tau * tau) + self.phase_rad, w * (1.0 + d * tau), w * d)
+        };
         let (mut theta, mut d1, mut d2) = (th0, 1.0, 0.0);
         for (h, [c, s]) in self.ripple_rad.iter().enumerate() {
             if *c == 0.0 && *s == 0.0 {
@@ -76,7 +90,7 @@ impl StandMotion {
             d1 += h * (-c * sn + s * cs);
             d2 += h * h * (-c * cs - s * sn);
         }
-        Angle { theta, rate: w * d1, accel: w * w * d2 }
+        Angle { theta, rate: w0 * d1, accel: w0 * w0 * d2 + e0 * d1 }
     }
 
     /// The base's up direction (unit).
@@ -317,6 +331,8 @@ mod tests {
             ripple_rad: [[0.02, -0.01], [0.005, 0.01]],
             wobble_rad: [0.003, -0.002],
             earth_rad_s: [0.0; 3],
+            rate_drift_per_s: -3e-3,
+            drift_from_s: 1.5,
         };
         let rot = |t: f64| {
             let a = s.angle(t);

@@ -402,8 +402,8 @@ impl SimConfig {
     /// A stand that logs its angle ([`stand::StandErrors::encoder_deg`]): the encoder's
     /// reading of conic run `plan`'s true angle at each stamp, rad (None otherwise).
     fn logged_angle(&self, plan: &RunPlan, conic_index: usize, t_s: &[f64]) -> Option<Vec<f64>> {
-        let m = self.stand.encoder_deg.and(self.stand.conic_motion(&plan.motion, conic_index))?;
         let t0 = t_s.first().copied().unwrap_or(0.0);
+        let m = self.stand.encoder_deg.and(self.stand.conic_motion(&plan.motion, conic_index, t0))?;
         Some(
             t_s.iter()
                 .map(|&t| self.stand.logged_deg(self.stand.angle_at(&m, t, t0).theta).unwrap_or(f64::NAN).to_radians())
@@ -423,11 +423,11 @@ impl SimConfig {
         let mount = self.stand.mount_of(&plan.name, &plan.mount).clone();
         let truth = self.stand.static_motion(&plan.motion);
         let tr = track_for(&truth, &mount, rec, self.g_m_s2, deriv);
-        match self.stand.conic_motion(&plan.motion, conic_index).filter(|_| !self.stand.is_zero()) {
+        let t0 = rec.t_s.first().copied().unwrap_or(0.0);
+        match self.stand.conic_motion(&plan.motion, conic_index, t0).filter(|_| !self.stand.is_zero()) {
             Some(m) if self.stand.spin_up_s > 0.0 => {
                 // The stand's angle law is not one a stand motion holds: its states per sample.
                 let fixed = m.fixed(self.g_m_s2);
-                let t0 = rec.t_s.first().copied().unwrap_or(0.0);
                 let states: Vec<crate::motion::Kinematics> =
                     rec.t_s.iter().map(|&t| fixed.at_angle(self.stand.angle_at(&m, t, t0))).collect();
                 tr.on_logged(&states, &mount, "exact (stand spinning up)".into())

@@ -18,6 +18,10 @@ pub struct StandErrors {
     pub cone_angle_deg: f64,
     /// Relative error of every conic run's rate (−0.005: 0.5 % slow).
     pub rate_scale: f64,
+    /// Drift of the conic runs' rate from each run's first sample on: the relative change
+    /// per second (−1e-4: the stand slows by 0.01 % of its rate each second), taken in turn
+    /// (cyclically).
+    pub rate_drift_per_s: Vec<f64>,
     /// Starting phase offset of the conic runs, degrees, taken in turn (cyclically).
     pub phase_deg: Vec<f64>,
     /// Base tilt about the base's x and y axes, degrees (common to the runs).
@@ -89,12 +93,12 @@ impl StandErrors {
         }
     }
 
-    /// The stand's true motion of conic run number `conic_index` declared as `declared`
-    /// (None unless conic).
-    pub fn conic_motion(&self, declared: &MotionSpec, conic_index: usize) -> Option<StandMotion> {
+    /// The stand's true motion of conic run number `conic_index` declared as `declared`,
+    /// the run's first sample at `t0_s` (None unless conic).
+    pub fn conic_motion(&self, declared: &MotionSpec, conic_index: usize, t0_s: f64) -> Option<StandMotion> {
         let MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg } = *declared else { return None };
-        let phase_off =
-            if self.phase_deg.is_empty() { 0.0 } else { self.phase_deg[conic_index % self.phase_deg.len()] };
+        let in_turn = |v: &[f64]| if v.is_empty() { 0.0 } else { v[conic_index % v.len()] };
+        let phase_off = in_turn(&self.phase_deg);
         let ripple = std::array::from_fn(|h| {
             let [r, psi] = self.ripple[h];
             // Speed ripple r·cos(hθ₀ + ψ) is the angle ripple (r/h)·sin(hθ₀ + ψ).
@@ -111,6 +115,8 @@ impl StandErrors {
             ripple_rad: ripple,
             wobble_rad: [wa.to_radians() * wp.to_radians().cos(), wa.to_radians() * wp.to_radians().sin()],
             earth_rad_s: self.earth_base_rad_s(),
+            rate_drift_per_s: in_turn(&self.rate_drift_per_s),
+            drift_from_s: t0_s,
         })
     }
 
@@ -138,7 +144,8 @@ impl StandErrors {
 
     /// Parses the `simulate` flag values: `--stand KEY=VALUE` with keys `cone` (deg),
     /// `rate` (relative), `phase` (deg, comma list), `tilt` (deg,deg), `ripple1` and
-    /// `ripple2` (relative,phase deg), `wobble` (deg,phase deg), `earth` (lat,heading deg),
+    /// `ripple2` (relative,phase deg), `wobble` (deg,phase deg), `drift` (relative per
+    /// second, comma list), `earth` (lat,heading deg),
     /// `mount` (RUN:+y,+x,-z) and `spinup` (s).
     pub fn set(&mut self, spec: &str) -> Result<(), String> {
         let (key, value) =
@@ -156,6 +163,7 @@ impl StandErrors {
         match key {
             "cone" => self.cone_angle_deg = nums(value, 1)?[0],
             "rate" => self.rate_scale = nums(value, 1)?[0],
+            "drift" => self.rate_drift_per_s = nums(value, 0)?,
             "phase" => self.phase_deg = nums(value, 0)?,
             "tilt" => self.tilt_deg = <[f64; 2]>::try_from(nums(value, 2)?).unwrap_or_default(),
             "ripple1" => self.ripple[0] = <[f64; 2]>::try_from(nums(value, 2)?).unwrap_or_default(),
@@ -184,7 +192,7 @@ impl StandErrors {
             }
             _ => {
                 return Err(format!(
-                    "'{key}': expected one of cone, rate, phase, tilt, ripple1, ripple2, wobble, earth, mount, encoder, spinup"
+                    "'{key}': expected one of cone, rate, drift, phase, tilt, ripple1, ripple2, wobble, earth, mount, encoder, spinup"
                 ))
             }
         }
@@ -215,7 +223,7 @@ mod tests {
     #[test]
     fn the_speed_ripple_has_the_asked_relative_size() {
         let s = StandErrors { ripple: [[0.01, 30.0], [0.0; 2]], ..Default::default() };
-        let m = s.conic_motion(&MotionSpec::Conic { cone_angle_deg: 10.0, rate_deg_s: 20.0, phase_deg: 0.0 }, 0);
+        let m = s.conic_motion(&MotionSpec::Conic { cone_angle_deg: 10.0, rate_deg_s: 20.0, phase_deg: 0.0 }, 0, 0.0);
         let m = m.unwrap();
         let rel: Vec<f64> = (0..400).map(|k| m.angle(k as f64 * 0.05).rate / m.rate_rad_s - 1.0).collect();
         let max = rel.iter().copied().fold(0.0, f64::max);

@@ -2,7 +2,8 @@
 //! it leaves is explained by the stand's own parameters, not by the unit.
 //!
 //! Each conic run's true motion is an imperfect stand ([`crate::motion::stand`]) around its
-//! label: per run a cone angle, a rate (relative) and a starting phase; common to the runs
+//! label: per run a cone angle, a rate (relative), a starting phase and a drift of the rate
+//! (relative per second from the run's first sample); common to the runs
 //! a base tilt (two angles), a once- and a twice-per-revolution speed ripple (cos, sin),
 //! a wobble of the cone axis (cos, sin) and the Earth's rate in base axes (three; its
 //! vertical part also turns static poses' gyro outputs along their up, and each static pose
@@ -12,7 +13,7 @@
 //! inputs pushed through the model). The columns, the model's own free coefficients and
 //! the residual are prewhitened with the diagnosis's noise model (the same AR filter per
 //! run and channel as [`super::space`]), and the stand's *groups* — cone angle (common or
-//! per run), rate (common or per run), phase per run, base tilt, ripple ×1, ripple ×2,
+//! per run), rate (common or per run), rate drift (common or per run), phase per run, base tilt, ripple ×1, ripple ×2,
 //! cone wobble, Earth rotation — are judged by the rules of [`super::select`] (χ² gain
 //! with p and ΔBIC, gain on left-out runs). A group that passes, is physically plausible,
 //! takes a material share of the χ² the noise does not explain (`MIN_SHARE`) and beats
@@ -24,7 +25,7 @@
 //! from the model's coefficients (`SEPARABLE`) gets no value.
 
 use super::algebra::{left_information, pinv_sym, Lsq};
-use super::knobs::{knob, Dir, Knobs, BLOCK, KNOBS};
+use super::knobs::{knob, Dir, Knobs, BLOCK, KNOBS, PER_RUN};
 use super::select::Evidence;
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::frames::Mount;
@@ -40,7 +41,7 @@ use rayon::prelude::*;
 use std::sync::Arc;
 
 /// The first common knob (tilt); knobs before it belong to one run.
-const COMMON: usize = 3;
+const COMMON: usize = PER_RUN;
 /// Gauss–Newton steps on an accepted group.
 const MAX_STEPS: usize = 8;
 /// The Earth's rotation rate, rad/s.
@@ -150,11 +151,15 @@ impl Suspect {
             let kind = match (m, run.track.mount()) {
                 (MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg }, Some(mount)) if norm.is_finite() => {
                     g_m_s2 = norm;
-                    let d = StandMotion::ideal(
-                        cone_angle_deg.to_radians(),
-                        rate_deg_s.to_radians(),
-                        phase_deg.to_radians(),
-                    );
+                    let d = StandMotion {
+                        // A drift of the rate counts from the run's first sample.
+                        drift_from_s: run.track.t_s.first().copied().unwrap_or(0.0),
+                        ..StandMotion::ideal(
+                            cone_angle_deg.to_radians(),
+                            rate_deg_s.to_radians(),
+                            phase_deg.to_radians(),
+                        )
+                    };
                     RunStand::Conic { declared: d, now: d, mount: mount.clone() }
                 }
                 (MotionSpec::Static { earth_rate_rad_s, .. }, _) if norm > 0.0 && norm.is_finite() => {
@@ -171,11 +176,11 @@ impl Suspect {
             return None;
         }
         let nc = conic.len();
-        let common = 3 * nc;
-        let earth_z = common + 10;
+        let common = COMMON * nc;
+        let earth_z = common + KNOBS - 1 - COMMON;
         let mut locals = vec![Vec::new(); out.len()];
         for (ci, &r) in conic.iter().enumerate() {
-            let mut l: Vec<(usize, Dir)> = (0..COMMON).map(|k| (3 * ci + k, Dir::Knob(k))).collect();
+            let mut l: Vec<(usize, Dir)> = (0..COMMON).map(|k| (COMMON * ci + k, Dir::Knob(k))).collect();
             let last = if earth_declared { KNOBS - 3 } else { KNOBS };
             l.extend((COMMON..last).map(|k| (common + k - COMMON, Dir::Knob(k))));
             locals[r] = l;
@@ -193,16 +198,18 @@ impl Suspect {
                 }
             }
         }
-        let per_run = |k: usize| -> Vec<Combo> { (0..nc).map(|ci| vec![(3 * ci + k, 1.0)]).collect() };
-        let all = |k: usize| -> Vec<Combo> { vec![(0..nc).map(|ci| (3 * ci + k, 1.0)).collect()] };
+        let per_run = |k: usize| -> Vec<Combo> { (0..nc).map(|ci| vec![(COMMON * ci + k, 1.0)]).collect() };
+        let all = |k: usize| -> Vec<Combo> { vec![(0..nc).map(|ci| (COMMON * ci + k, 1.0)).collect()] };
         let pair = |k: usize| -> Vec<Combo> { vec![vec![(common + k, 1.0)], vec![(common + k + 1, 1.0)]] };
         let mut groups = Vec::new();
         if nc > 0 {
             groups.push(Group { id: "cone-angle", params: all(0) });
             groups.push(Group { id: "stand-rate", params: all(1) });
+            groups.push(Group { id: "stand-rate-drift", params: all(3) });
             if nc > 1 {
                 groups.push(Group { id: "cone-angle-per-run", params: per_run(0) });
                 groups.push(Group { id: "stand-rate-per-run", params: per_run(1) });
+                groups.push(Group { id: "stand-rate-drift-per-run", params: per_run(3) });
             }
             groups.push(Group { id: "phase-per-run", params: per_run(2) });
             groups.push(Group { id: "base-tilt", params: pair(0) });
@@ -624,6 +631,8 @@ impl Suspect {
             "cone-angle" | "cone-angle-per-run" => within(2f64.to_radians()),
             "stand-rate" | "stand-rate-per-run" => within(0.05),
             "phase-per-run" => within(30f64.to_radians()),
+            // 0.1 % of the rate per second: 6 % in a minute's run.
+            "stand-rate-drift" | "stand-rate-drift-per-run" => within(1e-3),
             "base-tilt" | "cone-wobble" => within(2f64.to_radians()),
             "speed-ripple-1" | "speed-ripple-2" => within(0.1),
             "earth-rotation" => {
@@ -804,10 +813,11 @@ impl Suspect {
                         0 => now.cone_angle_rad - declared.cone_angle_rad,
                         1 => now.rate_rad_s / declared.rate_rad_s - 1.0,
                         2 => now.phase_rad - declared.phase_rad,
-                        3 | 4 => now.tilt_rad[k - 3],
-                        5..=8 => now.ripple_rad[(k - 5) / 2][(k - 5) % 2],
-                        9 | 10 => now.wobble_rad[k - 9],
-                        _ => now.earth_rad_s[k - 11],
+                        3 => now.rate_drift_per_s - declared.rate_drift_per_s,
+                        4 | 5 => now.tilt_rad[k - 4],
+                        6..=9 => now.ripple_rad[(k - 6) / 2][(k - 6) % 2],
+                        10 | 11 => now.wobble_rad[k - 10],
+                        _ => now.earth_rad_s[k - 12],
                     },
                     (RunStand::Static { earth, .. }, Dir::Rate(v)) => earth.iter().zip(v).map(|(a, b)| a * b).sum(),
                     _ => 0.0,
@@ -819,7 +829,7 @@ impl Suspect {
 
     /// Per group parameter: the run it belongs to (per-run groups) and its label.
     fn context(&self, group: &Group, names: &[String]) -> Vec<super::stand_words::ParamContext> {
-        let per_run = 3 * self.conic_count();
+        let per_run = COMMON * self.conic_count();
         group
             .params
             .iter()
@@ -831,10 +841,11 @@ impl Suspect {
                     None
                 };
                 let label = run.map_or(f64::NAN, |r| match &self.runs[r] {
-                    RunStand::Conic { declared, .. } => match gi % 3 {
+                    RunStand::Conic { declared, .. } => match gi % COMMON {
                         0 => declared.cone_angle_rad,
                         1 => declared.rate_rad_s,
-                        _ => declared.phase_rad,
+                        2 => declared.phase_rad,
+                        _ => declared.rate_drift_per_s,
                     },
                     _ => f64::NAN,
                 });

@@ -2,7 +2,7 @@
 //! the stand parameters (module docs of [`super`]) and, per channel, the gain G = R₁₁⁻¹R₁₂
 //! of the coefficients on them.
 
-use super::{Predictor, StandProblem, COMMON, COMMON_STEP, EARTH, POSE_STEP, RUN_STEP};
+use super::{Predictor, StandProblem, COMMON, COMMON_STEP, EARTH, POSE_STEP, RUN, RUN_STEP};
 use crate::estimate::{CoefStatus, EstimateError, Fit};
 use crate::model::State;
 use crate::motion::stand::StandAt;
@@ -35,11 +35,11 @@ enum Move {
 
 impl StandProblem<'_> {
     /// The parameters that move run `ri` as (global index, step, how): a conic run's own
-    /// three and the common ones; a static pose's vertical and horizontal Earth rate.
+    /// four and the common ones; a static pose's vertical and horizontal Earth rate.
     fn perturbed(&self, x: &[f64], ri: usize) -> Vec<(usize, f64, Move)> {
         let c0 = self.common();
         if let Some(ci) = self.conic.iter().position(|&i| i == ri) {
-            let own = (0..3).map(|k| (3 * ci + k, RUN_STEP[k]));
+            let own = (0..RUN).map(|k| (RUN * ci + k, RUN_STEP[k]));
             let common = (0..COMMON).map(|k| (c0 + k, COMMON_STEP[k]));
             return own
                 .chain(common)

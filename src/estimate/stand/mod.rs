@@ -1,6 +1,6 @@
 //! The stand's own imperfections estimated jointly with the linear coefficients, because a
 //! stand never sits exactly at its nominal setting: per conic run the actual cone angle α,
-//! rate ω_s and phase φ; common to the runs the base tilt (two angles), the speed ripple
+//! rate ω_s, phase φ and the drift of its rate from the run's first sample; common to the runs the base tilt (two angles), the speed ripple
 //! once and twice per revolution (cos, sin of the angle's ripple) and the wobble of the cone
 //! axis (cos, sin) — the imperfect stand of [`crate::motion::stand`].
 //!
@@ -77,6 +77,13 @@ pub struct StandParams {
     pub value: ConeSetting,
     /// Its standard errors (0 for a setting held at its label).
     pub std_error: ConeSetting,
+    /// The drift of the run's rate from its first sample: the relative change per second
+    /// (0 when held).
+    #[serde(default)]
+    pub rate_drift_per_s: f64,
+    /// Its standard error, per second.
+    #[serde(default)]
+    pub rate_drift_se_per_s: f64,
     /// Settings held at their labels, with why (a run that logs its angle has no rate or
     /// phase to estimate).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -223,10 +230,16 @@ const COMMON_NAMES: [&str; COMMON] = [
     "Earth's rate along the stand base's y",
     "Earth's rate, vertical",
 ];
+/// Number of a conic run's own parameters: α, ω_s, φ and the rate's drift.
+const RUN: usize = 4;
 /// A run's own parameters' names.
-const RUN_NAMES: [&str; 3] = ["cone angle", "rate", "phase"];
-/// Central-difference steps of a run's α (deg), ω_s (deg/s), φ (deg).
-const RUN_STEP: [f64; 3] = [1e-4, 1e-4, 1e-3];
+const RUN_NAMES: [&str; RUN] = ["cone angle", "rate", "phase", "rate drift"];
+/// Central-difference steps of a run's α (deg), ω_s (deg/s), φ (deg) and rate drift
+/// (relative per second).
+const RUN_STEP: [f64; RUN] = [1e-4, 1e-4, 1e-3, 1e-6];
+/// How far a run's rate may drift before the estimate is refused, relative per second
+/// (0.1 %/s: 6 % in a minute's run).
+const DRIFT_LIMIT: f64 = 1e-3;
 /// Central-difference step of the common parameters, rad (rad/s for the Earth's rate).
 const COMMON_STEP: [f64; COMMON] = [1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-8, 1e-8, 1e-8];
 /// Central-difference step of a static pose's horizontal Earth rate, rad/s.
@@ -298,7 +311,7 @@ type Converged = (Vec<f64>, Vec<Track>, Fit);
 type Start = (Vec<Track>, Fit, linearise::Linearised);
 
 /// The stand problem of a session: which runs are conic, and the tracks and fit at given
-/// parameters `x` (per conic run `[α deg, ω_s deg/s, φ deg]`, then the [`COMMON`] ones, rad
+/// parameters `x` (per conic run `[α deg, ω_s deg/s, φ deg, drift 1/s]`, then the [`COMMON`] ones, rad
 /// and rad/s, then per static pose the Earth's horizontal rate along its two horizontal
 /// directions, rad/s — the heading being unknown, each pose has its own).
 struct StandProblem<'a> {
@@ -328,12 +341,12 @@ struct Pose {
 
 impl StandProblem<'_> {
     fn width(&self) -> usize {
-        3 * self.conic.len() + COMMON + 2 * self.poses.len()
+        RUN * self.conic.len() + COMMON + 2 * self.poses.len()
     }
 
     /// Index of the first common parameter.
     fn common(&self) -> usize {
-        3 * self.conic.len()
+        RUN * self.conic.len()
     }
 
     /// The Earth's rate on static pose `pi` at parameters `x`, sensor axes, rad/s: the
@@ -347,8 +360,8 @@ impl StandProblem<'_> {
 
     /// The stand motion of conic run number `ci` at parameters `x`.
     fn stand_of(&self, x: &[f64], ci: usize) -> StandMotion {
-        let p = &x[3 * ci..3 * ci + 3];
-        let c = &x[3 * self.conic.len()..];
+        let p = &x[RUN * ci..RUN * ci + RUN];
+        let c = &x[self.common()..];
         StandMotion {
             cone_angle_rad: p[0].to_radians(),
             rate_rad_s: p[1].to_radians(),
@@ -357,6 +370,8 @@ impl StandProblem<'_> {
             ripple_rad: [[c[2], c[3]], [c[4], c[5]]],
             wobble_rad: [c[6], c[7]],
             earth_rad_s: [c[EARTH], c[EARTH + 1], c[EARTH + 2]],
+            rate_drift_per_s: p[3],
+            drift_from_s: self.declared[self.conic[ci]].t_s.first().copied().unwrap_or(0.0),
         }
     }
 
@@ -532,9 +547,9 @@ impl StandProblem<'_> {
             )));
         }
         for (r, &i) in self.conic.iter().enumerate() {
-            let (p, n) = (&x[3 * r..3 * r + 3], &nominal[3 * r..3 * r + 3]);
-            let limit = [2.0, 0.05 * n[1].abs().max(1.0), 30.0];
-            if let Some(k) = (0..3).find(|&k| (p[k] - n[k]).abs() > limit[k] || !p[k].is_finite()) {
+            let (p, n) = (&x[RUN * r..RUN * r + RUN], &nominal[RUN * r..RUN * r + RUN]);
+            let limit = [2.0, 0.05 * n[1].abs().max(1.0), 30.0, DRIFT_LIMIT];
+            if let Some(k) = (0..RUN).find(|&k| (p[k] - n[k]).abs() > limit[k] || !p[k].is_finite()) {
                 return Err(EstimateError::NotConverged(format!(
                     "run '{}': the estimated {} {:.4} is implausibly far from its label {} (limit ±{}); check the run's label (cone angle, rate and direction)",
                     self.session.runs[i].spec.name, RUN_NAMES[k], p[k], n[k], limit[k]
@@ -567,7 +582,7 @@ impl StandProblem<'_> {
 
     /// Why a parameter is held, in words.
     fn held_reason(&self, j: usize, raw: f64) -> String {
-        let logs = j < 3 * self.conic.len() && self.logged[self.conic[j / 3]].is_some();
+        let logs = j < self.common() && self.logged[self.conic[j / RUN]].is_some();
         if self.is_declared(j) {
             "declared in the manifest (earth_rate on the static runs); not estimated".to_string()
         } else if logs {
@@ -638,8 +653,12 @@ pub(crate) fn fit_with_stand(
             _ => None,
         })
         .collect();
-    let mut nominal: Vec<f64> =
-        conic.iter().filter_map(|&i| conic_of(&session.runs[i].spec.motion)).flatten().collect();
+    // Per conic run its label's α, ω_s, φ and no drift.
+    let mut nominal: Vec<f64> = conic
+        .iter()
+        .filter_map(|&i| conic_of(&session.runs[i].spec.motion))
+        .flat_map(|[a, w, p]| [a, w, p, 0.0])
+        .collect();
     let earth_declared = session.runs.iter().any(|r| {
         matches!(r.spec.motion, MotionSpec::Static { earth_rate_rad_s, .. } if earth_rate_rad_s.iter().any(|v| *v != 0.0))
     });
@@ -686,16 +705,18 @@ pub(crate) fn fit_with_stand(
         .enumerate()
         .map(|(r, &i)| StandParams {
             run: session.runs[i].spec.name.clone(),
-            nominal: ConeSetting::from(std::array::from_fn(|k| nominal[3 * r + k])),
-            value: ConeSetting::from(std::array::from_fn(|k| x[3 * r + k])),
-            std_error: ConeSetting::from(std::array::from_fn(|k| se(3 * r + k))),
-            held: (0..3)
-                .filter(|&k| held(3 * r + k))
-                .map(|k| format!("{}: {}", RUN_NAMES[k], problem.held_reason(3 * r + k, lin.raw[3 * r + k])))
+            nominal: ConeSetting::from(std::array::from_fn(|k| nominal[RUN * r + k])),
+            value: ConeSetting::from(std::array::from_fn(|k| x[RUN * r + k])),
+            std_error: ConeSetting::from(std::array::from_fn(|k| se(RUN * r + k))),
+            rate_drift_per_s: x[RUN * r + 3],
+            rate_drift_se_per_s: se(RUN * r + 3),
+            held: (0..RUN)
+                .filter(|&k| held(RUN * r + k))
+                .map(|k| format!("{}: {}", RUN_NAMES[k], problem.held_reason(RUN * r + k, lin.raw[RUN * r + k])))
                 .collect(),
         })
         .collect();
-    let c0 = 3 * problem.conic.len();
+    let c0 = problem.common();
     let held_common: Vec<String> = (0..COMMON)
         .filter(|&k| held(c0 + k))
         .map(|k| format!("{}: {}", COMMON_NAMES[k], problem.held_reason(c0 + k, lin.raw[c0 + k])))
