@@ -4,7 +4,7 @@
 
 use crate::frames::Mount;
 use crate::model::{Predictor, State};
-use crate::motion::stand::{to_sensor, StandAt, StandMotion};
+use crate::motion::stand::{to_sensor, Angle, StandAt, StandMotion};
 
 /// Motion parameters of a conic run: its own cone, rate (relative), phase and rate drift
 /// (relative per second), then the common tilt ×2, ripple ×4, wobble ×2, Earth ×3.
@@ -95,14 +95,15 @@ impl<'m> Knobs<'m> {
         }
     }
 
-    /// Gathers sample `i` of the block: state `st` at `t_s` and each local parameter's
-    /// nudged state. The stand's angle and cone angle are worked out once and their sines
+    /// Gathers sample `i` of the block: state `st` at `t_s` (at the stand's `logged` angle
+    /// when it logs it: no knob that moves the angle is then local) and each local
+    /// parameter's nudged state. The stand's angle and cone angle are worked out once and their sines
     /// reused by the parameters that leave them alone (the same numbers as the nudged
     /// motion's own [`StandAt::at_angle`]).
-    pub(super) fn push(&mut self, i: usize, t_s: f64, st: &State) {
+    pub(super) fn push(&mut self, i: usize, t_s: f64, logged: Option<Angle>, st: &State) {
         self.base[i] = *st;
         let at = self.stand.as_ref().map(|(now, ..)| {
-            let an = now.motion.angle(t_s);
+            let an = logged.unwrap_or_else(|| now.motion.angle(t_s));
             let sc = libm::sincos(an.theta);
             (an, sc, now.cone_trig(sc))
         });
@@ -111,8 +112,7 @@ impl<'m> Knobs<'m> {
             match (dir, &self.stand, &at) {
                 (Dir::Knob(kn), Some((_, nudged, mount)), Some((an0, sc0, cone0))) => {
                     let m = &nudged[j];
-                    // Rate, phase, drift and ripple move the stand's angle; the others keep it.
-                    let x = if matches!(kn, 1..=3 | 6..=9) {
+                    let x = if moves_angle(kn) {
                         let an = m.motion.angle(t_s);
                         m.at_angle_trig(an, sincos_near(an.theta, an0.theta, *sc0), Some(*cone0))
                     } else {
@@ -208,6 +208,12 @@ fn sincos_near(theta: f64, theta0: f64, (s0, c0): (f64, f64)) -> (f64, f64) {
     let sd = d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0) * (1.0 - d2 * (1.0 / 42.0))));
     let cd = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0)));
     (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
+}
+
+/// Whether knob `k` moves the stand's angle (rate, phase, drift, ripple): a stand that logs
+/// its angle follows the log instead.
+pub(super) fn moves_angle(k: usize) -> bool {
+    matches!(k, 1..=3 | 6..=9)
 }
 
 /// Applies a knob of a stand motion (rate relative to the label `declared_rate`).

@@ -44,6 +44,10 @@ enum Source {
     Constant(SensorKinematics),
     /// An imperfect conic stand ([`super::stand::StandMotion`]) evaluated at `t − lag_s`.
     Stand { s: super::stand::StandAt, mount: Mount, lag_s: f64 },
+    /// A conic stand that logs its angle: the stand motion's cone angle, tilt, wobble and
+    /// Earth's rate at each sample's logged angle and its derivatives (its own rate, phase,
+    /// drift and ripple unused).
+    Logged { s: super::stand::StandAt, angles: Arc<[super::stand::Angle]>, mount: Mount },
 }
 
 /// True motion of one run in sensor axes, one state per recorded sample (SI units).
@@ -124,6 +128,7 @@ impl Track {
                 *s
             }
             Source::Stand { s, mount, lag_s } => s.sensor_at(self.t_s[k] - lag_s, mount),
+            Source::Logged { s, angles, mount } => super::stand::to_sensor(s.at_angle(angles[k]), mount),
         };
         for m in &self.maps {
             m.apply(&mut s);
@@ -141,19 +146,34 @@ impl Track {
     /// The mount of a conic track (None for stored or constant motion).
     pub fn mount(&self) -> Option<&Mount> {
         match &self.source {
-            Source::Conic { mount, .. } | Source::Stand { mount, .. } => Some(mount),
+            Source::Conic { mount, .. } | Source::Stand { mount, .. } | Source::Logged { mount, .. } => Some(mount),
+            _ => None,
+        }
+    }
+
+    /// The stand's logged angle with its derivatives at each sample, for a conic run whose
+    /// stand logs it (None otherwise).
+    pub fn logged_angles(&self) -> Option<&[super::stand::Angle]> {
+        match &self.source {
+            Source::Logged { angles, .. } => Some(angles),
             _ => None,
         }
     }
 
     /// The same stamps (and temperature branch and maps) on an imperfect conic stand's
-    /// motion, through `mount` (the stand's own settings replace the declared ones).
+    /// motion, through `mount` (the stand's own settings replace the declared ones). A run
+    /// whose stand logs its angle keeps following it: the motion's cone angle, tilt, wobble
+    /// and Earth's rate apply at the logged angles.
     pub fn on_stand(&self, s: super::stand::StandMotion, g_m_s2: f64, mount: Mount) -> Track {
-        Track {
-            source: Source::Stand { s: s.fixed(g_m_s2), mount, lag_s: 0.0 },
-            epsilon_source: "exact (stand motion with its estimated imperfections differentiated)".into(),
-            ..self.clone()
-        }
+        let source = match &self.source {
+            Source::Logged { angles, .. } => Source::Logged { s: s.fixed(g_m_s2), angles: angles.clone(), mount },
+            _ => Source::Stand { s: s.fixed(g_m_s2), mount, lag_s: 0.0 },
+        };
+        let epsilon_source = match &self.source {
+            Source::Logged { .. } => self.epsilon_source.clone(),
+            _ => "exact (stand motion with its estimated imperfections differentiated)".into(),
+        };
+        Track { source, epsilon_source, ..self.clone() }
     }
 
     /// The same stamps (and temperature branch and maps) with states given in stand axes
@@ -194,6 +214,9 @@ impl Track {
         let same_source = match (&self.source, &base.source) {
             (Source::Sampled { w, e, a }, Source::Sampled { w: w2, e: e2, a: a2 }) => {
                 Arc::ptr_eq(w, w2) && Arc::ptr_eq(e, e2) && Arc::ptr_eq(a, a2)
+            }
+            (Source::Logged { s, angles, mount }, Source::Logged { s: s2, angles: a2, mount: m2 }) => {
+                s == s2 && Arc::ptr_eq(angles, a2) && mount == m2
             }
             (x, y) => x == y,
         };
@@ -266,6 +289,9 @@ impl Track {
             Source::Sampled { w, e, a } => {
                 Source::Sampled { w: w[k0..k1].into(), e: e[k0..k1].into(), a: a[k0..k1].into() }
             }
+            Source::Logged { s, angles, mount } => {
+                Source::Logged { s: *s, angles: angles[k0..k1].into(), mount: mount.clone() }
+            }
             other => other.clone(),
         };
         Track {
@@ -286,6 +312,9 @@ impl Track {
             Source::Sampled { w, e, a } => {
                 let pick = |x: &[V3<Sensor>]| x.iter().step_by(step).copied().collect();
                 Source::Sampled { w: pick(w), e: pick(e), a: pick(a) }
+            }
+            Source::Logged { s, angles, mount } => {
+                Source::Logged { s: *s, angles: angles.iter().step_by(step).copied().collect(), mount: mount.clone() }
             }
             other => other.clone(),
         };
@@ -366,17 +395,9 @@ fn logged_source(
     g_m_s2: f64,
     deriv: &DerivativeConfig,
 ) -> (Source, String) {
-    let stand = super::stand::StandMotion::ideal(cone_angle_rad, 0.0, 0.0);
-    let angles = super::stand::logged_angles(&rec.t_s, theta_rad, deriv);
-    let n = angles.len();
-    let (mut w, mut e, mut a) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
-    for an in angles {
-        let k = stand.at_angle(an, g_m_s2);
-        w.push(mount.to_sensor(k.w_rad_s));
-        e.push(mount.to_sensor(k.e_rad_s2));
-        a.push(mount.to_sensor(k.a_m_s2));
-    }
-    (Source::Sampled { w: w.into(), e: e.into(), a: a.into() }, super::stand::logged_method(deriv))
+    let s = super::stand::StandMotion::ideal(cone_angle_rad, 0.0, 0.0).fixed(g_m_s2);
+    let angles = super::stand::logged_angles(&rec.t_s, theta_rad, deriv).into();
+    (Source::Logged { s, angles, mount: mount.clone() }, super::stand::logged_method(deriv))
 }
 
 /// A reference run's stored states, with ε given or derived from the reference rate.

@@ -25,7 +25,7 @@
 //! from the model's coefficients (`SEPARABLE`) gets no value.
 
 use super::algebra::{left_information, pinv_sym, Lsq};
-use super::knobs::{knob, Dir, Knobs, BLOCK, KNOBS, PER_RUN};
+use super::knobs::{knob, moves_angle, Dir, Knobs, BLOCK, KNOBS, PER_RUN};
 use super::select::Evidence;
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::frames::Mount;
@@ -179,12 +179,17 @@ impl Suspect {
         let common = COMMON * nc;
         let earth_z = common + KNOBS - 1 - COMMON;
         let mut locals = vec![Vec::new(); out.len()];
+        let logs = |r: usize| runs[r].track.logged_angles().is_some();
         for (ci, &r) in conic.iter().enumerate() {
-            let mut l: Vec<(usize, Dir)> = (0..COMMON).map(|k| (COMMON * ci + k, Dir::Knob(k))).collect();
+            // A stand that logs its angle: the run's rate, phase, drift and ripple are the log's.
+            let follows = |k: &usize| !(logs(r) && moves_angle(*k));
+            let mut l: Vec<(usize, Dir)> =
+                (0..COMMON).filter(follows).map(|k| (COMMON * ci + k, Dir::Knob(k))).collect();
             let last = if earth_declared { KNOBS - 3 } else { KNOBS };
-            l.extend((COMMON..last).map(|k| (common + k - COMMON, Dir::Knob(k))));
+            l.extend((COMMON..last).filter(follows).map(|k| (common + k - COMMON, Dir::Knob(k))));
             locals[r] = l;
         }
+        let free_angle = conic.iter().any(|&r| !logs(r));
         let mut width = common + KNOBS - COMMON;
         let mut horizontals = Vec::new();
         if !earth_declared {
@@ -204,17 +209,22 @@ impl Suspect {
         let mut groups = Vec::new();
         if nc > 0 {
             groups.push(Group { id: "cone-angle", params: all(0) });
-            groups.push(Group { id: "stand-rate", params: all(1) });
-            groups.push(Group { id: "stand-rate-drift", params: all(3) });
             if nc > 1 {
                 groups.push(Group { id: "cone-angle-per-run", params: per_run(0) });
-                groups.push(Group { id: "stand-rate-per-run", params: per_run(1) });
-                groups.push(Group { id: "stand-rate-drift-per-run", params: per_run(3) });
             }
-            groups.push(Group { id: "phase-per-run", params: per_run(2) });
+            // Groups of the stand's angle, unless every conic run logs it.
+            if free_angle {
+                groups.push(Group { id: "stand-rate", params: all(1) });
+                groups.push(Group { id: "stand-rate-drift", params: all(3) });
+                if nc > 1 {
+                    groups.push(Group { id: "stand-rate-per-run", params: per_run(1) });
+                    groups.push(Group { id: "stand-rate-drift-per-run", params: per_run(3) });
+                }
+                groups.push(Group { id: "phase-per-run", params: per_run(2) });
+                groups.push(Group { id: "speed-ripple-1", params: pair(2) });
+                groups.push(Group { id: "speed-ripple-2", params: pair(4) });
+            }
             groups.push(Group { id: "base-tilt", params: pair(0) });
-            groups.push(Group { id: "speed-ripple-1", params: pair(2) });
-            groups.push(Group { id: "speed-ripple-2", params: pair(4) });
             groups.push(Group { id: "cone-wobble", params: pair(6) });
         }
         if !earth_declared {
@@ -388,6 +398,7 @@ impl Suspect {
         let mut states: [Vec<State>; 2] = [Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK)];
         let mut base: Vec<State> = Vec::with_capacity(BLOCK);
         let how = [0, 1].map(|si| run.seen_from(seen[si].as_ref()));
+        let logged = run.track.logged_angles();
         let mut basis = vec![0.0; noise.basis.size * BLOCK];
         let mut brow = vec![0.0; noise.basis.size];
         // The residual (output − the fitted model on the motion each sensor sees).
@@ -402,7 +413,7 @@ impl Suspect {
                 run.seen_states(&how[si], &base, k0, s);
             }
             for (i, k) in (k0..k1).enumerate() {
-                knobs.push(i, run.track.t_s[k], &base[i]);
+                knobs.push(i, run.track.t_s[k], logged.map(|a| a[k]), &base[i]);
                 if any_slow {
                     noise.basis.row(run.track.t_s[k], &mut brow);
                     for (b, v) in brow.iter().enumerate() {
