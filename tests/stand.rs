@@ -151,12 +151,12 @@ fn a_logged_stand_angle_makes_speed_ripple_cost_nothing() {
     let rms: Vec<f64> = f.gyro.channels.iter().map(|c| c.residual_rms).collect();
     println!("logged angle: worst |error|/se {worst:.2}, gyro residual rms / noise {:?}", rms.map_or_each(noise));
     assert!(rms.iter().all(|r| *r < 1.02 * noise), "{rms:?}");
-    // `fit --stand` on it: the rate, phase, drift and ripple follow the logged angle (held, said
-    // so); the cone angle and tilt are still estimated.
+    // `fit --stand` on it: the rate, drift and ripple follow the logged angle (held, said
+    // so); the cone angle, tilt and the encoder's offset (the phase) are still estimated.
     let fs = fit_with_stand(&model, &logged).unwrap();
     let held: Vec<&String> = fs.stand.iter().flat_map(|p| &p.held).collect();
     println!("held per run: {:?}\nheld common: {:?}", &held[..2], fs.stand_base.as_ref().map(|b| &b.held));
-    assert_eq!(held.len(), 3 * fs.stand.len(), "{held:?}");
+    assert_eq!(held.len(), 2 * fs.stand.len(), "{held:?}");
     assert!(held.iter().all(|h| h.contains("logged angle")), "{held:?}");
     let base = fs.stand_base.as_ref().unwrap();
     assert_eq!(base.held.len(), 4, "{:?}", base.held);
@@ -199,6 +199,26 @@ fn a_rate_drifting_within_each_run_is_estimated_per_run() {
     }
     println!("rate drift: worst |error|/se = {worst_drift:.2} over {} runs", f.stand.len());
     assert!(worst_drift < 4.0, "{worst_drift}");
+}
+
+/// An encoder whose zero is 1.2° off the stand's: `fit --stand` estimates each logged run's
+/// phase as the offset (−1.2° within 3 SE), and the coefficients with it.
+#[test]
+fn fit_stand_estimates_an_encoders_offset_as_the_phase() {
+    let mut cfg = noisy_paper(33, 36.0, 100.0);
+    cfg.stand.set("encoder=0.001").unwrap();
+    cfg.stand.set("encoder-offset=1.2").unwrap();
+    let s = cfg.generate();
+    let f = fit_with_stand(&Model::default_model(), &s).unwrap();
+    let worst = worst_z(&f, &cfg);
+    println!("coefficients: worst |error|/se = {worst:.2}");
+    assert!(worst < 4.0, "worst |error|/se {worst}");
+    let mut worst_phase = 0.0f64;
+    for p in &f.stand {
+        worst_phase = worst_phase.max(((p.value.get(2) + 1.2) / p.std_error.get(2)).abs());
+    }
+    println!("encoder offset: worst |error|/se = {worst_phase:.2}");
+    assert!(worst_phase < 4.0, "{worst_phase}");
 }
 
 /// Ratios of each value to `by`.

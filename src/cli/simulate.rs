@@ -119,7 +119,8 @@ pub struct Args {
     /// earth=LAT_DEG,HEADING_DEG (the Earth's rotation, undeclared), spinup=S (each conic
     /// run recorded from rest, the stand at speed after S seconds); and encoder=RES_DEG: the
     /// stand logs its angle with this resolution (0: exact) in a `theta_deg` column of each
-    /// conic run, named by the run's `angle_column` (the fit then follows it).
+    /// conic run, named by the run's `angle_column` (the fit then follows it), with
+    /// encoder-offset=DEG: the encoder's zero this far off the stand's.
     #[arg(long = "stand", value_name = "KEY=VALUE")]
     stand: Vec<String>,
 }

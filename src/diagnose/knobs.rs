@@ -96,14 +96,14 @@ impl<'m> Knobs<'m> {
     }
 
     /// Gathers sample `i` of the block: state `st` at `t_s` (at the stand's `logged` angle
-    /// when it logs it: no knob that moves the angle is then local) and each local
-    /// parameter's nudged state. The stand's angle and cone angle are worked out once and their sines
+    /// when it logs it: of the knobs that move the angle only the phase, the encoder's
+    /// offset, is then local) and each local parameter's nudged state. The stand's angle and cone angle are worked out once and their sines
     /// reused by the parameters that leave them alone (the same numbers as the nudged
     /// motion's own [`StandAt::at_angle`]).
     pub(super) fn push(&mut self, i: usize, t_s: f64, logged: Option<Angle>, st: &State) {
         self.base[i] = *st;
         let at = self.stand.as_ref().map(|(now, ..)| {
-            let an = logged.unwrap_or_else(|| now.motion.angle(t_s));
+            let an = now.motion.angle_or_logged(t_s, logged);
             let sc = libm::sincos(an.theta);
             (an, sc, now.cone_trig(sc))
         });
@@ -113,7 +113,7 @@ impl<'m> Knobs<'m> {
                 (Dir::Knob(kn), Some((_, nudged, mount)), Some((an0, sc0, cone0))) => {
                     let m = &nudged[j];
                     let x = if moves_angle(kn) {
-                        let an = m.motion.angle(t_s);
+                        let an = m.motion.angle_or_logged(t_s, logged);
                         m.at_angle_trig(an, sincos_near(an.theta, an0.theta, *sc0), Some(*cone0))
                     } else {
                         m.at_angle_trig(*an0, *sc0, Some(*cone0))
@@ -210,10 +210,15 @@ fn sincos_near(theta: f64, theta0: f64, (s0, c0): (f64, f64)) -> (f64, f64) {
     (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
 }
 
-/// Whether knob `k` moves the stand's angle (rate, phase, drift, ripple): a stand that logs
-/// its angle follows the log instead.
+/// Whether knob `k` moves the stand's angle (rate, phase, drift, ripple).
 pub(super) fn moves_angle(k: usize) -> bool {
     matches!(k, 1..=3 | 6..=9)
+}
+
+/// Whether knob `k` belongs to a run whose stand logs its angle (`logs`): the log holds the
+/// rate, drift and ripple; the phase is then the encoder's offset.
+pub(super) fn follows(k: usize, logs: bool) -> bool {
+    !(logs && moves_angle(k) && k != 2)
 }
 
 /// Applies a knob of a stand motion (rate relative to the label `declared_rate`).

@@ -146,6 +146,17 @@ pub fn finding(
                 ),
             )
         }
+        "encoder-offset" => {
+            // The model turns the log by φ: the log reads −φ off the stand's angle.
+            let (d, s) = (-deg(v[0]), deg(se[0]));
+            (
+                vec![value("logged angle offset (every run that logs it)".into(), d, s, "deg")],
+                format!(
+                    "the stand: its logged angle reads {}° off the stand's zero (the encoder's zero; every run that logs it): correct the encoder's zero or fit with --stand",
+                    pm(d, s, 3, true)
+                ),
+            )
+        }
         "cone-angle-per-run" | "stand-rate-per-run" | "phase-per-run" | "stand-rate-drift-per-run" => {
             per_run(id, v, se, ctx)
         }

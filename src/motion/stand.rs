@@ -93,6 +93,17 @@ impl StandMotion {
         Angle { theta, rate: w0 * d1, accel: w0 * w0 * d2 + e0 * d1 }
     }
 
+    /// The stand's angle at `t_s`, or, for a stand that logs it, the `logged` angle offset
+    /// by the motion's phase (the encoder's zero: the angle the log reads when the stand is
+    /// at its own zero is −φ).
+    #[inline]
+    pub fn angle_or_logged(&self, t_s: f64, logged: Option<Angle>) -> Angle {
+        match logged {
+            Some(a) => Angle { theta: a.theta + self.phase_rad, ..a },
+            None => self.angle(t_s),
+        }
+    }
+
     /// The base's up direction (unit).
     pub fn up(&self) -> [f64; 3] {
         let [tx, ty] = self.tilt_rad;

@@ -45,8 +45,8 @@ enum Source {
     /// An imperfect conic stand ([`super::stand::StandMotion`]) evaluated at `t − lag_s`.
     Stand { s: super::stand::StandAt, mount: Mount, lag_s: f64 },
     /// A conic stand that logs its angle: the stand motion's cone angle, tilt, wobble and
-    /// Earth's rate at each sample's logged angle and its derivatives (its own rate, phase,
-    /// drift and ripple unused).
+    /// Earth's rate at each sample's logged angle and its derivatives, its phase the
+    /// encoder's offset (its own rate, drift and ripple unused).
     Logged { s: super::stand::StandAt, angles: Arc<[super::stand::Angle]>, mount: Mount },
 }
 
@@ -128,7 +128,9 @@ impl Track {
                 *s
             }
             Source::Stand { s, mount, lag_s } => s.sensor_at(self.t_s[k] - lag_s, mount),
-            Source::Logged { s, angles, mount } => super::stand::to_sensor(s.at_angle(angles[k]), mount),
+            Source::Logged { s, angles, mount } => {
+                super::stand::to_sensor(s.at_angle(s.motion.angle_or_logged(0.0, Some(angles[k]))), mount)
+            }
         };
         for m in &self.maps {
             m.apply(&mut s);

@@ -39,6 +39,9 @@ pub struct StandErrors {
     /// conic run's CSV gets a `theta_deg` column, named by the run's `angle_column` in the
     /// manifest. Not an imperfection: it is what lets a fit follow the others.
     pub encoder_deg: Option<f64>,
+    /// The encoder's zero is off the stand's: its logged angle reads this many degrees
+    /// more than the stand's angle.
+    pub encoder_offset_deg: f64,
     /// Each conic run is recorded from rest: the stand's rate rises from 0 to its own over
     /// this many seconds (raised cosine, θ̇ = ω (1 − cos(π t/T))/2), so that its angle then
     /// lags the manifest's by ω T/2. 0: at speed from the first sample.
@@ -48,14 +51,14 @@ pub struct StandErrors {
 impl StandErrors {
     /// True when the stand moves exactly as declared (whether it logs its angle or not).
     pub fn is_zero(&self) -> bool {
-        Self { encoder_deg: None, ..self.clone() } == Self::default()
+        Self { encoder_deg: None, encoder_offset_deg: 0.0, ..self.clone() } == Self::default()
     }
 
     /// The angle an encoder of [`Self::encoder_deg`] logs for the true angle `theta_rad`,
     /// degrees (rounded to the resolution).
     pub fn logged_deg(&self, theta_rad: f64) -> Option<f64> {
         let res = self.encoder_deg?;
-        let deg = theta_rad.to_degrees();
+        let deg = theta_rad.to_degrees() + self.encoder_offset_deg;
         Some(if res > 0.0 { (deg / res).round() * res } else { deg })
     }
 
@@ -146,7 +149,8 @@ impl StandErrors {
     /// `rate` (relative), `phase` (deg, comma list), `tilt` (deg,deg), `ripple1` and
     /// `ripple2` (relative,phase deg), `wobble` (deg,phase deg), `drift` (relative per
     /// second, comma list), `earth` (lat,heading deg),
-    /// `mount` (RUN:+y,+x,-z) and `spinup` (s).
+    /// `mount` (RUN:+y,+x,-z), `encoder` (resolution, deg), `encoder-offset` (deg) and
+    /// `spinup` (s).
     pub fn set(&mut self, spec: &str) -> Result<(), String> {
         let (key, value) =
             spec.split_once('=').ok_or_else(|| format!("'{spec}': expected KEY=VALUE, e.g. cone=0.3"))?;
@@ -177,6 +181,7 @@ impl StandErrors {
                 }
                 self.encoder_deg = Some(res);
             }
+            "encoder-offset" => self.encoder_offset_deg = nums(value, 1)?[0],
             "spinup" => {
                 self.spin_up_s = nums(value, 1)?[0];
                 if self.spin_up_s < 0.0 {
@@ -192,7 +197,7 @@ impl StandErrors {
             }
             _ => {
                 return Err(format!(
-                    "'{key}': expected one of cone, rate, drift, phase, tilt, ripple1, ripple2, wobble, earth, mount, encoder, spinup"
+                    "'{key}': expected one of cone, rate, drift, phase, tilt, ripple1, ripple2, wobble, earth, mount, encoder, encoder-offset, spinup"
                 ))
             }
         }

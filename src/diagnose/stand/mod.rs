@@ -25,7 +25,7 @@
 //! from the model's coefficients (`SEPARABLE`) gets no value.
 
 use super::algebra::{left_information, pinv_sym, Lsq};
-use super::knobs::{knob, moves_angle, Dir, Knobs, BLOCK, KNOBS, PER_RUN};
+use super::knobs::{follows, knob, Dir, Knobs, BLOCK, KNOBS, PER_RUN};
 use super::select::Evidence;
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::frames::Mount;
@@ -151,6 +151,9 @@ impl Suspect {
             let kind = match (m, run.track.mount()) {
                 (MotionSpec::Conic { cone_angle_deg, rate_deg_s, phase_deg }, Some(mount)) if norm.is_finite() => {
                     g_m_s2 = norm;
+                    // A stand that logs its angle starts from the log (its phase is the
+                    // encoder's offset, none declared).
+                    let phase_deg = if run.track.logged_angles().is_some() { 0.0 } else { *phase_deg };
                     let d = StandMotion {
                         // A drift of the rate counts from the run's first sample.
                         drift_from_s: run.track.t_s.first().copied().unwrap_or(0.0),
@@ -181,12 +184,11 @@ impl Suspect {
         let mut locals = vec![Vec::new(); out.len()];
         let logs = |r: usize| runs[r].track.logged_angles().is_some();
         for (ci, &r) in conic.iter().enumerate() {
-            // A stand that logs its angle: the run's rate, phase, drift and ripple are the log's.
-            let follows = |k: &usize| !(logs(r) && moves_angle(*k));
-            let mut l: Vec<(usize, Dir)> =
-                (0..COMMON).filter(follows).map(|k| (COMMON * ci + k, Dir::Knob(k))).collect();
+            // A stand that logs its angle: the run's rate, drift and ripple are the log's.
+            let own = |k: &usize| follows(*k, logs(r));
+            let mut l: Vec<(usize, Dir)> = (0..COMMON).filter(own).map(|k| (COMMON * ci + k, Dir::Knob(k))).collect();
             let last = if earth_declared { KNOBS - 3 } else { KNOBS };
-            l.extend((COMMON..last).filter(follows).map(|k| (common + k - COMMON, Dir::Knob(k))));
+            l.extend((COMMON..last).filter(own).map(|k| (common + k - COMMON, Dir::Knob(k))));
             locals[r] = l;
         }
         let free_angle = conic.iter().any(|&r| !logs(r));
@@ -223,6 +225,15 @@ impl Suspect {
                 groups.push(Group { id: "phase-per-run", params: per_run(2) });
                 groups.push(Group { id: "speed-ripple-1", params: pair(2) });
                 groups.push(Group { id: "speed-ripple-2", params: pair(4) });
+            }
+            // The encoder's zero, common to the runs that log the angle.
+            let logged: Combo =
+                conic.iter().enumerate().filter(|(_, &r)| logs(r)).map(|(ci, _)| (COMMON * ci + 2, 1.0)).collect();
+            if !logged.is_empty() {
+                groups.push(Group { id: "encoder-offset", params: vec![logged] });
+            }
+            if !free_angle {
+                groups.push(Group { id: "phase-per-run", params: per_run(2) });
             }
             groups.push(Group { id: "base-tilt", params: pair(0) });
             groups.push(Group { id: "cone-wobble", params: pair(6) });
@@ -641,7 +652,7 @@ impl Suspect {
         match id {
             "cone-angle" | "cone-angle-per-run" => within(2f64.to_radians()),
             "stand-rate" | "stand-rate-per-run" => within(0.05),
-            "phase-per-run" => within(30f64.to_radians()),
+            "phase-per-run" | "encoder-offset" => within(30f64.to_radians()),
             // 0.1 % of the rate per second: 6 % in a minute's run.
             "stand-rate-drift" | "stand-rate-drift-per-run" => within(1e-3),
             "base-tilt" | "cone-wobble" => within(2f64.to_radians()),

@@ -380,7 +380,9 @@ impl StandProblem<'_> {
     fn state_at(&self, ri: usize, sm: &StandAt, k: usize) -> SensorKinematics {
         let mount = &self.session.runs[ri].spec.mount;
         match &self.logged[ri] {
-            Some(angles) => crate::motion::stand::to_sensor(sm.at_angle(angles[k]), mount),
+            Some(angles) => {
+                crate::motion::stand::to_sensor(sm.at_angle(sm.motion.angle_or_logged(0.0, Some(angles[k]))), mount)
+            }
             None => sm.sensor_at(self.declared[ri].t_s[k], mount),
         }
     }
@@ -408,7 +410,11 @@ impl StandProblem<'_> {
                 let mount = &self.session.runs[ri].spec.mount;
                 match &self.logged[ri] {
                     Some(angles) => {
-                        let states: Vec<_> = angles.iter().map(|a| sm.at_angle(*a, self.g_m_s2)).collect();
+                        // The phase turns the log: the encoder's offset.
+                        let states: Vec<_> = angles
+                            .iter()
+                            .map(|a| sm.at_angle(sm.angle_or_logged(0.0, Some(*a)), self.g_m_s2))
+                            .collect();
                         self.declared[ri].on_logged(&states, mount, crate::motion::stand::logged_method(self.deriv))
                     }
                     None => self.declared[ri].on_stand(sm, self.g_m_s2, mount.clone()),
@@ -657,7 +663,9 @@ pub(crate) fn fit_with_stand(
     let mut nominal: Vec<f64> = conic
         .iter()
         .filter_map(|&i| conic_of(&session.runs[i].spec.motion))
-        .flat_map(|[a, w, p]| [a, w, p, 0.0])
+        .zip(&conic)
+        // A run that logs its angle has no declared phase: its phase is the encoder's offset.
+        .flat_map(|([a, w, p], &i)| [a, w, if session.runs[i].rec.angle_rad.is_some() { 0.0 } else { p }, 0.0])
         .collect();
     let earth_declared = session.runs.iter().any(|r| {
         matches!(r.spec.motion, MotionSpec::Static { earth_rate_rad_s, .. } if earth_rate_rad_s.iter().any(|v| *v != 0.0))
