@@ -56,6 +56,7 @@ const SEPARABLE: f64 = 1e-6;
 pub use super::stand_words::{StandFinding, StandValue};
 
 mod rejudge;
+mod report;
 
 /// A run's noise model as the stand's systems weigh it: the AR filter per channel, and the
 /// slow noise's random effect on the run's basis ([`super::slow`]; `slow[c]` empty or zero
@@ -774,120 +775,5 @@ impl Suspect {
             }
         }
         Ok(last_se)
-    }
-
-    /// The findings so far, each group's values ± standard errors from the joint solution
-    /// of every accepted group with the model's coefficients on `sys` (around the final
-    /// motion: the values are the motion's departures from the labels). `names` are the
-    /// runs' names.
-    pub fn findings(&self, sys: &Systems, names: &[String]) -> Vec<StandFinding> {
-        // A common group whose per-run group was found later is part of it.
-        let per_run_found =
-            |id: &str| self.accepted.iter().any(|(g, _)| self.groups[*g].id.strip_suffix("-per-run") == Some(id));
-        let accepted: Vec<&(usize, Evidence)> =
-            self.accepted.iter().filter(|(g, _)| !per_run_found(self.groups[*g].id)).collect();
-        let mut joint: Vec<Combo> = Vec::new();
-        let mut spans = Vec::new();
-        for (gi, _) in &accepted {
-            let start = joint.len();
-            joint.extend(self.groups[*gi].params.iter().cloned());
-            spans.push(start..joint.len());
-        }
-        let (g, _) = reduce(&sys.total, sys.base, &joint);
-        let (pinv, _) = pinv_sym(&g);
-        // A parameter another combination of columns (the unit's model, the other groups)
-        // moves the outputs as exactly has no standard error: the pseudo-inverse would give
-        // it a small one on the arbitrary split (the Earth's vertical rate beside a gyro
-        // g-sensitivity's diagonal, on conic runs alone).
-        let se_of = |p: usize| {
-            if left_information(&g, p) > SEPARABLE * g[(p, p)] {
-                pinv[(p, p)].max(0.0).sqrt()
-            } else {
-                f64::INFINITY
-            }
-        };
-        let labels = self.labels();
-        // A group none of whose parameters stands out of its standard error in the joint
-        // solution (|v| ≤ 3 SE: a per-run group with no run off its label) is not a finding:
-        // the motion it moved is the declared one within the noise.
-        let found: Vec<StandFinding> = accepted
-            .iter()
-            .zip(spans)
-            .filter_map(|((gi, ev), span)| {
-                let group = &self.groups[*gi];
-                let se: Vec<f64> = span.map(|j| se_of(sys.base + j)).collect();
-                let values: Vec<f64> = group.params.iter().map(|c| self.departure(c)).collect();
-                let stands_out = values.iter().zip(&se).any(|(v, s)| v.abs() > 3.0 * s);
-                let ctx = self.context(group, names);
-                stands_out.then(|| super::stand_words::finding(group.id, &values, &se, &ctx, &labels, ev.clone()))
-            })
-            .collect();
-        self.mounts.iter().cloned().chain(found).collect()
-    }
-
-    /// How far the motion now believed is from the labels along one group parameter.
-    fn departure(&self, combo: &Combo) -> f64 {
-        let Some(&(gi, _)) = combo.first() else { return 0.0 };
-        for (r, locals) in self.locals.iter().enumerate() {
-            if let Some(&(_, dir)) = locals.iter().find(|(g, _)| *g == gi) {
-                return match (&self.runs[r], dir) {
-                    (RunStand::Conic { declared, now, .. }, Dir::Knob(k)) => match k {
-                        0 => now.cone_angle_rad - declared.cone_angle_rad,
-                        1 => now.rate_rad_s / declared.rate_rad_s - 1.0,
-                        2 => now.phase_rad - declared.phase_rad,
-                        3 => now.rate_drift_per_s - declared.rate_drift_per_s,
-                        4 | 5 => now.tilt_rad[k - 4],
-                        6..=9 => now.ripple_rad[(k - 6) / 2][(k - 6) % 2],
-                        10 | 11 => now.wobble_rad[k - 10],
-                        _ => now.earth_rad_s[k - 12],
-                    },
-                    (RunStand::Static { earth, .. }, Dir::Rate(v)) => earth.iter().zip(v).map(|(a, b)| a * b).sum(),
-                    _ => 0.0,
-                };
-            }
-        }
-        0.0
-    }
-
-    /// Per group parameter: the run it belongs to (per-run groups) and its label.
-    fn context(&self, group: &Group, names: &[String]) -> Vec<super::stand_words::ParamContext> {
-        let per_run = COMMON * self.conic_count();
-        group
-            .params
-            .iter()
-            .map(|c| {
-                let gi = c.first().map_or(usize::MAX, |x| x.0);
-                let run = if c.len() == 1 && gi < per_run {
-                    self.locals.iter().position(|l| l.iter().any(|(g, _)| *g == gi))
-                } else {
-                    None
-                };
-                let label = run.map_or(f64::NAN, |r| match &self.runs[r] {
-                    RunStand::Conic { declared, .. } => match gi % COMMON {
-                        0 => declared.cone_angle_rad,
-                        1 => declared.rate_rad_s,
-                        2 => declared.phase_rad,
-                        _ => declared.rate_drift_per_s,
-                    },
-                    _ => f64::NAN,
-                });
-                super::stand_words::ParamContext { run: run.and_then(|r| names.get(r).cloned()), label }
-            })
-            .collect()
-    }
-
-    fn conic_count(&self) -> usize {
-        self.runs.iter().filter(|r| matches!(r, RunStand::Conic { .. })).count()
-    }
-
-    /// The declared cone angles and rates of the conic runs (for the words).
-    pub fn labels(&self) -> Vec<(f64, f64)> {
-        self.runs
-            .iter()
-            .filter_map(|r| match r {
-                RunStand::Conic { declared, .. } => Some((declared.cone_angle_rad, declared.rate_rad_s)),
-                _ => None,
-            })
-            .collect()
     }
 }
