@@ -174,19 +174,27 @@ fn a_logged_stand_angle_makes_speed_ripple_cost_nothing() {
     assert!(rms.iter().all(|r| *r > 5.0 * noise), "{rms:?}");
 }
 
+/// `fit --stand` on the paper's noisy session recorded on a stand with errors `stand`
+/// (KEY=VALUE as `simulate --stand`), its coefficients asserted within 4 SE of the truth.
+fn fit_stand_on(seed: u64, stand: &[&str]) -> Fit {
+    let mut cfg = noisy_paper(seed, 36.0, 100.0);
+    for s in stand {
+        cfg.stand.set(s).unwrap();
+    }
+    let f = fit_with_stand(&Model::default_model(), &cfg.generate()).unwrap();
+    let worst = worst_z(&f, &cfg);
+    println!("{stand:?}: coefficients worst |error|/se = {worst:.2}");
+    assert!(worst < 4.0, "worst |error|/se {worst}");
+    f
+}
+
 /// A stand whose rate drifts within each run (a different drift per run, from each run's
 /// first sample, some runs steady): `fit --stand` recovers every run's drift within 3
 /// standard errors, and the coefficients with it.
 #[test]
 fn a_rate_drifting_within_each_run_is_estimated_per_run() {
-    let mut cfg = noisy_paper(31, 36.0, 100.0);
     let drifts = [-1.4e-4, 0.0, 2e-4, 0.0, 8e-5, -5e-5];
-    cfg.stand.set("drift=-1.4e-4,0,2e-4,0,8e-5,-5e-5").unwrap();
-    let s = cfg.generate();
-    let f = fit_with_stand(&Model::default_model(), &s).unwrap();
-    let worst = worst_z(&f, &cfg);
-    println!("coefficients: worst |error|/se = {worst:.2}");
-    assert!(worst < 4.0, "worst |error|/se {worst}");
+    let f = fit_stand_on(31, &["drift=-1.4e-4,0,2e-4,0,8e-5,-5e-5"]);
     let mut worst_drift = 0.0f64;
     for (i, p) in f.stand.iter().enumerate() {
         let z = (p.rate_drift_per_s - drifts[i % 6]) / p.rate_drift_se_per_s;
@@ -205,14 +213,7 @@ fn a_rate_drifting_within_each_run_is_estimated_per_run() {
 /// phase as the offset (−1.2° within 3 SE), and the coefficients with it.
 #[test]
 fn fit_stand_estimates_an_encoders_offset_as_the_phase() {
-    let mut cfg = noisy_paper(33, 36.0, 100.0);
-    cfg.stand.set("encoder=0.001").unwrap();
-    cfg.stand.set("encoder-offset=1.2").unwrap();
-    let s = cfg.generate();
-    let f = fit_with_stand(&Model::default_model(), &s).unwrap();
-    let worst = worst_z(&f, &cfg);
-    println!("coefficients: worst |error|/se = {worst:.2}");
-    assert!(worst < 4.0, "worst |error|/se {worst}");
+    let f = fit_stand_on(33, &["encoder=0.001", "encoder-offset=1.2"]);
     let mut worst_phase = 0.0f64;
     for p in &f.stand {
         worst_phase = worst_phase.max(((p.value.get(2) + 1.2) / p.std_error.get(2)).abs());
