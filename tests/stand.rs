@@ -222,6 +222,24 @@ fn fit_stand_estimates_an_encoders_offset_as_the_phase() {
     assert!(worst_phase < 4.0, "{worst_phase}");
 }
 
+/// The streamed `fit` (the CLI's default for these runs) warns of runs recorded while the
+/// stand spun up, as the in-memory fit does (before, only the in-memory fit did); a steady
+/// stand brings no such warning.
+#[test]
+fn the_streamed_fit_warns_of_runs_off_the_stands_speed() {
+    let dir = tempfile::tempdir().unwrap();
+    crate::common::run_ok(dir.path(), &["simulate", "--out", "s", "--duration", "12", "--stand", "spinup=2"]);
+    crate::common::run_ok(dir.path(), &["simulate", "--out", "c", "--duration", "12"]);
+    let (code, out, err) = crate::common::run_in(dir.path(), &["fit", "s", "--dry-run"]);
+    assert_eq!(code, 0, "{out}{err}");
+    let all = format!("{out}{err}");
+    assert!(all.contains("(streamed)"), "{all}");
+    assert!(all.contains("not at its speed at the start or end of 18 conic run(s): first 2.5 s of each"), "{all}");
+    let (code, out, err) = crate::common::run_in(dir.path(), &["fit", "c", "--dry-run"]);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(!format!("{out}{err}").contains("not at its speed"), "{out}{err}");
+}
+
 /// Ratios of each value to `by`.
 trait Ratios {
     fn map_or_each(&self, by: f64) -> Vec<f64>;

@@ -285,11 +285,7 @@ fn fit_session(req: &FitRequest<'_>, full: &Session) -> Result<FitOutcome, Estim
     let off = super::spin::off_speed(&fit_runs(&session, &tr), &motions);
     if !off.is_empty() {
         let names: Vec<&str> = session.runs.iter().map(|r| r.spec.name.as_str()).collect();
-        warnings.push(super::spin::warning(
-            &off,
-            &names,
-            "the fit uses those seconds as declared, and its coefficients carry their misfit",
-        ));
+        warnings.push(super::spin::warning(&off, &names, super::spin::FIT_KEEPS));
     }
     let mut notes = warnings.clone();
     for (run, t) in session.runs.iter().zip(&tr) {

@@ -83,11 +83,26 @@ fn run_off_speed(i: usize, r: &FitRun<'_>) -> Option<OffSpeed> {
             }
         })
         .collect();
-    if ratio.iter().any(|x| !x.is_finite()) {
+    let (head_w, tail_w) = stretches(&ratio)?;
+    // One window more each side: the last one off settles within the next.
+    let head = if head_w > 0 { ((head_w + 1) * w).min(n) } else { 0 };
+    let tail = if tail_w > 0 { (n - ((windows - tail_w - 1) * w)).min(n - head) } else { 0 };
+    let span = |k0: usize, k1: usize| if k1 > k0 { t[k1.min(n - 1)] - t[k0] } else { 0.0 };
+    Some(OffSpeed { run: i, head, tail, head_s: span(0, head), tail_s: span(n - tail, n - 1) })
+}
+
+/// What the fit does with the seconds off speed (its warning's `done`).
+pub const FIT_KEEPS: &str = "the fit uses those seconds as declared, and its coefficients carry their misfit";
+
+/// The windows off speed at a run's start and end, from the windows' ratios of the gyro's
+/// magnitude to the declared motion's: (head, tail) counts, None when there are none or
+/// too many (module docs).
+fn stretches(ratio: &[f64]) -> Option<(usize, usize)> {
+    if ratio.len() < MIN_WINDOWS || ratio.iter().any(|x| !x.is_finite()) {
         return None;
     }
-    let med = crate::stats::median(&mut ratio.clone())?;
-    let spread = crate::stats::robust_sigma(&ratio, med)?;
+    let med = crate::stats::median(&mut ratio.to_vec())?;
+    let spread = crate::stats::robust_sigma(ratio, med)?;
     if med <= 0.0 {
         return None;
     }
@@ -102,14 +117,62 @@ fn run_off_speed(i: usize, r: &FitRun<'_>) -> Option<OffSpeed> {
     };
     let head_w = stretch(&mut ratio.iter());
     let tail_w = stretch(&mut ratio.iter().rev());
-    if head_w + tail_w == 0 || (head_w + tail_w) as f64 > MAX_SHARE * windows as f64 {
+    if head_w + tail_w == 0 || (head_w + tail_w) as f64 > MAX_SHARE * ratio.len() as f64 {
         return None;
     }
-    // One window more each side: the last one off settles within the next.
-    let head = if head_w > 0 { ((head_w + 1) * w).min(n) } else { 0 };
-    let tail = if tail_w > 0 { (n - ((windows - tail_w - 1) * w)).min(n - head) } else { 0 };
-    let span = |k0: usize, k1: usize| if k1 > k0 { t[k1.min(n - 1)] - t[k0] } else { 0.0 };
-    Some(OffSpeed { run: i, head, tail, head_s: span(0, head), tail_s: span(n - tail, n - 1) })
+    Some((head_w, tail_w))
+}
+
+/// The same check fed one sample at a time (a fit that streams its runs): windows of
+/// [`WINDOW_S`] on the run's clock, a few numbers per window.
+#[derive(Debug, Clone, Default)]
+pub struct SpeedWindows {
+    t0_s: Option<f64>,
+    /// The current window's index and sums of |gyro|, |ω| declared, and samples.
+    current: usize,
+    meas: f64,
+    truth: f64,
+    count: usize,
+    /// Per finished window: its ratio and samples.
+    done: Vec<(f64, usize)>,
+}
+
+impl SpeedWindows {
+    /// One sample: its stamp, the gyro's output and the declared motion's rate (same units).
+    pub fn push(&mut self, t_s: f64, gyro: [f64; 3], declared: [f64; 3]) {
+        let t0 = *self.t0_s.get_or_insert(t_s);
+        let j = ((t_s - t0) / WINDOW_S).floor();
+        let j = if j.is_finite() && j >= 0.0 { j as usize } else { self.current };
+        if j != self.current && self.count > 0 {
+            self.close();
+        }
+        self.current = j;
+        self.meas += crate::stats::norm3(gyro);
+        self.truth += crate::stats::norm3(declared);
+        self.count += 1;
+    }
+
+    fn close(&mut self) {
+        let ratio = if self.truth > 0.0 { self.meas / self.truth } else { f64::NAN };
+        self.done.push((ratio, self.count));
+        (self.meas, self.truth, self.count) = (0.0, 0.0, 0);
+    }
+
+    /// Run `run`'s stretches off speed, when it has some.
+    pub fn finish(mut self, run: usize) -> Option<OffSpeed> {
+        if self.count > 0 {
+            self.close();
+        }
+        let ratio: Vec<f64> = self.done.iter().map(|d| d.0).collect();
+        let (head_w, tail_w) = stretches(&ratio)?;
+        // One window more each side, as the in-memory check leaves out.
+        let samples = |ws: &[(f64, usize)]| ws.iter().map(|d| d.1).sum::<usize>();
+        let n = self.done.len();
+        let head = if head_w > 0 { samples(&self.done[..(head_w + 1).min(n)]) } else { 0 };
+        let tail = if tail_w > 0 { samples(&self.done[n.saturating_sub(tail_w + 1)..]) } else { 0 };
+        let secs = |w: usize| if w > 0 { ((w + 1) as f64 * WINDOW_S).min(n as f64 * WINDOW_S) } else { 0.0 };
+        Some(OffSpeed { run, head, tail, head_s: secs(head_w), tail_s: secs(tail_w) })
+    }
 }
 
 /// The warning that says which runs were off speed, by how much, what was done about it

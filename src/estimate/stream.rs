@@ -49,6 +49,8 @@ struct Seen {
     warnings: Vec<String>,
     /// Temperature range of the rows used, °C.
     temp_range_c: Option<[f64; 2]>,
+    /// A conic run's stretches off the stand's speed at its start and end (run index 0).
+    off_speed: Option<super::spin::OffSpeed>,
 }
 
 /// The rows of a run as parsed, in a closed temporary file (reopened for each later read,
@@ -172,6 +174,8 @@ struct Blocks<'f, 'g> {
     states: Vec<State>,
     gyro: Vec<[f64; 3]>,
     accel: Vec<[f64; 3]>,
+    /// The check for a stand off its speed (a conic run's first read).
+    speed: Option<super::spin::SpeedWindows>,
 }
 
 impl Blocks<'_, '_> {
@@ -185,6 +189,9 @@ impl Blocks<'_, '_> {
         // The temperature's rate of change needs the samples after this one: a model that
         // reads it is not streamed (see `fit_streaming`), so it stays unknown here.
         self.states.push(State { t_session_s, w, e, a, temp_c: row.temp_c, temp_rate_c_s: f64::NAN });
+        if let Some(s) = &mut self.speed {
+            s.push(row.t_s, row.gyro, w);
+        }
         self.gyro.push(row.gyro);
         self.accel.push(row.accel);
         self.used += 1;
@@ -260,6 +267,9 @@ impl StreamRun<'_> {
             rdr.stop_hashing();
         }
         let mut scan = known.is_none().then(|| StreamScan::new(self.manifest.units.time.to_s()));
+        if known.is_none() && matches!(self.spec.motion, MotionSpec::Conic { .. }) {
+            blocks.speed = Some(super::spin::SpeedWindows::default());
+        }
         let mut spill = if known.is_none() {
             tempfile::Builder::new()
                 .prefix(&format!(".crosscal-{}-spill-", std::process::id()))
@@ -306,7 +316,9 @@ impl StreamRun<'_> {
                 return Err(gap.to_error(&self.path, rdr.t_column()));
             }
             if let Ok(mut seen) = self.seen.lock() {
-                *seen = Some(Seen { sha256: rdr.sha256(), samples: blocks.used, warnings, temp_range_c: temps });
+                let off_speed = blocks.speed.take().and_then(|s| s.finish(0));
+                *seen =
+                    Some(Seen { sha256: rdr.sha256(), samples: blocks.used, warnings, temp_range_c: temps, off_speed });
             }
             if let Some(file) = spill.and_then(|w| w.into_inner().ok()) {
                 if let Ok(mut s) = self.spill.lock() {
@@ -333,6 +345,7 @@ impl Samples for StreamRun<'_> {
             states: Vec::with_capacity(BLOCK),
             gyro: Vec::with_capacity(BLOCK),
             accel: Vec::with_capacity(BLOCK),
+            speed: None,
         };
         let spilled = self.spill.lock().ok().and_then(|s| s.as_ref().map(|f| f.0.to_path_buf()));
         match spilled {
@@ -416,7 +429,17 @@ pub(crate) fn fit_streaming(
         SamplesError::Estimate(e) => StreamError::Estimate(e),
     })?;
     let used = runs.iter().map(StreamRun::used).collect();
-    let warnings = runs.iter().flat_map(StreamRun::warnings).collect();
+    let mut warnings: Vec<String> = runs.iter().flat_map(StreamRun::warnings).collect();
+    // Runs recorded while the stand was not at its speed, as the in-memory fit warns.
+    let off: Vec<super::spin::OffSpeed> = runs
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| r.seen().off_speed.map(|o| super::spin::OffSpeed { run: i, ..o }))
+        .collect();
+    if !off.is_empty() {
+        let names: Vec<&str> = manifest.runs.iter().map(|r| r.name.as_str()).collect();
+        warnings.push(super::spin::warning(&off, &names, super::spin::FIT_KEEPS));
+    }
     drop(sources);
     drop(runs);
     Ok(StreamedFit { manifest, fit, runs: used, warnings })
