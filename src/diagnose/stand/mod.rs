@@ -223,7 +223,6 @@ impl Suspect {
                     groups.push(Group { id: "stand-rate-per-run", params: per_run(1) });
                     groups.push(Group { id: "stand-rate-drift-per-run", params: per_run(3) });
                 }
-                groups.push(Group { id: "phase-per-run", params: per_run(2) });
                 groups.push(Group { id: "speed-ripple-1", params: pair(2) });
                 groups.push(Group { id: "speed-ripple-2", params: pair(4) });
             }
@@ -233,9 +232,8 @@ impl Suspect {
             if !logged.is_empty() {
                 groups.push(Group { id: "encoder-offset", params: vec![logged] });
             }
-            if !free_angle {
-                groups.push(Group { id: "phase-per-run", params: per_run(2) });
-            }
+            // A starting phase per run; on a run that logs its angle, its encoder's offset.
+            groups.push(Group { id: "phase-per-run", params: per_run(2) });
             groups.push(Group { id: "base-tilt", params: pair(0) });
             groups.push(Group { id: "cone-wobble", params: pair(6) });
         }
