@@ -157,14 +157,17 @@ fn fit_vs_peer(table: &mut Table, sizes: &[usize]) {
 /// `CROSSCAL_BENCH_1E7`) with a hidden gyro dead zone, beside the plain `fit` of the same
 /// session: wall time, peak memory, and diagnose's time over the fit's (issue 36: ≤ 20× and
 /// < 100 MB at 1e6, < 300 MB at 1e7).
+/// The 1e6 session again on a stand whose cone angle is 0.3° off and whose base is tilted
+/// (0.1°, 0.05°): each stand group found restarts the diagnosis.
 fn diagnose_at_scale(table: &mut Table) {
-    diagnose_of(table, 1e6);
+    diagnose_of(table, 1e6, false);
+    diagnose_of(table, 1e6, true);
     if std::env::var("CROSSCAL_BENCH_1E7").is_ok() {
-        diagnose_of(table, 1e7);
+        diagnose_of(table, 1e7, false);
     }
 }
 
-fn diagnose_of(table: &mut Table, samples: f64) {
+fn diagnose_of(table: &mut Table, samples: f64, stand_errors: bool) {
     use crosscal::simulate::{write_session, SimConfig};
     let tmp = tempfile::tempdir().expect("temp dir");
     let mut c = SimConfig::paper();
@@ -176,6 +179,10 @@ fn diagnose_of(table: &mut Table, samples: f64) {
     c.truth.model.add_effect("gyro-dead-zone").expect("catalogue effect");
     for (n, v) in [("gyro.dz_x", 9e-4), ("gyro.dz_y", 5e-4), ("gyro.dz_z", 7e-4)] {
         c.truth.values.insert(n.into(), v);
+    }
+    if stand_errors {
+        c.stand.cone_angle_deg = 0.3;
+        c.stand.tilt_deg = [0.1, 0.05];
     }
     let manifest = write_session(&c.generate(), &tmp.path().join("s")).expect("write session");
     // Each command three times: the shortest wall time and the largest peak (a shared
@@ -190,7 +197,10 @@ fn diagnose_of(table: &mut Table, samples: f64) {
     let (tc, mc) = run(&["compare"]);
     report(
         table,
-        format!("`diagnose` / `compare` / `fit`, 18 runs, {samples:.0e} samples, hidden gyro dead zone (found)"),
+        format!(
+            "`diagnose` / `compare` / `fit`, 18 runs, {samples:.0e} samples, hidden gyro dead zone (found){}",
+            if stand_errors { ", stand cone +0.3° and base tilted (found)" } else { "" }
+        ),
         format!(
             "{td:.2} s / {md:.0} MB; {tc:.2} s / {mc:.0} MB; fit {tf:.2} s / {mf:.0} MB; diagnose / fit {:.1}×",
             td / tf.max(1e-9)

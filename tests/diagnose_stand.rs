@@ -118,6 +118,33 @@ fn a_stand_that_logs_its_angle_is_still_the_suspect_for_its_cone_and_tilt() {
     assert_eq!(ids.len(), 2, "{ids:?}");
 }
 
+/// Some runs log the stand's angle, the others do not: a drift of the rate is found on those
+/// that do not (the others follow their log), and the words say so (before, "within every
+/// conic run"), beside the base tilt every run shares.
+#[test]
+fn a_drift_on_the_runs_that_do_not_log_their_angle_is_said_of_those() {
+    let (mut cfg, _) = hidden("", &[], 18);
+    let mut e = StandErrors::default();
+    for s in ["encoder=0.001", "drift=1e-4", "tilt=0.2,-0.1"] {
+        e.set(s).unwrap();
+    }
+    cfg.stand = e;
+    let mut session = cfg.generate();
+    for run in session.runs.iter_mut().skip(1).step_by(2) {
+        run.rec.angle_rad = None;
+        run.spec.angle_column = None;
+    }
+    let d = run_diagnose(&session);
+    assert!(d.steps.is_empty() && d.unexplained.is_empty(), "{:?} {:?}", effects(&d), d.unexplained);
+    let f = finding(&d, &["stand-rate-drift"]);
+    println!("{}", f.message);
+    within(f, "rate drift", 1e-4 * 6000.0);
+    assert!(f.message.contains("every conic run that does not log its angle"), "{}", f.message);
+    let t = finding(&d, &["base-tilt"]);
+    within(t, "base tilt about x", 0.2);
+    within(t, "base tilt about y", -0.1);
+}
+
 /// An encoder whose zero is off the stand's: the logged angle is turned by a constant. Before,
 /// a 0.5° offset became a base tilt of 0.48° and 0.47°, a cone wobble, and an unexplained
 /// residual drawn as hysteresis.

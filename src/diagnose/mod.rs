@@ -27,6 +27,7 @@ mod mount;
 mod noise_choice;
 pub mod picture;
 pub mod protocol;
+mod reduced;
 pub mod report;
 mod secants;
 pub mod select;
@@ -594,33 +595,24 @@ fn refit_reduced(
     opts: &FitOptions,
     warnings: &mut Vec<String>,
 ) -> Result<Fit, EstimateError> {
-    let total: usize = runs.iter().map(FitRun::len).sum();
-    if model.nonlinear().is_empty() || total <= REDUCED_SAMPLES {
+    if model.nonlinear().is_empty() {
         return refit(model, runs, opts);
     }
-    let k = total.div_ceil(REDUCED_SAMPLES);
+    // Nonlinear effects that are pointwise maps of the motion (a dead zone) search on a
+    // stored copy of the motion: the same numbers, without the kinematics worked out again
+    // at each of the search's evaluations.
+    let pointwise = |t: &crate::motion::Track| {
+        model.nonlinear().iter().all(|e| e.effect.transform(&e.values, t).maps_beyond(t).is_some())
+    };
+    let total: usize = runs.iter().map(FitRun::len).sum();
+    if total <= REDUCED_SAMPLES {
+        return refit(model, runs, opts);
+    }
+    let k = reduced::step_for(runs, REDUCED_SAMPLES);
     // The reduced copies live only for the search (memory: the fit on all samples follows).
     let searched = {
-        let every = |v: &[[f64; 3]]| v.iter().step_by(k).copied().collect::<Vec<_>>();
-        // Nonlinear effects that are pointwise maps of the motion (a dead zone) search on a
-        // stored copy of the reduced motion: the same numbers, without the kinematics worked
-        // out again at each of the search's evaluations.
-        let pointwise = |t: &crate::motion::Track| {
-            model.nonlinear().iter().all(|e| e.effect.transform(&e.values, t).maps_beyond(t).is_some())
-        };
-        let tracks: Vec<crate::motion::Track> =
-            runs.iter().map(|r| r.track.every(k)).map(|t| if pointwise(&t) { t.materialised() } else { t }).collect();
-        type Outputs = (Vec<[f64; 3]>, Vec<[f64; 3]>, Option<Vec<f64>>);
-        let outputs: Vec<Outputs> = runs
-            .iter()
-            .map(|r| (every(r.gyro), every(r.accel), r.temp_c.map(|t| t.iter().step_by(k).copied().collect())))
-            .collect();
-        let reduced: Vec<FitRun<'_>> = runs
-            .iter()
-            .zip(&tracks)
-            .zip(&outputs)
-            .map(|((r, tr), (g, a, temp))| FitRun { track: tr, gyro: g, accel: a, temp_c: temp.as_deref(), ..*r })
-            .collect();
+        let copy = reduced::Reduced::new(runs, k, pointwise);
+        let reduced = copy.runs(runs);
         refit(model, &reduced, opts)?
     };
     let mut f = refit(&crate::estimate::held_at_fit(model, &searched), runs, opts)?;
@@ -630,6 +622,37 @@ fn refit_reduced(
         total.div_ceil(k)
     ));
     Ok(f)
+}
+
+/// Every candidate effect scored around the base set `set` of `space`, best ΔBIC first
+/// (each with its columns), and per sensor whether its residual is at the recording's
+/// numerical resolution (a noiseless recording: its candidates are then rejected, as
+/// there is nothing to explain).
+pub(super) fn score(space: &Space, set: &[usize]) -> (Vec<(Candidate, Vec<usize>)>, [bool; 2]) {
+    let base = space.solve(set);
+    let base_heldout = space.heldout(set);
+    let base_q = space.channel_q(&base);
+    let mut scored: Vec<(Candidate, Vec<usize>)> = space
+        .universe
+        .candidates
+        .par_iter()
+        .map(|&id| {
+            let cand = space.effect_params(id);
+            (candidate(id, space.evidence(set, &base, &base_heldout, &cand), &base_q), cand)
+        })
+        .collect();
+    scored.extend(temperature::polynomial_candidates(space, set, &base, &base_heldout, &base_q));
+    temperature::size_candidates(space, set, &mut scored);
+    scored.sort_by(|x, y| x.0.delta_bic.total_cmp(&y.0.delta_bic));
+    let res = resolution(space);
+    let sigma = noise_reports(space);
+    let exact: [bool; 2] = std::array::from_fn(|s| (3 * s..3 * s + 3).all(|c| sigma[c].sigma <= 10.0 * res[c]));
+    for (c, _) in &mut scored {
+        if c.rejected.is_none() && exact[usize::from(c.sensor == SensorKind::Accel)] {
+            c.rejected = Some("the residual is at the recording's numerical resolution".into());
+        }
+    }
+    (scored, exact)
 }
 
 /// Steps, first-round candidates, the last analysis, and whether the stand check changed
@@ -660,30 +683,7 @@ fn climb(
     while steps.len() < bound {
         let space = &a.space;
         let set = space.base_set();
-        let base = space.solve(&set);
-        let base_heldout = space.heldout(&set);
-        let base_q = space.channel_q(&base);
-        let mut scored: Vec<(Candidate, Vec<usize>)> = space
-            .universe
-            .candidates
-            .par_iter()
-            .map(|&id| {
-                let cand = space.effect_params(id);
-                (candidate(id, space.evidence(&set, &base, &base_heldout, &cand), &base_q), cand)
-            })
-            .collect();
-        scored.extend(temperature::polynomial_candidates(space, &set, &base, &base_heldout, &base_q));
-        temperature::size_candidates(space, &set, &mut scored);
-        scored.sort_by(|x, y| x.0.delta_bic.total_cmp(&y.0.delta_bic));
-        // A sensor whose noise is rounding (a noiseless recording) has nothing to explain.
-        let res = resolution(space);
-        let sigma = noise_reports(space);
-        let exact: Vec<bool> = (0..2).map(|s| (3 * s..3 * s + 3).all(|c| sigma[c].sigma <= 10.0 * res[c])).collect();
-        for (c, _) in &mut scored {
-            if c.rejected.is_none() && exact[usize::from(c.sensor == SensorKind::Accel)] {
-                c.rejected = Some("the residual is at the recording's numerical resolution".into());
-            }
-        }
+        let (scored, exact) = score(space, &set);
         if steps.is_empty() {
             first_round = Some(scored.iter().map(|s| s.0.clone()).collect());
         }

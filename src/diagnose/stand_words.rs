@@ -50,6 +50,26 @@ pub struct ParamContext {
     pub label: f64,
 }
 
+/// A conic run's label, as the words of a finding need it.
+pub struct RunLabel {
+    /// The declared cone angle, rad.
+    pub cone_rad: f64,
+    /// The declared rate, rad/s.
+    pub rate_rad_s: f64,
+    /// Whether the stand logs its angle on the run (its rate, drift and ripple are then the
+    /// log's, not the stand groups').
+    pub logs: bool,
+}
+
+/// The conic runs a group of the stand's angle (rate, drift, ripple) moves, in words.
+fn angle_scope(labels: &[RunLabel]) -> &'static str {
+    if labels.iter().any(|l| l.logs) {
+        "every conic run that does not log its angle"
+    } else {
+        "every conic run"
+    }
+}
+
 /// Decimals that show a standard error `se` to one significant digit (two when it starts
 /// with 1), at least `min` and at most 8: an estimate is never printed "± 0.000".
 fn decimals(se: f64, min: usize) -> usize {
@@ -102,21 +122,21 @@ fn listed(values: &[StandValue], ctx: &[ParamContext], show: impl Fn(&StandValue
     format!("{} of {} runs: {}{more}", off.len(), values.len(), off.into_iter().take(6).collect::<Vec<_>>().join("; "))
 }
 
-/// The finding of a stand group: `v` and `se` in SI (rad, relative, rad/s), `labels` the
-/// declared (cone angle, rate) of the conic runs.
+/// The finding of a stand group: `v` and `se` in SI (rad, relative, rad/s), `labels` those
+/// of the conic runs.
 pub fn finding(
     id: &str,
     v: &[f64],
     se: &[f64],
     ctx: &[ParamContext],
-    labels: &[(f64, f64)],
+    labels: &[RunLabel],
     evidence: Evidence,
 ) -> StandFinding {
     let deg = f64::to_degrees;
     let (values, message) = match id {
         "cone-angle" => {
             let (d, s) = (deg(v[0]), deg(se[0]));
-            let mut angles: Vec<f64> = labels.iter().map(|l| deg(l.0)).collect();
+            let mut angles: Vec<f64> = labels.iter().map(|l| deg(l.cone_rad)).collect();
             angles.sort_by(f64::total_cmp);
             angles.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
             let each: Vec<String> = angles.iter().map(|a| format!("{}°, not {a}°", pm(a + d, s, 3, false))).collect();
@@ -127,22 +147,28 @@ pub fn finding(
         }
         "stand-rate" => {
             let (d, s) = (100.0 * v[0], 100.0 * se[0]);
-            let mut rates: Vec<f64> = labels.iter().map(|l| deg(l.1)).collect();
+            let mut rates: Vec<f64> = labels.iter().filter(|l| !l.logs).map(|l| deg(l.rate_rad_s)).collect();
             rates.sort_by(f64::total_cmp);
             rates.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
             let each: Vec<String> = rates.iter().map(|r| format!("{:.4} °/s, not {r} °/s", r * (1.0 + v[0]))).collect();
             (
-                vec![value("rate error (every conic run)".into(), d, s, "%")],
-                format!("the stand: rate {} % off the manifest ({}): {FIX}", pm(d, s, 3, true), each.join("; ")),
+                vec![value(format!("rate error ({})", angle_scope(labels)), d, s, "%")],
+                format!(
+                    "the stand: rate {} % off the manifest ({}){}: {FIX}",
+                    pm(d, s, 3, true),
+                    each.join("; "),
+                    if labels.iter().any(|l| l.logs) { ", on every conic run that does not log its angle" } else { "" }
+                ),
             )
         }
         "stand-rate-drift" => {
             let (d, s) = (PCT_MIN * v[0], PCT_MIN * se[0]);
             (
-                vec![value("rate drift (every conic run)".into(), d, s, "%/min")],
+                vec![value(format!("rate drift ({})", angle_scope(labels)), d, s, "%/min")],
                 format!(
-                    "the stand: its rate drifts {} % of the rate per minute within every conic run (from the run's first sample): {DRIFT_FIX}",
-                    pm(d, s, 3, true)
+                    "the stand: its rate drifts {} % of the rate per minute within {} (from the run's first sample): {DRIFT_FIX}",
+                    pm(d, s, 3, true),
+                    angle_scope(labels)
                 ),
             )
         }

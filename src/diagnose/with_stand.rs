@@ -11,6 +11,17 @@ use crate::model::Model;
 /// Stand groups found at most (each restarts the diagnosis on the corrected motion).
 const MAX_STAND_FINDINGS: usize = 8;
 
+/// Samples above which the stand is first looked for on every k-th sample (about
+/// [`PRE_SAMPLES`] of them): each group found restarts the diagnosis, which on the reduced
+/// runs costs a k-th; the diagnosis on every sample then starts from the motion so
+/// corrected, with the groups judged again there ([`stand::Suspect::rejudge`]) and
+/// estimated again at its end, so that the values and standard errors reported are those
+/// of every sample.
+const PRE_FROM: usize = 200_000;
+
+/// Samples the reduced runs of the first look at the stand hold, about.
+const PRE_SAMPLES: usize = 50_000;
+
 /// The stand check of a climb: the suspect and the runs with their declared motion.
 pub(super) struct StandCheck<'s, 'r, 'a> {
     suspect: &'s mut stand::Suspect,
@@ -44,12 +55,6 @@ fn noise_models(a: &Analysis) -> Vec<stand::RunNoiseModel> {
         .collect()
 }
 
-/// The noise models without the channels' dispersion: what an estimate weighs each channel
-/// by (the dispersion decides only whether a group is evidence).
-fn plain(noise: &[stand::RunNoiseModel]) -> Vec<stand::RunNoiseModel> {
-    noise.iter().map(|n| stand::RunNoiseModel { dispersion: [1.0; 6], ..n.clone() }).collect()
-}
-
 impl StandCheck<'_, '_, '_> {
     /// At one step of the climb around `current` (analysed in `a` on `runs`, the corrected
     /// motion): whether a stand group beats every sensor candidate (best ΔBIC
@@ -76,7 +81,7 @@ impl StandCheck<'_, '_, '_> {
                 // sample at each (a dead zone's thresholds) would cost far more than the
                 // stand's small change of motion moves them.
                 let held = crate::estimate::held_at_fit(current, &a.base_fit);
-                self.suspect.accept(pick, &held, self.declared, &plain(&noise), opts)
+                self.suspect.accept(pick, &held, self.declared, &noise, opts)
             }
             None => Ok(false),
         }
@@ -106,21 +111,54 @@ pub(super) fn findings(
             // The groups estimated again under the final noise model, so that their values
             // are the estimates whose standard errors the final systems give; if that fails
             // the values of the climb stand (on the final residual's systems).
-            if sc.suspect.polish(&m, sc.declared, &plain(&noise), opts).is_ok() {
-                let tracks = sc.suspect.tracks(sc.declared);
-                let moved: Vec<FitRun<'_>> =
-                    sc.declared.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
-                let req = crate::estimate::FitRequest::runs(&m, &moved).options(*opts);
-                if let Ok(out) = crate::estimate::fit(&req) {
-                    let sys = sc.suspect.systems(&m, &out.fit, &moved, &noise);
-                    return sc.suspect.findings(&sys, &a.names);
-                }
+            match sc.suspect.polish(&m, sc.declared, &noise, opts) {
+                Ok(Some(sys)) => sc.suspect.findings(&sys, &a.names),
+                Ok(None) => sc.suspect.mounts(),
+                Err(_) => sc.suspect.findings(&sc.suspect.systems(&m, final_fit, runs, &noise), &a.names),
             }
-            let sys = sc.suspect.systems(&m, final_fit, runs, &noise);
-            sc.suspect.findings(&sys, &a.names)
         }
         _ => Vec::new(),
     }
+}
+
+/// The first look at the stand on reduced runs (every k-th sample of a large session): the
+/// mounts, then the stand check on the declared model's residual. When it finds a stand
+/// group, the whole diagnosis runs on the reduced runs (each group found restarts it, at a
+/// k-th of the cost), and its suspect is the answer: its report is not kept (its numbers
+/// are those of a k-th of the samples). When it finds none, the look ends there: a group
+/// that shows only beside a sensor effect is found on every sample.
+fn first_look(
+    mut suspect: stand::Suspect,
+    model: &Model,
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    opts: &FitOptions,
+    has_temp: bool,
+) -> Result<stand::Suspect, EstimateError> {
+    let (wrong, fit) = super::mount::wrong_mounts(model, runs, motions, opts)?;
+    for (i, mount, finding) in wrong {
+        suspect.set_mount(i, mount, finding);
+    }
+    let tracks = suspect.tracks(runs);
+    let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
+    let owned = suspect.motions(motions);
+    let now: Vec<&crate::session::MotionSpec> = owned.iter().collect();
+    let fit = match fit {
+        Some(f) if !suspect.changed() => f,
+        _ => refit(model, &moved, opts)?,
+    };
+    let a = analyse(model, fit, &moved, &now, has_temp);
+    let (scored, exact) = super::score(&a.space, &a.space.base_set());
+    if exact.iter().all(|e| *e) {
+        return Ok(suspect);
+    }
+    let sensor_bic = scored.iter().filter(|c| c.0.rejected.is_none()).map(|c| c.0.delta_bic).reduce(f64::min);
+    let mut check = StandCheck { suspect: &mut suspect, declared: runs };
+    if !check.check(model, &a, &moved, sensor_bic, opts)? {
+        return Ok(suspect);
+    }
+    let (_, found) = diagnose(suspect.carried_over(), model, runs, motions, opts, has_temp)?;
+    found.ok_or_else(|| EstimateError::NotConverged("the stand kept explaining more on the reduced runs".into()))
 }
 
 /// Diagnoses `model` on `runs` with the stand as a suspect, with the suspect at the end
@@ -135,6 +173,14 @@ pub(super) fn diagnose(
     opts: &FitOptions,
     has_temp: bool,
 ) -> Result<(Diagnosis, Option<stand::Suspect>), EstimateError> {
+    let total: usize = runs.iter().map(FitRun::len).sum();
+    if !suspect.carried() && total > PRE_FROM {
+        let copy = super::reduced::Reduced::new(runs, super::reduced::step_for(runs, PRE_SAMPLES), |_| false);
+        // When the first look cannot be had, the diagnosis on every sample looks for itself.
+        if let Ok(found) = first_look(suspect.clone(), model, &copy.runs(runs), motions, opts, has_temp) {
+            suspect = found.carried_over();
+        }
+    }
     let mut as_declared = None;
     if !suspect.carried() {
         let (wrong, fit) = super::mount::wrong_mounts(model, runs, motions, opts)?;

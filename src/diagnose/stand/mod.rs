@@ -44,6 +44,12 @@ use std::sync::Arc;
 const COMMON: usize = PER_RUN;
 /// Gauss–Newton steps on an accepted group.
 const MAX_STEPS: usize = 8;
+/// Standard errors within which a Gauss–Newton step ends the estimate: the outputs move
+/// linearly with a stand parameter over far more than that (its standard error is a tiny
+/// share of the scale on which they curve: 1e-6° of a 10° cone), so the point such a step
+/// lands on is the solution to far below its standard error, and a step to confirm it
+/// (a refit and a pass over every sample) would change nothing reported.
+const LINEAR_WITHIN: f64 = 10.0;
 /// The Earth's rotation rate, rad/s.
 const EARTH_RAD_S: f64 = 7.292_115e-5;
 /// Share of the whitened χ² the noise does not explain that a stand group must take to be
@@ -82,8 +88,9 @@ pub struct RunNoiseModel {
 #[derive(Debug, Clone)]
 #[allow(clippy::large_enum_variant)]
 enum RunStand {
-    /// A conic run: its label and the motion now believed.
-    Conic { declared: StandMotion, now: StandMotion, mount: Mount },
+    /// A conic run: its label, the motion now believed, and whether the stand logs its
+    /// angle there (its rate, drift and ripple are then the log's).
+    Conic { declared: StandMotion, now: StandMotion, mount: Mount, logs: bool },
     /// A static pose: its up in sensor axes and the Earth's rate now believed (sensor axes).
     Static { up: [f64; 3], earth: [f64; 3] },
     /// Anything else (no stand parameters).
@@ -164,7 +171,12 @@ impl Suspect {
                             phase_deg.to_radians(),
                         )
                     };
-                    RunStand::Conic { declared: d, now: d, mount: mount.clone() }
+                    RunStand::Conic {
+                        declared: d,
+                        now: d,
+                        mount: mount.clone(),
+                        logs: run.track.logged_angles().is_some(),
+                    }
                 }
                 (MotionSpec::Static { earth_rate_rad_s, .. }, _) if norm > 0.0 && norm.is_finite() => {
                     earth_declared |= earth_rate_rad_s.iter().any(|&x| x != 0.0);
@@ -399,7 +411,7 @@ impl Suspect {
             (0..6).map(|c| WhitenedGram::new(index[c].len() + nb(c) + 1, &noise.ar[c], BLOCK)).collect();
         let predict = [0, 1].map(|si| Predictor::new(&terms[si], &values[si]));
         let conic = match &self.runs[r] {
-            RunStand::Conic { declared, now, mount } => Some((declared.rate_rad_s, *now, mount)),
+            RunStand::Conic { declared, now, mount, .. } => Some((declared.rate_rad_s, *now, mount)),
             _ => None,
         };
         let mut knobs = Knobs::new(predict, locals, conic, self.g_m_s2);
@@ -569,6 +581,18 @@ impl Systems {
         (ev, values, raw_bic)
     }
 
+    /// A group's values and standard errors solved on the system without the channels'
+    /// dispersion (each channel weighed by its noise model alone).
+    fn raw_values(&self, group: &[Combo]) -> Vec<(f64, f64)> {
+        let (g, b) = reduce(&self.raw, self.base, group);
+        let all: Vec<usize> = (0..g.nrows()).collect();
+        let l = Lsq::solve(&g, &b, self.raw.yy, &all);
+        let (pinv, _) = pinv_sym(&g);
+        (0..group.len())
+            .map(|j| (l.beta[self.base + j], pinv[(self.base + j, self.base + j)].max(0.0).sqrt()))
+            .collect()
+    }
+
     /// Σ over left-out runs of the χ² reduction: the model's coefficients and the group's
     /// common parameters from the other runs; the left-out run's own parameters (a per-run
     /// group's) refitted on that run alone with the rest held.
@@ -685,7 +709,7 @@ impl Suspect {
             groups.push(pick.group);
         }
         let before = self.runs.clone();
-        let se = self.estimate(&groups, model, runs, noise, opts)?;
+        let (se, _) = self.estimate(&groups, model, runs, noise, opts)?;
         if !self.all_plausible(&groups, &se) {
             self.runs = before;
             self.refused.push(pick.group);
@@ -703,26 +727,29 @@ impl Suspect {
     /// weighs the samples inefficiently — unbiased, but scattered far beyond the standard
     /// error the final systems report. An estimate that leaves what a stand does (a
     /// residual no effect explains pulls it) is an error, and the motion stays as it was.
+    /// The systems of the estimate's last step (on the groups' parameters, the channels
+    /// weighed by their dispersion too), for the findings' standard errors; None with no
+    /// group found.
     pub fn polish(
         &mut self,
         model: &Model,
         runs: &[FitRun<'_>],
         noise: &[RunNoiseModel],
         opts: &FitOptions,
-    ) -> Result<(), EstimateError> {
+    ) -> Result<Option<Systems>, EstimateError> {
         let groups: Vec<usize> = self.accepted.iter().map(|a| a.0).collect();
         if groups.is_empty() {
-            return Ok(());
+            return Ok(None);
         }
         let before = self.runs.clone();
-        let se = self.estimate(&groups, model, runs, noise, opts)?;
+        let (se, sys) = self.estimate(&groups, model, runs, noise, opts)?;
         if !self.all_plausible(&groups, &se) {
             self.runs = before;
             return Err(EstimateError::NotConverged(
                 "the stand's groups estimated again under the final model left what a stand does".into(),
             ));
         }
-        Ok(())
+        Ok(Some(sys))
     }
 
     /// Whether every group's departure from the labels is something a stand does, with the
@@ -737,8 +764,10 @@ impl Suspect {
         })
     }
 
-    /// Gauss–Newton on the groups' parameters, the model refitted at every step; the
-    /// standard error of each parameter (in the groups' order) at the last step.
+    /// Gauss–Newton on the groups' parameters, the model refitted at every step, each
+    /// channel weighed by its noise model alone (not its dispersion: the misfit it had is
+    /// what the groups remove); the standard error of each parameter (in the groups' order)
+    /// and the systems (on the groups' parameters) of the last step.
     fn estimate(
         &mut self,
         groups: &[usize],
@@ -746,19 +775,18 @@ impl Suspect {
         runs: &[FitRun<'_>],
         noise: &[RunNoiseModel],
         opts: &FitOptions,
-    ) -> Result<Vec<f64>, EstimateError> {
+    ) -> Result<(Vec<f64>, Systems), EstimateError> {
         let params: Vec<Combo> = groups.iter().flat_map(|&g| self.groups[g].params.iter().cloned()).collect();
-        let mut last_se = vec![0.0; params.len()];
         let mut used: Vec<usize> = params.iter().flatten().map(|&(gi, _)| gi).collect();
         used.sort_unstable();
         used.dedup();
+        let mut last = None;
         for _ in 0..MAX_STEPS {
             let tracks = self.tracks(runs);
             let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
             let fit = crate::estimate::fit(&FitRequest::runs(model, &moved).options(*opts))?.fit;
             let sys = self.systems_of(model, &fit, &moved, noise, Some(&used));
-            let (_, values, _) = sys.evidence(&params);
-            last_se = values.iter().map(|v| v.1).collect();
+            let values = sys.raw_values(&params);
             let mut worst = 0.0f64;
             for (combo, (v, se)) in params.iter().zip(&values) {
                 for &(gi, w) in combo {
@@ -768,10 +796,11 @@ impl Suspect {
                     worst = worst.max(v.abs() / se);
                 }
             }
-            if worst < 0.01 {
+            last = Some((values.iter().map(|v| v.1).collect(), sys));
+            if worst < LINEAR_WITHIN {
                 break;
             }
         }
-        Ok(last_se)
+        last.ok_or_else(|| EstimateError::NotConverged("no Gauss–Newton step on the stand's groups".into()))
     }
 }

@@ -56,28 +56,33 @@ impl Suspect {
         self.mounts.iter().cloned().chain(found).collect()
     }
 
-    /// How far the motion now believed is from the labels along one group parameter.
+    /// The runs found on another mount than declared (the findings without a stand group).
+    pub fn mounts(&self) -> Vec<StandFinding> {
+        self.mounts.clone()
+    }
+
+    /// How far the motion now believed is from the labels along one group parameter: on
+    /// the first run that has one of its global parameters (a common rate's first run may
+    /// log its angle, which the rate does not move).
     pub(super) fn departure(&self, combo: &Combo) -> f64 {
-        let Some(&(gi, _)) = combo.first() else { return 0.0 };
-        for (r, locals) in self.locals.iter().enumerate() {
-            if let Some(&(_, dir)) = locals.iter().find(|(g, _)| *g == gi) {
-                return match (&self.runs[r], dir) {
-                    (RunStand::Conic { declared, now, .. }, Dir::Knob(k)) => match k {
-                        0 => now.cone_angle_rad - declared.cone_angle_rad,
-                        1 => now.rate_rad_s / declared.rate_rad_s - 1.0,
-                        2 => now.phase_rad - declared.phase_rad,
-                        3 => now.rate_drift_per_s - declared.rate_drift_per_s,
-                        4 | 5 => now.tilt_rad[k - 4],
-                        6..=9 => now.ripple_rad[(k - 6) / 2][(k - 6) % 2],
-                        10 | 11 => now.wobble_rad[k - 10],
-                        _ => now.earth_rad_s[k - 12],
-                    },
-                    (RunStand::Static { earth, .. }, Dir::Rate(v)) => earth.iter().zip(v).map(|(a, b)| a * b).sum(),
-                    _ => 0.0,
-                };
-            }
+        let found = combo.iter().find_map(|&(gi, _)| {
+            self.locals.iter().enumerate().find_map(|(r, l)| l.iter().find(|(g, _)| *g == gi).map(|&(_, dir)| (r, dir)))
+        });
+        let Some((r, dir)) = found else { return 0.0 };
+        match (&self.runs[r], dir) {
+            (RunStand::Conic { declared, now, .. }, Dir::Knob(k)) => match k {
+                0 => now.cone_angle_rad - declared.cone_angle_rad,
+                1 => now.rate_rad_s / declared.rate_rad_s - 1.0,
+                2 => now.phase_rad - declared.phase_rad,
+                3 => now.rate_drift_per_s - declared.rate_drift_per_s,
+                4 | 5 => now.tilt_rad[k - 4],
+                6..=9 => now.ripple_rad[(k - 6) / 2][(k - 6) % 2],
+                10 | 11 => now.wobble_rad[k - 10],
+                _ => now.earth_rad_s[k - 12],
+            },
+            (RunStand::Static { earth, .. }, Dir::Rate(v)) => earth.iter().zip(v).map(|(a, b)| a * b).sum(),
+            _ => 0.0,
         }
-        0.0
     }
 
     /// Per group parameter: the run it belongs to (per-run groups) and its label.
@@ -112,11 +117,15 @@ impl Suspect {
     }
 
     /// The declared cone angles and rates of the conic runs (for the words).
-    pub fn labels(&self) -> Vec<(f64, f64)> {
+    pub fn labels(&self) -> Vec<crate::diagnose::stand_words::RunLabel> {
         self.runs
             .iter()
             .filter_map(|r| match r {
-                RunStand::Conic { declared, .. } => Some((declared.cone_angle_rad, declared.rate_rad_s)),
+                RunStand::Conic { declared, logs, .. } => Some(crate::diagnose::stand_words::RunLabel {
+                    cone_rad: declared.cone_angle_rad,
+                    rate_rad_s: declared.rate_rad_s,
+                    logs: *logs,
+                }),
                 _ => None,
             })
             .collect()
