@@ -121,11 +121,7 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         for r in rungs.iter().skip(1).filter(|r| !r.heldout_gain) {
             outln!("no held-out gain: '{}' does not predict left-out runs better than the rung before it: its extra terms fit noise", r.model);
         }
-        outln!(
-            "verdict: {:?}{}",
-            d.verdict,
-            if d.proposal.is_empty() { String::new() } else { format!(": add {}", d.proposal.join(", ")) }
-        );
+        conclusion(&d)?;
     }
     if let Some(path) = &a.svg {
         let names = ["gyro x", "gyro y", "gyro z", "accel x", "accel y", "accel z"];
@@ -146,4 +142,20 @@ pub fn run(a: Args) -> anyhow::Result<Outcome> {
         errln!("plot written to {}", path.display());
     }
     Ok(Outcome::Ok)
+}
+
+/// The stand's findings the ladder's motion carries, and the verdict.
+fn conclusion(d: &crosscal::diagnose::Diagnosis) -> anyhow::Result<()> {
+    if !d.stand.is_empty() {
+        outln!("the ladder is on the motion the stand's findings correct (`diagnose` says more):");
+        for f in &d.stand {
+            outln!("  {}", f.message);
+        }
+    }
+    outln!(
+        "verdict: {:?}{}",
+        d.verdict,
+        if d.proposal.is_empty() { String::new() } else { format!(": add {}", d.proposal.join(", ")) }
+    );
+    Ok(())
 }

@@ -4,7 +4,7 @@
 //! gain.
 
 use super::select::Space;
-use super::{analyse, conclude, refit, refit_reduced, Diagnosis, NoiseReport, RunMotions};
+use super::{analyse, diagnose_from, refit, refit_reduced, Diagnosis, NoiseReport, RunMotions};
 use crate::estimate::{CoefStatus, EstimateError, Fit, FitOptions, FitRun};
 use crate::model::Model;
 use crate::units::SensorKind;
@@ -126,11 +126,23 @@ pub fn compare(
 ) -> Result<(Vec<Rung>, Diagnosis), EstimateError> {
     let base = Model::default_model();
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
-    let first = analyse(&base, refit(&base, runs, opts)?, runs, motions, has_temp);
-    let space = first.space.clone();
-    let base_fit = first.base_fit.clone();
-    let d = conclude(first, &base, runs, motions, opts, has_temp, None)?
-        .ok_or_else(|| EstimateError::NotConverged("the diagnosis did not settle".into()))?;
+    // The diagnosis with the stand as a suspect, and the ladder on the motion it corrected:
+    // a stand that does not move as declared is not a rung of sensor effects.
+    let (d, suspect) = diagnose_from(&base, runs, motions, opts, None)?;
+    let suspect = suspect.filter(super::stand::Suspect::changed);
+    let tracks = suspect.as_ref().map(|s| s.tracks(runs));
+    let runs: Vec<FitRun<'_>> = match &tracks {
+        Some(t) => runs.iter().zip(t).map(|(r, t)| FitRun { track: t, ..*r }).collect(),
+        None => runs.to_vec(),
+    };
+    let owned = suspect.as_ref().map(|s| s.motions(motions));
+    let now: Vec<&crate::session::MotionSpec> = match &owned {
+        Some(m) => m.iter().collect(),
+        None => motions.to_vec(),
+    };
+    let runs = runs.as_slice();
+    let first = analyse(&base, refit(&base, runs, opts)?, runs, &now, has_temp);
+    let (space, base_fit) = (first.space, first.base_fit);
     let mut models = vec![("paper (eqs. 3-4)".to_string(), Model::paper()), ("default".to_string(), base.clone())];
     let mut m = base;
     for st in &d.steps {
