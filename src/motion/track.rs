@@ -398,8 +398,9 @@ fn logged_source(
     deriv: &DerivativeConfig,
 ) -> (Source, String) {
     let s = super::stand::StandMotion::ideal(cone_angle_rad, 0.0, 0.0).fixed(g_m_s2);
-    let angles = super::stand::logged_angles(&rec.t_s, theta_rad, deriv).into();
-    (Source::Logged { s, angles, mount: mount.clone() }, super::stand::logged_method(deriv))
+    let deriv = super::stand::log_derivative(&rec.t_s, theta_rad, deriv);
+    let angles = super::stand::logged_angles(&rec.t_s, theta_rad, &deriv).into();
+    (Source::Logged { s, angles, mount: mount.clone() }, super::stand::logged_method(&deriv))
 }
 
 /// A reference run's stored states, with ε given or derived from the reference rate.

@@ -27,7 +27,7 @@ mod linearise;
 use super::memory::fit_in_memory as fit;
 use super::{EstimateError, Fit, FitOptions, FitRun};
 use crate::model::Model;
-use crate::motion::stand::{Angle, StandAt, StandMotion};
+use crate::motion::stand::{StandAt, StandMotion};
 use crate::motion::{DerivativeConfig, SensorKinematics, Track};
 use crate::session::{MotionSpec, Session};
 use crate::units::SensorKind;
@@ -318,13 +318,10 @@ struct StandProblem<'a> {
     model: &'a Model,
     session: &'a Session,
     conic: Vec<usize>,
-    deriv: &'a DerivativeConfig,
     opts: &'a FitOptions,
     g_m_s2: f64,
     /// Each run's track on its declared motion (stamps and temperature branch).
     declared: Vec<Track>,
-    /// Per run, the logged stand angle with its derivatives (runs that log their angle).
-    logged: Vec<Option<Vec<Angle>>>,
     /// The static poses whose Earth rate is estimated (none when the manifest declares it).
     poses: Vec<Pose>,
     /// The manifest declares the Earth's rate (its parameters are then held).
@@ -379,7 +376,7 @@ impl StandProblem<'_> {
     /// without building a track).
     fn state_at(&self, ri: usize, sm: &StandAt, k: usize) -> SensorKinematics {
         let mount = &self.session.runs[ri].spec.mount;
-        match &self.logged[ri] {
+        match self.declared[ri].logged_angles() {
             Some(angles) => {
                 crate::motion::stand::to_sensor(sm.at_angle(sm.motion.angle_or_logged(0.0, Some(angles[k]))), mount)
             }
@@ -408,17 +405,9 @@ impl StandProblem<'_> {
                 let sm = self.stand_of(x, ci);
                 ci += 1;
                 let mount = &self.session.runs[ri].spec.mount;
-                match &self.logged[ri] {
-                    Some(angles) => {
-                        // The phase turns the log: the encoder's offset.
-                        let states: Vec<_> = angles
-                            .iter()
-                            .map(|a| sm.at_angle(sm.angle_or_logged(0.0, Some(*a)), self.g_m_s2))
-                            .collect();
-                        self.declared[ri].on_logged(&states, mount, crate::motion::stand::logged_method(self.deriv))
-                    }
-                    None => self.declared[ri].on_stand(sm, self.g_m_s2, mount.clone()),
-                }
+                // A run that logs its angle keeps following it (the phase turns the log: the
+                // encoder's offset).
+                self.declared[ri].on_stand(sm, self.g_m_s2, mount.clone())
             })
             .collect()
     }
@@ -588,7 +577,7 @@ impl StandProblem<'_> {
 
     /// Why a parameter is held, in words.
     fn held_reason(&self, j: usize, raw: f64) -> String {
-        let logs = j < self.common() && self.logged[self.conic[j / RUN]].is_some();
+        let logs = j < self.common() && self.declared[self.conic[j / RUN]].logged_angles().is_some();
         if self.is_declared(j) {
             "declared in the manifest (earth_rate on the static runs); not estimated".to_string()
         } else if logs {
@@ -649,16 +638,6 @@ pub(crate) fn fit_with_stand(
     }
     let g_m_s2 = session.manifest.g_m_s2;
     let declared: Vec<Track> = session.runs.iter().map(|r| crate::motion::track(r, g_m_s2, deriv)).collect();
-    let logged = session
-        .runs
-        .iter()
-        .map(|r| match (&r.spec.motion, r.rec.angle_rad.as_deref()) {
-            (MotionSpec::Conic { .. }, Some(theta)) => {
-                Some(crate::motion::stand::logged_angles(&r.rec.t_s, theta, deriv))
-            }
-            _ => None,
-        })
-        .collect();
     // Per conic run its label's α, ω_s, φ and no drift.
     let mut nominal: Vec<f64> = conic
         .iter()
@@ -686,7 +665,7 @@ pub(crate) fn fit_with_stand(
             .collect()
     };
     nominal.extend(vec![0.0; COMMON + 2 * poses.len()]);
-    let problem = StandProblem { model, session, conic, deriv, opts, g_m_s2, declared, logged, poses, earth_declared };
+    let problem = StandProblem { model, session, conic, opts, g_m_s2, declared, poses, earth_declared };
     let (free, start) = problem.identifiable(&nominal)?;
     let (x, tracks, mut f) = problem.gauss_newton(nominal.clone(), &free, start)?;
     problem.refuse_mislabelled(&x, &nominal, &tracks, &f)?;
