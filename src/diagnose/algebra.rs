@@ -33,15 +33,19 @@ pub fn pinv_sym(a: &DMatrix<f64>) -> (DMatrix<f64>, usize) {
     }
     let eig = s.symmetric_eigen();
     let top = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
-    let mut inv = DMatrix::<f64>::zeros(n, n);
+    // S⁺ = V Λ⁺ Vᵀ over the eigenvalues kept: V's columns scaled by 1/λ (0 for those
+    // dropped), times Vᵀ, one matrix product.
+    let mut scaled = eig.eigenvectors.clone();
     let mut rank = 0;
     for (k, &l) in eig.eigenvalues.iter().enumerate() {
         if top > 0.0 && l > RCOND * top {
             rank += 1;
-            let v = eig.eigenvectors.column(k);
-            inv += (v * v.transpose()) / l;
+            scaled.column_mut(k).scale_mut(1.0 / l);
+        } else {
+            scaled.column_mut(k).fill(0.0);
         }
     }
+    let mut inv = scaled * eig.eigenvectors.transpose();
     for i in 0..n {
         for j in 0..n {
             inv[(i, j)] *= d[i] * d[j];

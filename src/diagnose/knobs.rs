@@ -4,7 +4,7 @@
 
 use crate::frames::Mount;
 use crate::model::{Predictor, State};
-use crate::motion::stand::{to_sensor, Angle, StandAt, StandMotion};
+use crate::motion::stand::{sincos_near, to_sensor, Angle, StandAt, StandMotion};
 
 /// Motion parameters of a conic run: its own cone, rate (relative), phase and rate drift
 /// (relative per second), then the common tilt ×2, ripple ×4, wobble ×2, Earth ×3.
@@ -190,24 +190,6 @@ impl<'m> Knobs<'m> {
             }
         }
     }
-}
-
-/// sin θ and cos θ from those of a nearby θ₀ (`sc0`): angle addition with the Taylor
-/// series of the difference d = θ − θ₀ (terms to d⁷; the first left out is below 1e-23 for
-/// |d| ≤ 0.01 rad), or libm's when θ is farther. A knob's nudge moves the stand's angle by
-/// far less, so its columns cost no sine of their own.
-#[inline]
-fn sincos_near(theta: f64, theta0: f64, (s0, c0): (f64, f64)) -> (f64, f64) {
-    let d = theta - theta0;
-    if d.abs() > 0.01 {
-        return libm::sincos(theta);
-    }
-    // Products by the reciprocals: a division is ten times a multiplication's latency, and
-    // this runs for every nudged sample.
-    let d2 = d * d;
-    let sd = d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0) * (1.0 - d2 * (1.0 / 42.0))));
-    let cd = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0)));
-    (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
 }
 
 /// Whether knob `k` moves the stand's angle (rate, phase, drift, ripple).

@@ -511,6 +511,9 @@ fn conclude(
     // its estimate; the last picture is drawn again around the final fit.
     changed |= !steps.is_empty() && m.has_bound_parameters();
     if changed {
+        if let Some(sc) = stand_check.as_mut() {
+            sc.moved_on();
+        }
         a = analyse(&m, refit(&m, runs, opts)?, runs, motions, has_temp);
         let noise = noise_reports(&a.space);
         if let Some(st) = steps.last_mut() {
@@ -733,6 +736,9 @@ fn climb(
         let next = analyse(&m, f, runs, motions, has_temp);
         let noise = noise_reports(&next.space);
         let channels = pictures(&next, &next.space.base_set(), &next.base_fit, &noise);
+        if let Some(sc) = stand_check.as_deref_mut() {
+            sc.moved_on();
+        }
         steps.push(Step {
             effect: best.0.effect.clone(),
             score: best.0.clone(),

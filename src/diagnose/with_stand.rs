@@ -7,6 +7,7 @@ use super::select::Space;
 use super::{analyse, conclude, refit, stand, Analysis, Diagnosis, RunMotions, Step};
 use crate::estimate::{EstimateError, Fit, FitOptions, FitRun};
 use crate::model::Model;
+use crate::session::MotionSpec;
 
 /// Stand groups found at most (each restarts the diagnosis on the corrected motion).
 const MAX_STAND_FINDINGS: usize = 8;
@@ -26,6 +27,31 @@ const PRE_SAMPLES: usize = 50_000;
 pub(super) struct StandCheck<'s, 'r, 'a> {
     suspect: &'s mut stand::Suspect,
     declared: &'r [FitRun<'a>],
+    /// The systems of the last check that found no new group, while the climb is still
+    /// around the model and analysis it made them on: the final estimate's first step.
+    last: Option<stand::Systems>,
+}
+
+/// The runs on the motion a stand suspect now believes: their tracks and motions.
+struct Believed {
+    tracks: Vec<crate::motion::Track>,
+    motions: Vec<MotionSpec>,
+}
+
+impl Believed {
+    fn new(suspect: &stand::Suspect, runs: &[FitRun<'_>], motions: &RunMotions<'_>) -> Self {
+        Self { tracks: suspect.tracks(runs), motions: suspect.motions(motions) }
+    }
+
+    /// `runs` on the believed tracks.
+    fn runs<'a>(&'a self, runs: &[FitRun<'a>]) -> Vec<FitRun<'a>> {
+        runs.iter().zip(&self.tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect()
+    }
+
+    /// The believed motions, as the diagnosis takes them.
+    fn motions(&self) -> Vec<&MotionSpec> {
+        self.motions.iter().collect()
+    }
 }
 
 /// The noise model of every run and channel of an analysis, with each channel's dispersion
@@ -68,6 +94,14 @@ impl StandCheck<'_, '_, '_> {
         opts: &FitOptions,
     ) -> Result<bool, EstimateError> {
         let noise = noise_models(a);
+        // Groups carried from a whole diagnosis, at the first check where a sensor effect
+        // follows: judged again on their own columns (`Suspect::searched_over`).
+        if self.suspect.searched() && sensor_bic.is_some() {
+            let sys = self.suspect.accepted_systems(current, &a.base_fit, runs, &noise);
+            let dropped = self.suspect.rejudge(&sys);
+            self.last = Some(sys);
+            return Ok(dropped);
+        }
         let sys = self.suspect.systems(current, &a.base_fit, runs, &noise);
         if self.suspect.carried() && self.suspect.rejudge(&sys) {
             return Ok(true);
@@ -83,8 +117,17 @@ impl StandCheck<'_, '_, '_> {
                 let held = crate::estimate::held_at_fit(current, &a.base_fit);
                 self.suspect.accept(pick, &held, self.declared, &noise, opts)
             }
-            None => Ok(false),
+            None => {
+                self.last = Some(sys);
+                Ok(false)
+            }
         }
+    }
+
+    /// The model or its analysis moved on from the last check's (an effect was added, or
+    /// the analysis was drawn again): its systems no longer start the final estimate.
+    pub(super) fn moved_on(&mut self) {
+        self.last = None;
     }
 }
 
@@ -111,7 +154,7 @@ pub(super) fn findings(
             // The groups estimated again under the final noise model, so that their values
             // are the estimates whose standard errors the final systems give; if that fails
             // the values of the climb stand (on the final residual's systems).
-            match sc.suspect.polish(&m, sc.declared, &noise, opts) {
+            match sc.suspect.polish(&m, sc.declared, &noise, opts, sc.last) {
                 Ok(Some(sys)) => sc.suspect.findings(&sys, &a.names),
                 Ok(None) => sc.suspect.mounts(),
                 Err(_) => sc.suspect.findings(&sc.suspect.systems(&m, final_fit, runs, &noise), &a.names),
@@ -123,10 +166,11 @@ pub(super) fn findings(
 
 /// The first look at the stand on reduced runs (every k-th sample of a large session): the
 /// mounts, then the stand check on the declared model's residual. When it finds a stand
-/// group, the whole diagnosis runs on the reduced runs (each group found restarts it, at a
-/// k-th of the cost), and its suspect is the answer: its report is not kept (its numbers
-/// are those of a k-th of the samples). When it finds none, the look ends there: a group
-/// that shows only beside a sensor effect is found on every sample.
+/// group, the climb runs on the reduced runs with a stand check at every step (each group
+/// found restarts it, at a k-th of the cost), and its suspect is the answer: its report is
+/// not kept (its numbers are those
+/// of a k-th of the samples). When it finds none, the look ends there: a group that shows
+/// only beside a sensor effect is found on every sample.
 fn first_look(
     mut suspect: stand::Suspect,
     model: &Model,
@@ -139,26 +183,53 @@ fn first_look(
     for (i, mount, finding) in wrong {
         suspect.set_mount(i, mount, finding);
     }
-    let tracks = suspect.tracks(runs);
-    let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
-    let owned = suspect.motions(motions);
-    let now: Vec<&crate::session::MotionSpec> = owned.iter().collect();
+    let now = Believed::new(&suspect, runs, motions);
+    let moved = now.runs(runs);
     let fit = match fit {
         Some(f) if !suspect.changed() => f,
         _ => refit(model, &moved, opts)?,
     };
-    let a = analyse(model, fit, &moved, &now, has_temp);
+    let a = analyse(model, fit, &moved, &now.motions(), has_temp);
     let (scored, exact) = super::score(&a.space, &a.space.base_set());
     if exact.iter().all(|e| *e) {
         return Ok(suspect);
     }
     let sensor_bic = scored.iter().filter(|c| c.0.rejected.is_none()).map(|c| c.0.delta_bic).reduce(f64::min);
-    let mut check = StandCheck { suspect: &mut suspect, declared: runs };
+    let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None };
     if !check.check(model, &a, &moved, sensor_bic, opts)? {
         return Ok(suspect);
     }
-    let (_, found) = diagnose(suspect.carried_over(), model, runs, motions, opts, has_temp)?;
-    found.ok_or_else(|| EstimateError::NotConverged("the stand kept explaining more on the reduced runs".into()))
+    // The climb on the corrected motion; each group found restarts it from the model it
+    // reached (only the suspect is kept: the diagnosis on every sample climbs from the
+    // start), whose nonlinear parameters are searched again (held where the fit on the
+    // motion before the correction put them, their misfit would be there for a stand
+    // group to take).
+    let mut reached = model.clone();
+    for _ in 0..MAX_STAND_FINDINGS {
+        let now = Believed::new(&suspect, runs, motions);
+        let moved = now.runs(runs);
+        let a = analyse(&reached, refit(&reached, &moved, opts)?, &moved, &now.motions(), has_temp);
+        let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None };
+        let (steps, _, a, restart) =
+            super::climb(a, &reached, &moved, &now.motions(), opts, has_temp, &mut Vec::new(), Some(&mut check))?;
+        let last = check.last.take();
+        for st in &steps {
+            let _ = reached.add_effect(&st.effect);
+        }
+        if restart {
+            continue;
+        }
+        // The groups estimated again around the model at the end of the climb, as at the end
+        // of a diagnosis (`findings`): the diagnosis on every sample starts from the motion
+        // the reduced runs know best.
+        let held = crate::estimate::held_at_fit(&reached, &a.base_fit);
+        let before = suspect.clone();
+        if suspect.polish(&held, runs, &noise_models(&a), opts, last).is_err() {
+            suspect = before;
+        }
+        return Ok(suspect);
+    }
+    Err(EstimateError::NotConverged("the stand kept explaining more on the reduced runs".into()))
 }
 
 /// Diagnoses `model` on `runs` with the stand as a suspect, with the suspect at the end
@@ -178,7 +249,7 @@ pub(super) fn diagnose(
         let copy = super::reduced::Reduced::new(runs, super::reduced::step_for(runs, PRE_SAMPLES), |_| false);
         // When the first look cannot be had, the diagnosis on every sample looks for itself.
         if let Ok(found) = first_look(suspect.clone(), model, &copy.runs(runs), motions, opts, has_temp) {
-            suspect = found.carried_over();
+            suspect = found.looked_over();
         }
     }
     let mut as_declared = None;
@@ -190,18 +261,16 @@ pub(super) fn diagnose(
         }
     }
     for _ in 0..=MAX_STAND_FINDINGS {
-        let tracks = suspect.tracks(runs);
-        let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
-        let owned = suspect.motions(motions);
-        let now: Vec<&crate::session::MotionSpec> = owned.iter().collect();
+        let now = Believed::new(&suspect, runs, motions);
+        let moved = now.runs(runs);
         // While the motion is as declared, the mount check's fit is this fit.
         let fit = match as_declared.take() {
             Some(f) if !suspect.changed() => f,
             _ => refit(model, &moved, opts)?,
         };
-        let a = analyse(model, fit, &moved, &now, has_temp);
-        let check = StandCheck { suspect: &mut suspect, declared: runs };
-        if let Some(d) = conclude(a, model, &moved, &now, opts, has_temp, Some(check))? {
+        let a = analyse(model, fit, &moved, &now.motions(), has_temp);
+        let check = StandCheck { suspect: &mut suspect, declared: runs, last: None };
+        if let Some(d) = conclude(a, model, &moved, &now.motions(), opts, has_temp, Some(check))? {
             return Ok((d, Some(suspect)));
         }
     }

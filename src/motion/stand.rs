@@ -151,6 +151,25 @@ pub struct StandAt {
     g_m_s2: f64,
 }
 
+/// sin θ and cos θ from those of a nearby θ₀ (`sc0`): angle addition with the Taylor
+/// series of the difference d = θ − θ₀ (terms to d⁷; the first left out is below 1e-23 for
+/// |d| ≤ 0.01 rad), or libm's when θ is farther. A stand parameter's nudge (the diagnosis's
+/// stand columns) moves the stand's angle and cone angle by far less, so that they cost no
+/// sine of their own.
+#[inline]
+pub fn sincos_near(theta: f64, theta0: f64, (s0, c0): (f64, f64)) -> (f64, f64) {
+    let d = theta - theta0;
+    if d.abs() > 0.01 {
+        return libm::sincos(theta);
+    }
+    // Products by the reciprocals: a division is ten times a multiplication's latency, and
+    // this runs for every nudged sample.
+    let d2 = d * d;
+    let sd = d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0) * (1.0 - d2 * (1.0 / 42.0))));
+    let cd = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0)));
+    (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
+}
+
 impl StandAt {
     /// Kinematics at time `t_s` in stand (platform) axes.
     #[inline]
@@ -184,8 +203,9 @@ impl StandAt {
 
     /// [`Self::at_angle`] with sin θ and cos θ given, and the cone angle's sine and cosine
     /// reused from `cone` ([`Self::cone_trig`] of a motion at the same θ) when its α is this
-    /// motion's: many nearby motions at one sample (a stand parameter nudged at a time)
-    /// then cost one or two sines, the same numbers as [`Self::at_angle`].
+    /// motion's, else worked out from them ([`sincos_near`]): many nearby motions at one
+    /// sample (a stand parameter nudged at a time) then cost one sine, the numbers of
+    /// [`Self::at_angle`] to within a few units in the last place.
     #[inline(always)]
     pub fn at_angle_trig(&self, an: Angle, (st, ct): (f64, f64), cone: Option<(f64, f64, f64)>) -> Kinematics {
         let Angle { theta: _, rate: td, accel: tdd } = an;
@@ -197,7 +217,11 @@ impl StandAt {
         let ad = a1 * td;
         let add = a2 * td * td + a1 * tdd;
         let hit = |c: Option<(f64, f64, f64)>| c.filter(|c| c.0.to_bits() == alpha.to_bits()).map(|c| (c.1, c.2));
-        let (sa, ca) = hit(self.cone).or_else(|| hit(cone)).unwrap_or_else(|| libm::sincos(alpha));
+        // A nearby motion's cone angle (a nudged one) from its sine and cosine.
+        let (sa, ca) = hit(self.cone).or_else(|| hit(cone)).unwrap_or_else(|| match cone {
+            Some((a0, s0, c0)) => sincos_near(alpha, a0, (s0, c0)),
+            None => libm::sincos(alpha),
+        });
         let f = [sa * ct, -sa * st, 1.0 - ca];
         let f_t = [-sa * st, -sa * ct, 0.0];
         let f_a = [ca * ct, -ca * st, sa];

@@ -125,6 +125,11 @@ pub struct Suspect {
     /// Carried from a diagnosis under another noise model: its groups are judged again
     /// at the first check ([`Self::rejudge`]).
     carried: bool,
+    /// Carried from a whole diagnosis ([`Self::searched_over`]).
+    searched: bool,
+    /// Its groups were found by the first look on every k-th sample of a large session
+    /// ([`Self::looked_over`]): on every sample they are not picked again.
+    looked: bool,
 }
 
 /// The whitened system of one run (global stand parameters after the model's).
@@ -265,6 +270,8 @@ impl Suspect {
             refused: Vec::new(),
             mounts: Vec::new(),
             carried: false,
+            searched: false,
+            looked: false,
         })
     }
 
@@ -333,6 +340,23 @@ impl Suspect {
     /// `noise[run][channel]`.
     pub fn systems(&self, model: &Model, fit: &Fit, runs: &[FitRun<'_>], noise: &[RunNoiseModel]) -> Systems {
         self.systems_of(model, fit, runs, noise, None)
+    }
+
+    /// [`Self::systems`] with the columns of the accepted groups' parameters only (the
+    /// others' rows and columns zero): enough to judge them again ([`Self::rejudge`]) or
+    /// to estimate them, not to look for new ones.
+    pub fn accepted_systems(&self, model: &Model, fit: &Fit, runs: &[FitRun<'_>], noise: &[RunNoiseModel]) -> Systems {
+        let used = self.accepted_params();
+        self.systems_of(model, fit, runs, noise, Some(&used))
+    }
+
+    /// The global stand parameters of the accepted groups, sorted.
+    fn accepted_params(&self) -> Vec<usize> {
+        let mut used: Vec<usize> =
+            self.accepted.iter().flat_map(|a| self.groups[a.0].params.iter().flatten().map(|&(gi, _)| gi)).collect();
+        used.sort_unstable();
+        used.dedup();
+        used
     }
 
     /// [`Self::systems`] with the columns of only the global stand parameters `only`
@@ -538,34 +562,52 @@ impl Systems {
         excess <= 0.0 || delta_q >= MIN_SHARE * excess
     }
 
+    /// What every group's evidence on this system shares ([`Shared`]).
+    fn shared(&self) -> Shared {
+        let base_set: Vec<usize> = (0..self.base).collect();
+        let l0 = Lsq::solve(&self.total.g, &self.total.b, self.total.yy, &base_set);
+        let raw_q0 = Lsq::solve(&self.raw.g, &self.raw.b, self.raw.yy, &base_set).q;
+        let rest = if self.folds.len() > 1 {
+            self.folds
+                .par_iter()
+                .map(|f| {
+                    let rest = Fold { g: &self.total.g - &f.g, b: &self.total.b - &f.b, yy: self.total.yy - f.yy };
+                    let q0 = Lsq::solve(&rest.g, &rest.b, rest.yy, &base_set).q_on(&f.g, &f.b, f.yy);
+                    (rest, q0)
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Shared { q0: l0.q, rank0: l0.rank, raw_q0, rest }
+    }
+
     /// The evidence for a group (channels weighed by their dispersion), its values and
     /// standard errors (all-run GLS), and its ΔBIC without the dispersion (the sensor
-    /// candidates' scale, for ranking against them).
-    fn evidence(&self, group: &[Combo]) -> (Evidence, Vec<(f64, f64)>, f64) {
+    /// candidates' scale, for ranking against them); `shared` is [`Self::shared`].
+    fn evidence(&self, group: &[Combo], shared: &Shared) -> Judged {
         let (g, b) = reduce(&self.total, self.base, group);
-        let base_set: Vec<usize> = (0..self.base).collect();
-        let all: Vec<usize> = (0..g.nrows()).collect();
-        let l0 = Lsq::solve(&g, &b, self.total.yy, &base_set);
-        let l1 = Lsq::solve(&g, &b, self.total.yy, &all);
+        // The solution on every column: G⁺b, whose pseudo-inverse also gives the standard errors.
+        let (pinv, rank1) = pinv_sym(&g);
+        let q1 = self.total.yy - b.dot(&(&pinv * &b));
+        let added = rank1.saturating_sub(shared.rank0);
+        let n = self.samples.max(2) as f64;
         let raw_bic = {
             let (g, b) = reduce(&self.raw, self.base, group);
-            let (q0, q1) = (Lsq::solve(&g, &b, self.raw.yy, &base_set).q, Lsq::solve(&g, &b, self.raw.yy, &all).q);
-            let added = l1.rank.saturating_sub(l0.rank);
-            -(q0 - q1).max(0.0) + added as f64 * (self.samples.max(2) as f64).ln()
+            let q1 = self.raw.yy - b.dot(&(pinv_sym(&g).0 * &b));
+            -(shared.raw_q0 - q1).max(0.0) + added as f64 * n.ln()
         };
-        let delta_q = (l0.q - l1.q).max(0.0);
-        let added = l1.rank.saturating_sub(l0.rank);
+        let delta_q = (shared.q0 - q1).max(0.0);
         let p_value = if added == 0 {
             1.0
         } else {
             use statrs::distribution::{ChiSquared, ContinuousCDF};
             ChiSquared::new(added as f64).map(|d| d.sf(delta_q)).unwrap_or(1.0)
         };
-        let n = self.samples.max(2) as f64;
-        let heldout = if self.folds.len() > 1 { self.heldout_gain(group) } else { delta_q };
-        let (pinv, _) = pinv_sym(&g);
+        let heldout = if self.folds.len() > 1 { self.heldout_gain(group, shared) } else { delta_q };
+        let beta = &pinv * &b;
         let values = (0..group.len())
-            .map(|j| (l1.beta[self.base + j], pinv[(self.base + j, self.base + j)].max(0.0).sqrt()))
+            .map(|j| (beta[self.base + j], pinv[(self.base + j, self.base + j)].max(0.0).sqrt()))
             .collect();
         let ev = Evidence {
             delta_q,
@@ -596,20 +638,16 @@ impl Systems {
     /// Σ over left-out runs of the χ² reduction: the model's coefficients and the group's
     /// common parameters from the other runs; the left-out run's own parameters (a per-run
     /// group's) refitted on that run alone with the rest held.
-    fn heldout_gain(&self, group: &[Combo]) -> f64 {
-        let base_set: Vec<usize> = (0..self.base).collect();
+    fn heldout_gain(&self, group: &[Combo], shared: &Shared) -> f64 {
         let mut gain = 0.0;
-        for f in &self.folds {
-            let rest = Fold { g: &self.total.g - &f.g, b: &self.total.b - &f.b, yy: self.total.yy - f.yy };
-            let (g, b) = reduce(&rest, self.base, group);
+        for (f, (rest, q0)) in self.folds.iter().zip(&shared.rest) {
+            let (g, b) = reduce(rest, self.base, group);
             let (gf, bf) = reduce(f, self.base, group);
             let all: Vec<usize> = (0..g.nrows()).collect();
-            let l0 = Lsq::solve(&g, &b, rest.yy, &base_set);
             let l1 = Lsq::solve(&g, &b, rest.yy, &all);
             // The run's own parameters: those the other runs do not see at all.
             let own: Vec<usize> =
                 (self.base..g.nrows()).filter(|&i| g[(i, i)] <= 1e-12 * gf[(i, i)] && gf[(i, i)] > 0.0).collect();
-            let q0 = l0.q_on(&gf, &bf, f.yy);
             let mut beta = DVector::from_fn(g.nrows(), |i, _| l1.value(i));
             if !own.is_empty() {
                 let go = DMatrix::from_fn(own.len(), own.len(), |i, j| gf[(own[i], own[j])]);
@@ -629,6 +667,20 @@ impl Systems {
     }
 }
 
+/// What every group's evidence on one system shares: the χ² and rank of the model's
+/// coefficients alone on the system and on its raw twin, and per left-out run the rest of
+/// the runs with the χ² the run has around the rest's solution.
+struct Shared {
+    q0: f64,
+    rank0: usize,
+    raw_q0: f64,
+    rest: Vec<(Fold, f64)>,
+}
+
+/// A group's evidence, its values with their standard errors, and its raw ΔBIC
+/// ([`Systems::evidence`]).
+type Judged = (Evidence, Vec<(f64, f64)>, f64);
+
 /// What the stand check decided at one step of the climb.
 pub struct Pick {
     group: usize,
@@ -643,8 +695,20 @@ impl Suspect {
     pub fn pick(&self, sys: &Systems, sensor_bic: Option<f64>) -> Option<Pick> {
         let mut best: Option<Pick> = None;
         let mut passed: Vec<&str> = Vec::new();
-        for (gi, g) in self.groups.iter().enumerate().filter(|(gi, _)| !self.refused.contains(gi)) {
-            let (ev, values, raw_bic) = sys.evidence(&g.params);
+        // After a first look on every k-th sample, a group it found is estimated again on
+        // every sample at the end (`polish`), not picked again: its estimate on the reduced
+        // runs is about one of their standard errors from every sample's, so that its
+        // refinement would take about k χ² per parameter there — near the rules' threshold,
+        // and each such pick would start the diagnosis again.
+        let again = |gi: &usize| !(self.looked && self.accepted.iter().any(|a| a.0 == *gi));
+        let shared = sys.shared();
+        let judged: Vec<(usize, Judged)> = (0..self.groups.len())
+            .into_par_iter()
+            .filter(|gi| !self.refused.contains(gi) && again(gi))
+            .map(|gi| (gi, sys.evidence(&self.groups[gi].params, &shared)))
+            .collect();
+        for (gi, (ev, values, raw_bic)) in judged {
+            let g = &self.groups[gi];
             if ev.rejection().is_some() || !self.plausible(g.id, &values) || !sys.material(&ev, raw_bic) {
                 continue;
             }
@@ -660,7 +724,7 @@ impl Suspect {
             if let Some(common) = self.groups[b.group].id.strip_suffix("-per-run") {
                 if passed.contains(&common) {
                     if let Some(ci) = self.groups.iter().position(|g| g.id == common) {
-                        let (ev, _, raw_bic) = sys.evidence(&self.groups[ci].params);
+                        let (ev, _, raw_bic) = sys.evidence(&self.groups[ci].params, &shared);
                         *b = Pick { group: ci, evidence: ev, raw_bic };
                     }
                 }
@@ -709,7 +773,7 @@ impl Suspect {
             groups.push(pick.group);
         }
         let before = self.runs.clone();
-        let (se, _) = self.estimate(&groups, model, runs, noise, opts)?;
+        let (se, _) = self.estimate(&groups, model, runs, noise, opts, None)?;
         if !self.all_plausible(&groups, &se) {
             self.runs = before;
             self.refused.push(pick.group);
@@ -730,19 +794,23 @@ impl Suspect {
     /// The systems of the estimate's last step (on the groups' parameters, the channels
     /// weighed by their dispersion too), for the findings' standard errors; None with no
     /// group found.
+    /// `first`, when given, are the systems around `model`'s fit on the motion now believed
+    /// under `noise` (the last stand check's, at the end of the ladder): the first step's,
+    /// without a fit and a pass of its own.
     pub fn polish(
         &mut self,
         model: &Model,
         runs: &[FitRun<'_>],
         noise: &[RunNoiseModel],
         opts: &FitOptions,
+        first: Option<Systems>,
     ) -> Result<Option<Systems>, EstimateError> {
         let groups: Vec<usize> = self.accepted.iter().map(|a| a.0).collect();
         if groups.is_empty() {
             return Ok(None);
         }
         let before = self.runs.clone();
-        let (se, sys) = self.estimate(&groups, model, runs, noise, opts)?;
+        let (se, sys) = self.estimate(&groups, model, runs, noise, opts, first)?;
         if !self.all_plausible(&groups, &se) {
             self.runs = before;
             return Err(EstimateError::NotConverged(
@@ -767,7 +835,8 @@ impl Suspect {
     /// Gauss–Newton on the groups' parameters, the model refitted at every step, each
     /// channel weighed by its noise model alone (not its dispersion: the misfit it had is
     /// what the groups remove); the standard error of each parameter (in the groups' order)
-    /// and the systems (on the groups' parameters) of the last step.
+    /// and the systems (on the groups' parameters) of the last step. `first`: the first
+    /// step's systems when they are already at hand ([`Self::polish`]).
     fn estimate(
         &mut self,
         groups: &[usize],
@@ -775,6 +844,7 @@ impl Suspect {
         runs: &[FitRun<'_>],
         noise: &[RunNoiseModel],
         opts: &FitOptions,
+        mut first: Option<Systems>,
     ) -> Result<(Vec<f64>, Systems), EstimateError> {
         let params: Vec<Combo> = groups.iter().flat_map(|&g| self.groups[g].params.iter().cloned()).collect();
         let mut used: Vec<usize> = params.iter().flatten().map(|&(gi, _)| gi).collect();
@@ -782,10 +852,16 @@ impl Suspect {
         used.dedup();
         let mut last = None;
         for _ in 0..MAX_STEPS {
-            let tracks = self.tracks(runs);
-            let moved: Vec<FitRun<'_>> = runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
-            let fit = crate::estimate::fit(&FitRequest::runs(model, &moved).options(*opts))?.fit;
-            let sys = self.systems_of(model, &fit, &moved, noise, Some(&used));
+            let sys = match first.take() {
+                Some(sys) => sys,
+                None => {
+                    let tracks = self.tracks(runs);
+                    let moved: Vec<FitRun<'_>> =
+                        runs.iter().zip(&tracks).map(|(r, t)| FitRun { track: t, ..*r }).collect();
+                    let fit = crate::estimate::fit(&FitRequest::runs(model, &moved).options(*opts))?.fit;
+                    self.systems_of(model, &fit, &moved, noise, Some(&used))
+                }
+            };
             let values = sys.raw_values(&params);
             let mut worst = 0.0f64;
             for (combo, (v, se)) in params.iter().zip(&values) {

@@ -5,11 +5,34 @@ use super::{pinv_sym, reduce, Combo, Suspect, Systems};
 use nalgebra::DVector;
 
 impl Suspect {
-    /// This suspect, to start a diagnosis under another noise model from the motion this
-    /// one corrected (the slow noise is then measured on a residual without the stand's
-    /// error, which it would otherwise absorb); its groups are judged again there.
+    /// This suspect, to start a diagnosis from the motion this one corrected: under another
+    /// noise model (the slow noise is then measured on a residual without the stand's
+    /// error, which it would otherwise absorb), or on every sample after the first look on
+    /// every k-th. Its groups are judged again there.
     pub fn carried_over(self) -> Self {
-        Self { carried: true, ..self }
+        Self { carried: true, searched: false, ..self }
+    }
+
+    /// [`Self::carried_over`] from a whole diagnosis, which looked for every group at every
+    /// step of its ladder: the first check judges the groups again on their own columns
+    /// and, when a sensor effect is to be added there, leaves the search for new groups to
+    /// the next check, on the model with that effect (a check with every stand column
+    /// costs a pass over every sample with each of them).
+    pub fn searched_over(self) -> Self {
+        Self { carried: true, searched: true, ..self }
+    }
+
+    /// [`Self::searched_over`] from the first look at the stand on every k-th sample of a
+    /// large session: the groups it found are estimated again on every sample at the end
+    /// of the diagnosis there, and not picked again ([`Self::pick`]).
+    pub fn looked_over(self) -> Self {
+        Self { looked: true, ..self.searched_over() }
+    }
+
+    /// Whether the groups were carried from a whole diagnosis ([`Self::searched_over`])
+    /// and not yet judged again.
+    pub fn searched(&self) -> bool {
+        self.carried && self.searched
     }
 
     /// Whether the groups were carried from another diagnosis and not yet judged again.
