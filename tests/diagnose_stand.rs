@@ -301,6 +301,32 @@ fn a_sensor_effect_beside_a_stand_error_is_still_found() {
     assert!(d.unexplained.is_empty(), "{:?}", d.unexplained);
 }
 
+/// A session above the size from which the stand is looked for first on every k-th sample
+/// (250k samples): the groups that look finds are carried into the diagnosis on every
+/// sample, judged again there and estimated again at its end. The cone angle off and the
+/// tilted base are the stand, with values within 3 SE of every sample's standard errors
+/// (not the reduced runs'), the hidden dead zone is the unit, and nothing else is added.
+#[test]
+fn a_large_session_looks_for_the_stand_on_every_kth_sample_first() {
+    let dz = [("gyro.dz_x", 9e-4), ("gyro.dz_y", 5e-4), ("gyro.dz_z", 7e-4)];
+    let (mut cfg, _) = hidden("gyro-dead-zone", &dz, 31);
+    for r in &mut cfg.runs {
+        r.duration_s = 250_000.0 / 100.0 / 18.0;
+    }
+    let mut e = StandErrors::default();
+    e.set("cone=0.3").unwrap();
+    e.set("tilt=0.1,0.05").unwrap();
+    cfg.stand = e;
+    let d = run_diagnose(&cfg.generate());
+    assert_eq!(effects(&d), ["gyro-dead-zone"], "stand {:#?}", d.stand);
+    within(finding(&d, &["cone-angle"]), "cone angle offset", 0.3);
+    let f = finding(&d, &["base-tilt"]);
+    within(f, "base tilt about x", 0.1);
+    within(f, "base tilt about y", 0.05);
+    assert_eq!(d.stand.len(), 2, "{:#?}", d.stand);
+    assert!(d.unexplained.is_empty(), "{:?}", d.unexplained);
+}
+
 #[test]
 fn clean_stands_bring_no_stand_finding() {
     let mut false_findings = 0;
