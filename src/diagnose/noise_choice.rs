@@ -120,7 +120,7 @@ fn by_mode(
             // motion, the slow noise would take in the stand's error (a base tilt's once per
             // revolution is as slow as a wander on runs of a few revolutions) and hide it.
             // The first answer stands when the second cannot be had, and says so.
-            match diagnose_from(model, runs, motions, &with(true), stand.map(super::stand::Suspect::searched_over)) {
+            match diagnose_from(model, runs, motions, &with(true), stand.map(super::stand::Suspect::carried_over)) {
                 Ok((second, _)) => Ok(choose(first, second)),
                 Err(e) => {
                     let mut first = first;

@@ -95,8 +95,8 @@ impl StandCheck<'_, '_, '_> {
     ) -> Result<bool, EstimateError> {
         let noise = noise_models(a);
         // Groups carried from a whole diagnosis, at the first check where a sensor effect
-        // follows: judged again on their own columns (`Suspect::searched_over`).
-        if self.suspect.searched() && sensor_bic.is_some() {
+        // follows: judged again on their own columns (`Suspect::carried_over`).
+        if self.suspect.carried() && sensor_bic.is_some() {
             let sys = self.suspect.accepted_systems(current, &a.base_fit, runs, &noise);
             let dropped = self.suspect.rejudge(&sys);
             self.last = Some(sys);

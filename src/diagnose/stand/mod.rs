@@ -125,8 +125,6 @@ pub struct Suspect {
     /// Carried from a diagnosis under another noise model: its groups are judged again
     /// at the first check ([`Self::rejudge`]).
     carried: bool,
-    /// Carried from a whole diagnosis ([`Self::searched_over`]).
-    searched: bool,
     /// Its groups were found by the first look on every k-th sample of a large session
     /// ([`Self::looked_over`]): on every sample they are not picked again.
     looked: bool,
@@ -270,7 +268,6 @@ impl Suspect {
             refused: Vec::new(),
             mounts: Vec::new(),
             carried: false,
-            searched: false,
             looked: false,
         })
     }

@@ -1,5 +1,6 @@
-//! The stand's groups carried from a diagnosis under another noise model (the one
-//! without slow noise) into the next, and judged again there.
+//! The stand's groups carried from one diagnosis into the next — from the one without
+//! slow noise into the one with it, or from the first look on every k-th sample of a
+//! large session into the diagnosis on every sample — and judged again there.
 
 use super::{pinv_sym, reduce, Combo, Suspect, Systems};
 use nalgebra::DVector;
@@ -8,31 +9,20 @@ impl Suspect {
     /// This suspect, to start a diagnosis from the motion this one corrected: under another
     /// noise model (the slow noise is then measured on a residual without the stand's
     /// error, which it would otherwise absorb), or on every sample after the first look on
-    /// every k-th. Its groups are judged again there.
+    /// every k-th. Its groups are judged again there. A whole diagnosis found them, having
+    /// looked for every group at every step of its ladder: so the first check judges them
+    /// on their own columns and, when a sensor effect is to be added there, leaves the
+    /// search for new groups to the next check, on the model with that effect (a check
+    /// with every stand column costs a pass over every sample with each of them).
     pub fn carried_over(self) -> Self {
-        Self { carried: true, searched: false, ..self }
+        Self { carried: true, ..self }
     }
 
-    /// [`Self::carried_over`] from a whole diagnosis, which looked for every group at every
-    /// step of its ladder: the first check judges the groups again on their own columns
-    /// and, when a sensor effect is to be added there, leaves the search for new groups to
-    /// the next check, on the model with that effect (a check with every stand column
-    /// costs a pass over every sample with each of them).
-    pub fn searched_over(self) -> Self {
-        Self { carried: true, searched: true, ..self }
-    }
-
-    /// [`Self::searched_over`] from the first look at the stand on every k-th sample of a
+    /// [`Self::carried_over`] from the first look at the stand on every k-th sample of a
     /// large session: the groups it found are estimated again on every sample at the end
     /// of the diagnosis there, and not picked again ([`Self::pick`]).
     pub fn looked_over(self) -> Self {
-        Self { looked: true, ..self.searched_over() }
-    }
-
-    /// Whether the groups were carried from a whole diagnosis ([`Self::searched_over`])
-    /// and not yet judged again.
-    pub fn searched(&self) -> bool {
-        self.carried && self.searched
+        Self { looked: true, ..self.carried_over() }
     }
 
     /// Whether the groups were carried from another diagnosis and not yet judged again.
