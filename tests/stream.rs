@@ -255,7 +255,8 @@ fn streamed_fit_warns_as_the_in_memory_reader_and_refuses_gaps_when_strict() {
 }
 
 /// Recordings past the heap budget live in a mapped spill file (`session::column`): with
-/// the budget at 0 every column is spilled, and `diagnose` (its fits, refits and stand
+/// the budget at 0 every column is spilled (with a small one, the runs read first move to the
+/// spill once the session is past it), and `diagnose` (its fits, refits and stand
 /// systems) and `fit` say the same, to the last digit, as with the recordings on the heap;
 /// so does a run where no spill file can be made.
 #[test]
@@ -296,6 +297,9 @@ fn spilled_recordings_give_the_numbers_of_the_heap() {
     assert!(heap.contains("gyro-dead-zone"), "{heap}");
     assert_eq!(run(Some("0"), &["diagnose", "s"]), heap);
     assert_eq!(run(Some("no-tmp"), &["diagnose", "s"]), heap);
+    // A budget some columns fit in (each reader's three builders take 1 MiB steps): the
+    // session passes it, and the columns on the heap move to the spill once all are read.
+    assert_eq!(run(Some("2.5"), &["diagnose", "s"]), heap);
     let fit = |mb| run(mb, &["fit", "s", "--dry-run"]);
     assert_eq!(fit(Some("0")), fit(None));
 }

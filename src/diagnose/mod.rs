@@ -278,9 +278,14 @@ fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotio
     let bound = crate::estimate::bound_at_fit(model, &base_fit);
     let model = &bound;
     let universe = space::Universe::new(model, &base_fit, has_temp);
-    let residual = |i: usize| picture::run_residual(model, &base_fit, &runs[i]).0;
-    let stats: Vec<space::RunNoiseStats> =
-        (0..runs.len()).into_par_iter().map(|i| space::run_noise(&runs[i], motions[i], &residual(i))).collect();
+    let residual = |i: usize| picture::run_residual(model, &base_fit, &runs[i]);
+    let stats: Vec<space::RunNoiseStats> = (0..runs.len())
+        .into_par_iter()
+        .map(|i| {
+            let (r, output_ss) = residual(i);
+            space::run_noise(&runs[i], motions[i], r, output_ss)
+        })
+        .collect();
     let pooled = space::pooled_noise(&stats);
     let span_s: f64 = runs.iter().map(run_span).sum();
     // The slow noise the fit measured (restricted likelihood on the runs' block means, with
@@ -298,7 +303,16 @@ fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotio
         .into_par_iter()
         .enumerate()
         .map(|(i, st)| {
-            space::run_gram(&universe, model, &base_fit, &runs[i], st, &pooled, &residual(i), (slow.as_slice(), span_s))
+            space::run_gram(
+                &universe,
+                model,
+                &base_fit,
+                &runs[i],
+                st,
+                &pooled,
+                &residual(i).0,
+                (slow.as_slice(), span_s),
+            )
         })
         .collect();
     let names = runs.iter().map(|r| r.name.to_string()).collect();

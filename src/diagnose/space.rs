@@ -365,9 +365,12 @@ pub struct RunNoiseStats {
 }
 
 /// The first look at one run (module documentation, steps 1–2): `r` is the base residual
-/// per channel.
-pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNoiseStats {
-    let n = run.len();
+/// per channel (cleaned in place: at 10⁷ samples a run's six channels are 27 MB, and a
+/// copy of them per worker was the diagnosis's largest transient), `output_ss` each
+/// channel's sum of squared recorded outputs, both as [`super::picture::run_residual`]
+/// returns them.
+pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, mut r: Vec<Vec<f64>>, output_ss: [f64; 6]) -> RunNoiseStats {
+    let n = run.len().min(r.iter().map(Vec::len).min().unwrap_or(0));
     let t = &run.track.t_s[..n];
     let basis = RunBasis::new(t, motion);
     let nb = basis.size;
@@ -396,7 +399,13 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
     let fs_hz = if n > 1 { (n - 1) as f64 / span.max(f64::MIN_POSITIVE) } else { 1.0 };
     let mut acov = Vec::with_capacity(6);
     let mut found = Vec::new();
-    let mut cleaned: Vec<Vec<f64>> = r.iter().map(|rc| rc[..n].to_vec()).collect();
+    let residual_ms = std::array::from_fn(|c| {
+        r.get(c).map_or(0.0, |rc| rc[..n].iter().map(|v| v * v).sum::<f64>()) / n.max(1) as f64
+    });
+    let cleaned = &mut r;
+    for cl in cleaned.iter_mut() {
+        cl.truncate(n);
+    }
     for k0 in (0..n).step_by(ROWS) {
         let len = (n - k0).min(ROWS);
         basis.rows_into(&t[k0..k0 + len], &mut row, &mut rows, ROWS);
@@ -411,7 +420,7 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
     }
     let bins = basis.fold_bins(n);
     let mut fold = PhaseFold::new(bins);
-    for (c, mut clean) in cleaned.into_iter().enumerate() {
+    for (c, mut clean) in r.into_iter().enumerate() {
         // Lines are not noise: their sinusoids leave before the noise is modelled.
         let here = run_lines(c, &clean, t, fs_hz);
         for l in &here {
@@ -426,21 +435,12 @@ pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, r: &[Vec<f64>]) -> RunNo
         acov.push(crate::stats::ar::autocovariances(&clean, crate::stats::ar::MAX_ORDER));
         found.extend(here);
     }
-    let mut output_ms = [0.0; 6];
-    for k in 0..n {
-        for (si, sensor) in SensorKind::BOTH.into_iter().enumerate() {
-            let y = run.output(sensor, k);
-            for ch in 0..3 {
-                output_ms[3 * si + ch] += y[ch] * y[ch] / n.max(1) as f64;
-            }
-        }
-    }
+    let output_ms = output_ss.map(|s| s / n.max(1) as f64);
     let fold = (bins > 0).then(|| Fold {
         cone_hz: basis.cone_hz().unwrap_or(0.0),
         fs_hz,
         harmonics: (HARMONICS + 1, bins / 2),
     });
-    let residual_ms = std::array::from_fn(|c| r[c].iter().map(|v| v * v).sum::<f64>() / n.max(1) as f64);
     RunNoiseStats { basis, basis_ms, acov, n, lines: found, output_ms, residual_ms, fold }
 }
 

@@ -11,8 +11,12 @@
 //! them are resident, looking every [`RELEASE_EVERY`] (`madvise(MADV_DONTNEED)` on the
 //! shared mapping: the file's contents do not change, the next touch maps them again), so
 //! a session of 10⁷ samples is read with a bounded resident set, the same numbers as on
-//! the heap. The bound is the governor's: a pass that maps pages faster than it looks
-//! (a few GB/s) overshoots by what it maps in one look.
+//! the heap. The bound is the governor's and loose: a pass that streams columns maps them
+//! at tens of GB/s (64 KiB of page cache per fault), so between two looks the mapped pages
+//! can pass the bound by 50–120 MB (measured at 10⁷ samples; a look every 0.5 ms overshot
+//! as much and took 5 % of a core). Once a session is past the budget its heap columns
+//! move to spill files too ([`Column::spilled`], `Session::load`), so the heap holds none
+//! of a session that is mapped.
 //!
 //! Why a mapping rather than loading runs on demand: every layer above reads recordings as
 //! slices (`&[[f64; 3]]`), so the storage changes and no reader of a recording does.
@@ -35,12 +39,13 @@ pub const MAPPED_RESIDENT_BYTES: usize = 32 << 20;
 /// Bytes of reader-built columns on the heap now (their reservations).
 static HEAP_BYTES: AtomicUsize = AtomicUsize::new(0);
 
-/// The heap budget of reader-built columns, bytes: `CROSSCAL_HEAP_MB` (MiB; 0 spills
-/// everything) or 64 MiB — a session of 10⁶ samples (56 MB) stays on the heap.
+/// The heap budget of reader-built columns, bytes: `CROSSCAL_HEAP_MB` (MiB, fractions
+/// allowed; 0 spills everything) or 64 MiB — a session of 10⁶ samples (56 MB) stays on the heap.
 pub fn heap_budget_bytes() -> usize {
     static BUDGET: OnceLock<usize> = OnceLock::new();
     *BUDGET.get_or_init(|| {
-        std::env::var("CROSSCAL_HEAP_MB").ok().and_then(|v| v.trim().parse::<usize>().ok()).unwrap_or(64) << 20
+        let mib = std::env::var("CROSSCAL_HEAP_MB").ok().and_then(|v| v.trim().parse::<f64>().ok());
+        (mib.filter(|m| m.is_finite() && *m >= 0.0).unwrap_or(64.0) * (1u64 << 20) as f64) as usize
     })
 }
 
@@ -121,6 +126,23 @@ impl<T: bytemuck::Pod> Column<T> {
             // Just made a unique heap store above.
             _ => &mut [],
         }
+    }
+
+    /// This column in a mapped spill file of its own (a clone when it is mapped already):
+    /// its heap store, once no other column shares it, goes back to the allocator and its
+    /// reservation to the budget. Errors when the file cannot be written or mapped.
+    pub fn spilled(&self) -> std::io::Result<Self>
+    where
+        T: Send + Sync + 'static,
+    {
+        if self.is_mapped() || self.is_empty() {
+            return Ok(self.clone());
+        }
+        let mut file = tempfile::tempfile()?;
+        file.write_all(bytemuck::cast_slice(&self[..]))?;
+        let store = Arc::new(Store::Mapped(map_file(&file)?));
+        governor::watch(&store);
+        Ok(Column { store, start: 0, len: self.len })
     }
 
     fn all(&self) -> &[T] {
@@ -370,21 +392,49 @@ mod governor {
         }
     }
 
+    /// The process's file-backed resident bytes (the third field of `/proc/self/statm`, in
+    /// pages), read from a handle kept open: a look is one `pread`, no allocation.
+    struct Statm {
+        file: Option<std::fs::File>,
+        page: usize,
+        buf: [u8; 128],
+    }
+
+    impl Statm {
+        fn open() -> Self {
+            Statm {
+                file: std::fs::File::open("/proc/self/statm").ok(),
+                page: rustix::param::page_size(),
+                buf: [0; 128],
+            }
+        }
+
+        fn shared_bytes(&mut self) -> Option<usize> {
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::FileExt;
+                let len = self.file.as_ref()?.read_at(&mut self.buf, 0).ok()?;
+                let text = std::str::from_utf8(&self.buf[..len]).ok()?;
+                text.split_whitespace().nth(2)?.parse::<usize>().ok().map(|pages| pages * self.page)
+            }
+            #[cfg(not(unix))]
+            {
+                None
+            }
+        }
+    }
+
     /// Every [`RELEASE_EVERY`], hands back the pages of every mapped store alive when the
     /// process's file-backed resident pages have grown more than [`MAPPED_RESIDENT_BYTES`]
     /// past what they were when it started (the binary's and libraries' pages); stops when
     /// no store is left (the next mapping starts it again).
     fn run() {
-        let page = rustix::param::page_size();
-        let shared = || {
-            let text = std::fs::read_to_string("/proc/self/statm").ok()?;
-            text.split_whitespace().nth(2)?.parse::<usize>().ok().map(|pages| pages * page)
-        };
-        let base = shared();
+        let mut statm = Statm::open();
+        let base = statm.shared_bytes();
         loop {
             std::thread::sleep(RELEASE_EVERY);
             // Without /proc the pages are handed back at every tick.
-            let over = match (base, shared()) {
+            let over = match (base, statm.shared_bytes()) {
                 (Some(b), Some(now)) => now > b + MAPPED_RESIDENT_BYTES,
                 _ => true,
             };
@@ -436,6 +486,12 @@ mod tests {
         // The governor's release leaves the samples as they were.
         mapped.store.release_now();
         assert_eq!(mapped, heap);
+        // A heap column (or a part of one) moved to a spill file reads the same.
+        let moved = heap.spilled().unwrap();
+        assert!(moved.is_mapped() && moved == heap && !moved.same_as(&heap));
+        let part = heap.slice(1000, 1010).spilled().unwrap();
+        assert!(part.is_mapped() && part.len() == 10 && part[0] == heap[1000]);
+        assert!(mapped.spilled().unwrap().same_as(&mapped));
     }
 
     #[test]

@@ -359,6 +359,13 @@ impl Session {
             };
             runs.push(Run { spec: spec.clone(), path, rec });
         }
+        // A session past the heap budget is mapped whole: the runs read first would
+        // otherwise hold the whole budget on the heap for as long as the session lives,
+        // beside the mapped pages of the rest (64 MB of the peak at 10⁷ samples).
+        if runs.iter().any(|r| r.rec.t_s.is_mapped() || r.rec.gyro.is_mapped() || r.rec.accel.is_mapped()) {
+            drop(cache);
+            runs.par_iter_mut().for_each(|r| r.rec.spill());
+        }
         Ok(Self { manifest_path: manifest_path.to_path_buf(), manifest, runs })
     }
 

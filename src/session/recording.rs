@@ -47,6 +47,21 @@ pub struct Recording {
 }
 
 impl Recording {
+    /// The long columns (time, gyro, accelerometer) moved to mapped spill files when they
+    /// are on the heap ([`super::Column::spilled`]); a column that cannot be moved stays
+    /// where it is (only memory is at stake).
+    pub fn spill(&mut self) {
+        if let Ok(c) = self.t_s.spilled() {
+            self.t_s = c;
+        }
+        if let Ok(c) = self.gyro.spilled() {
+            self.gyro = c;
+        }
+        if let Ok(c) = self.accel.spilled() {
+            self.accel = c;
+        }
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.t_s.len()
