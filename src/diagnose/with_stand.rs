@@ -21,7 +21,7 @@ const MAX_STAND_FINDINGS: usize = 8;
 const PRE_FROM: usize = 200_000;
 
 /// Samples the reduced runs of the first look at the stand hold, about.
-const PRE_SAMPLES: usize = 50_000;
+const PRE_SAMPLES: usize = 25_000;
 
 /// The stand check of a climb: the suspect and the runs with their declared motion.
 pub(super) struct StandCheck<'s, 'r, 'a> {
