@@ -279,13 +279,8 @@ fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotio
     let model = &bound;
     let universe = space::Universe::new(model, &base_fit, has_temp);
     let residual = |i: usize| picture::run_residual(model, &base_fit, &runs[i]);
-    let stats: Vec<space::RunNoiseStats> = (0..runs.len())
-        .into_par_iter()
-        .map(|i| {
-            let (r, output_ss) = residual(i);
-            space::run_noise(&runs[i], motions[i], r, output_ss)
-        })
-        .collect();
+    let stats: Vec<space::RunNoiseStats> =
+        (0..runs.len()).into_par_iter().map(|i| space::run_noise(&runs[i], motions[i], residual(i))).collect();
     let pooled = space::pooled_noise(&stats);
     let span_s: f64 = runs.iter().map(run_span).sum();
     // The slow noise the fit measured (restricted likelihood on the runs' block means, with
@@ -299,22 +294,11 @@ fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotio
         .chain(std::iter::repeat(None))
         .take(6)
         .collect();
-    let grams: Vec<space::RunGram> = stats
-        .into_par_iter()
-        .enumerate()
-        .map(|(i, st)| {
-            space::run_gram(
-                &universe,
-                model,
-                &base_fit,
-                &runs[i],
-                st,
-                &pooled,
-                &residual(i).0,
-                (slow.as_slice(), span_s),
-            )
-        })
-        .collect();
+    let gram_of = |i: usize, st| {
+        let r = residual(i).0;
+        space::run_gram(&universe, model, &base_fit, &runs[i], st, &pooled, &r, (slow.as_slice(), span_s))
+    };
+    let grams: Vec<space::RunGram> = stats.into_par_iter().enumerate().map(|(i, st)| gram_of(i, st)).collect();
     let names = runs.iter().map(|r| r.name.to_string()).collect();
     let mut space = Space::new(universe, grams);
     space.slow = slow;

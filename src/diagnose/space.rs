@@ -366,10 +366,14 @@ pub struct RunNoiseStats {
 
 /// The first look at one run (module documentation, steps 1–2): `r` is the base residual
 /// per channel (cleaned in place: at 10⁷ samples a run's six channels are 27 MB, and a
-/// copy of them per worker was the diagnosis's largest transient), `output_ss` each
-/// channel's sum of squared recorded outputs, both as [`super::picture::run_residual`]
-/// returns them.
-pub fn run_noise(run: &FitRun<'_>, motion: &MotionSpec, mut r: Vec<Vec<f64>>, output_ss: [f64; 6]) -> RunNoiseStats {
+/// copy of them per worker was the diagnosis's largest transient) and `output_ss` each
+/// channel's sum of squared recorded outputs, as [`super::picture::run_residual`] returns
+/// them.
+pub fn run_noise(
+    run: &FitRun<'_>,
+    motion: &MotionSpec,
+    (mut r, output_ss): (Vec<Vec<f64>>, [f64; 6]),
+) -> RunNoiseStats {
     let n = run.len().min(r.iter().map(Vec::len).min().unwrap_or(0));
     let t = &run.track.t_s[..n];
     let basis = RunBasis::new(t, motion);
