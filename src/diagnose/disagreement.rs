@@ -41,12 +41,20 @@ pub fn per_run_disagreements(model: &Model, all: &Fit, runs: &[FitRun<'_>], opts
 /// One run's disagreements with the all-run fit `all`.
 fn run_disagreements(model: &Model, all: &Fit, run: &FitRun<'_>, opts: &FitOptions) -> Vec<Disagreement> {
     let one = std::slice::from_ref(run);
-    let Ok(first) = refit(model, one, opts) else { return Vec::new() };
+    // The first fit only tells what the run cannot identify: its slow-noise covariance (a
+    // restricted-likelihood climb per channel) is measured on the fit compared.
+    let quick = FitOptions { slow_noise: false, ..*opts };
+    let Ok(first) = refit(model, one, &quick) else { return Vec::new() };
     let held: Vec<&String> =
         first.gyro.unidentifiable.iter().chain(&first.accel.unidentifiable).map(|c| &c.held).collect();
     // With nothing the run cannot identify, the first fit is the one to compare.
     let f = if held.is_empty() {
-        first
+        if !opts.slow_noise {
+            first
+        } else {
+            let Ok(f) = refit(model, one, opts) else { return Vec::new() };
+            f
+        }
     } else {
         let mut m = model.clone();
         for name in held {

@@ -29,7 +29,7 @@
 //! no slow noise and D is zero.
 
 use crate::estimate::slow::SlowNoise;
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 
 /// Pieces a run is cut into for the projection (at most; at least 16 per cone cycle of the
 /// highest harmonic where the run is long).
@@ -92,9 +92,10 @@ pub fn basis_covariances(
             let Some(s) = s.filter(SlowNoise::is_slow) else { return zero() };
             let kernel = s.kernel(span_s);
             let centre = kernel.walk2() * span_s / 6.0;
-            let sigma = DMatrix::from_fn(pieces, pieces, |i, j| kernel.cov(at[i], at[j], i == j) + centre);
-            let d = &proj * sigma * proj.transpose();
-            0.5 * (&d + d.transpose())
+            let mut blocks: Vec<(DVector<f64>, (f64, f64))> =
+                proj.column_iter().zip(&at).map(|(c, t)| (c.into_owned(), *t)).collect();
+            let total: DVector<f64> = proj.column_sum();
+            kernel.sandwich(&mut blocks) + centre * &total * total.transpose()
         })
         .collect()
 }
