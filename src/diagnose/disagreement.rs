@@ -20,7 +20,7 @@ pub struct Disagreement {
     pub run_std_error: f64,
     /// All-run estimate.
     pub all_value: f64,
-    /// (run − all) / run standard error.
+    /// (run − all) / √(run standard error² + all-run standard error²).
     pub z: f64,
 }
 
@@ -28,7 +28,7 @@ pub struct Disagreement {
 pub const DISAGREEMENT_Z: f64 = 6.0;
 
 /// Refits the model on each run alone and lists coefficients that disagree with the
-/// all-run fit by more than [`DISAGREEMENT_Z`] standard errors. Coefficients a single run
+/// all-run fit by more than [`DISAGREEMENT_Z`] standard errors of their difference. Coefficients a single run
 /// cannot identify are held at their all-run values, so the rest stay comparable.
 pub fn per_run_disagreements(model: &Model, all: &Fit, runs: &[FitRun<'_>], opts: &FitOptions) -> Vec<Disagreement> {
     // Each run's fits are independent: the runs in parallel, their lists joined in run order.
@@ -71,7 +71,10 @@ fn run_disagreements(model: &Model, all: &Fit, run: &FitRun<'_>, opts: &FitOptio
         if c.status != CoefStatus::Fitted || a.status != CoefStatus::Fitted || se <= 0.0 {
             continue;
         }
-        let z = (c.value - a.value) / se;
+        // The all-run estimate's own error counts too: under slow noise it can be the larger
+        // (a wandering bias moves what each run's constant regressors tell the whole fit),
+        // and the two are positively correlated, so the sum is an upper bound.
+        let z = (c.value - a.value) / se.hypot(a.std_error.unwrap_or(0.0));
         if z.abs() > DISAGREEMENT_Z {
             out.push(Disagreement {
                 coefficient: c.name.clone(),

@@ -380,7 +380,7 @@ fn picture(
 }
 
 fn pictures(a: &Analysis, set: &[usize], fit: &Fit, noise: &[NoiseReport]) -> Vec<ChannelReport> {
-    let left: Vec<Leftover> = a.space.systematic(&a.space.solve(set));
+    let left: Vec<Leftover> = a.space.systematic(&a.space.solve_slow(set));
     let res = resolution(&a.space);
     (0..6).map(|c| picture(res[c], &left[c], fit, noise, &a.names, c)).collect()
 }

@@ -230,6 +230,30 @@ impl Space {
         Lsq::solve(&self.total.g, &self.total.b, self.total.yy, set)
     }
 
+    /// The all-run solution on a set under the slow noise as well: each run's Grams carry
+    /// its random effect on the basis ([`super::slow::adjust_gram`], generalised least
+    /// squares), so a wandering bias does not drag coefficients whose regressors are nearly
+    /// constant within a run (gravity's share on a cone's axis) and leave their error at
+    /// the cone harmonics. Without slow noise, [`Self::solve`].
+    pub fn solve_slow(&self, set: &[usize]) -> Lsq {
+        let carries = |rg: &RunGram| rg.slow.iter().any(|d| d.iter().any(|v| *v != 0.0));
+        if !self.runs.iter().any(carries) {
+            return self.solve(set);
+        }
+        let mut total = System::zeros(self.universe.params.len());
+        for rg in &self.runs {
+            for c in 0..6 {
+                let mut g = rg.gram[c].clone();
+                if let Some(d) = rg.slow.get(c) {
+                    let width = self.universe.channel_params(c).count();
+                    super::slow::adjust_gram(&mut g, width, rg.basis, d);
+                }
+                total.add(&scatter_gram(&self.universe, &g, c));
+            }
+        }
+        Lsq::solve(&total.g, &total.b, total.yy, set)
+    }
+
     /// Whitened samples over all runs.
     pub fn samples(&self) -> usize {
         self.total.n
@@ -457,8 +481,12 @@ pub struct Leftover {
 /// One run's channel as a global system: its local Gram scattered onto the global
 /// parameters (the basis rows and columns left out).
 fn scatter(u: &Universe, rg: &RunGram, c: usize) -> System {
+    scatter_gram(u, &rg.gram[c], c)
+}
+
+/// A channel's local Gram `[columns | basis | r]` as a global system.
+fn scatter_gram(u: &Universe, g: &DMatrix<f64>, c: usize) -> System {
     let idx: Vec<usize> = u.channel_params(c).collect();
-    let g = &rg.gram[c];
     let m = g.nrows();
     let mut one = System::zeros(u.params.len());
     for (i, &gi) in idx.iter().enumerate() {

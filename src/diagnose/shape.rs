@@ -220,7 +220,22 @@ impl NoiseScale {
         });
         Self { sigma, integral: (1.0 + rho) / (1.0 - rho), run_var: run_var.max(0.0) }
     }
+
+    /// The same noise seen on every `stride`-th sample: the lag-1 correlation ρ read back
+    /// from the integral time (1 + ρ)/(1 − ρ) becomes ρ^stride between the samples kept.
+    fn strided(self, stride: usize) -> Self {
+        if stride <= 1 {
+            return self;
+        }
+        let rho = ((self.integral - 1.0) / (self.integral + 1.0)).clamp(0.0, 0.999);
+        let rs = rho.powi(stride.min(i32::MAX as usize) as i32);
+        Self { integral: (1.0 + rs) / (1.0 - rs), ..self }
+    }
 }
+
+/// Samples a shape is drawn from at most: past it every k-th sample of each run is kept
+/// (memory bounded whatever the session's length; the bins' errors follow the stride).
+const SHAPE_SAMPLES: usize = 250_000;
 
 /// Binned partial residuals of channel `c` (0..6) and the shape they show.
 #[allow(clippy::too_many_arguments)]
@@ -236,14 +251,17 @@ pub fn shape_of(
     let i = c % 3;
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
     let vars = variables(sensor, i, has_temp);
-    // Values per variable and residuals, gathered once (one pass over the runs).
+    // Values per variable and residuals, gathered once (one pass over the runs), on every
+    // `stride`-th sample of a long session.
+    let stride = runs.iter().map(|r| r.len()).sum::<usize>().div_ceil(SHAPE_SAMPLES).max(1);
+    let noise = noise.strided(stride);
     let mut xs: Vec<Vec<f64>> = vec![Vec::new(); vars.len()];
     let mut res = Vec::new();
     let mut run_of = Vec::new();
     for (ri, run) in runs.iter().enumerate() {
         let (r, _) = super::picture::run_residual(model, fit, run);
         let phase = crate::motion::cone_phase(motions[ri]);
-        for (k, rk) in r[c].iter().enumerate() {
+        for (k, rk) in r[c].iter().enumerate().step_by(stride) {
             let s = run.state(k);
             let theta = phase.map(|p| p.theta(run.track.t_s[k]));
             for (vi, (v, _)) in vars.iter().enumerate() {

@@ -87,10 +87,13 @@ pub fn basis_covariances(
         return (0..slow.len()).map(|_| zero()).collect();
     };
     let proj = &pinv * &w;
+    // The flicker down to the pieces: the basis's harmonics sit at frequencies the fit's
+    // blocks (longer on a long session) may not resolve.
+    let shortest = at.iter().map(|a| a.1).filter(|l| *l > 0.0).fold(f64::INFINITY, f64::min);
     slow.iter()
         .map(|s| {
             let Some(s) = s.filter(SlowNoise::is_slow) else { return zero() };
-            let kernel = s.kernel(span_s);
+            let kernel = s.kernel_down_to(shortest, span_s);
             let centre = kernel.walk2() * span_s / 6.0;
             let mut blocks: Vec<(DVector<f64>, (f64, f64))> =
                 proj.column_iter().zip(&at).map(|(c, t)| (c.into_owned(), *t)).collect();

@@ -22,7 +22,9 @@
 //! 3. **Propagate.** With A = (ΦᵀΦ)⁻¹ and S_b the block sums of the regressors, the error
 //!    of the estimate is Σ_b d_b s̄_b with d_b = A S_b − e_bias n_b/N (the session-averaged
 //!    bias is the target), so the slow part adds Σ_{b,b'} d_b d_bᵀ' C(b, b') to the
-//!    covariance (sandwich form, Newey & West 1987 with a parametric kernel).
+//!    covariance (sandwich form, Newey & West 1987 with a parametric kernel). Between
+//!    blocks each pole's covariance is a product of a factor of each block's time, so the
+//!    double sum is carried forward in time as running sums: linear in the blocks.
 //!
 //! The pass streams the samples once more in fixed memory (per block: q sums per channel).
 
@@ -78,8 +80,17 @@ impl SlowNoise {
 
     /// Its covariance kernel over a session of `span_s`.
     pub fn kernel(&self, span_s: f64) -> SlowKernel {
+        self.kernel_down_to(self.block_s, span_s)
+    }
+
+    /// Its covariance kernel over a session of `span_s` with the flicker carried down to
+    /// time constants of `shortest_s` where that is shorter than the block it was measured
+    /// on: the 1/f law B²/(πf) continued to frequencies the fit's blocks do not resolve
+    /// (a question about a run's cone harmonics asks about them).
+    pub fn kernel_down_to(&self, shortest_s: f64, span_s: f64) -> SlowKernel {
+        let t_min = if shortest_s > 0.0 { shortest_s.min(self.block_s) } else { self.block_s };
         SlowKernel {
-            poles: poles(self.block_s.max(f64::MIN_POSITIVE), span_s),
+            poles: poles(t_min.max(f64::MIN_POSITIVE), span_s),
             b2: self.bias_instability.powi(2),
             k2: self.random_walk.powi(2),
         }
@@ -115,7 +126,7 @@ impl SlowKernel {
     }
 }
 
-/// Blocks a session is cut into at most (the covariance sum is quadratic in them).
+/// Blocks a session is cut into at most (the pass keeps q sums per block and channel).
 const MAX_BLOCKS: usize = 1500;
 /// Ratio of neighbouring flicker time constants (two per decade).
 const RATIO: f64 = 3.162_277_660_168_379_5;
