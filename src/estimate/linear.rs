@@ -284,12 +284,16 @@ fn slow_noise(
         .par_iter()
         .map(|src| super::slow::pass(*src, &plans, &width, per_block, &fill))
         .collect::<Result<_, _>>()?;
-    for (di, sol) in solved.iter_mut().enumerate() {
+    // Each channel's likelihood climb is its own: the channels in parallel.
+    let mut channels: Vec<(usize, &mut ChannelFit)> = solved
+        .iter_mut()
+        .enumerate()
+        .flat_map(|(di, sol)| sol.channels.iter_mut().enumerate().map(move |(ch, c)| (3 * di + ch, c)))
+        .collect();
+    channels.par_iter_mut().for_each(|(i, c)| c.slow_noise = super::slow::inflate(&blocks, *i, c));
+    for sol in solved.iter_mut() {
         for ch in 0..3 {
-            let c = &mut sol.channels[ch];
-            let measured = super::slow::inflate(&blocks, 3 * di + ch, c);
-            c.slow_noise = measured;
-            rescale(c, &sol.fitted_sets[ch], &mut sol.std_errors, 1.0);
+            rescale(&mut sol.channels[ch], &sol.fitted_sets[ch], &mut sol.std_errors, 1.0);
         }
     }
     Ok(())

@@ -539,8 +539,13 @@ fn white_component(blocks: &[Coarse]) -> DMatrix<f64> {
 
 /// The restricted log-likelihood of white noise plus a constant offset drawn anew in each
 /// run (a turn-on bias, variance τ² shared by the runs) on the same block means, at its
-/// REML estimate; `white` seeds the white level. None when it does not converge.
+/// REML estimate; `white` seeds the white level. None when it does not converge or the
+/// blocks come from one run.
 fn turn_on_likelihood(blocks: &[Coarse], white: f64) -> Option<f64> {
+    // An offset drawn anew in each run needs two runs (in one it is that run's bias).
+    if blocks.iter().all(|b| b.source == blocks[0].source) {
+        return None;
+    }
     let (x, y) = block_regression(blocks)?;
     let m = blocks.len();
     let runs = DMatrix::from_fn(m, m, |a, b| if blocks[a].source == blocks[b].source { 1.0 } else { 0.0 });
