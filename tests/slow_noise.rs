@@ -304,3 +304,33 @@ fn a_weak_accel_turn_on_bias_under_wander_is_not_blamed_on_the_stand() {
         assert!(steps.is_empty(), "seed {seed}: {steps:?}");
     }
 }
+
+/// A motion law under a wander carried from run to run, as `crosscal simulate` makes it
+/// (300k samples): under the AR model alone the wander left beside the law keeps every
+/// effect from the noise floor ("tried, not proposed"), so the automatic mode must take the
+/// diagnosis with slow noise, which names the law. Rule 5 of the choice (a motion law the
+/// left-out runs confirm keeps the first answer) no longer holds that answer back when the
+/// second adds the law or its twin; before, this session ended "unexplained" with nothing
+/// added (measured 2026-11-30).
+#[test]
+fn a_motion_law_under_a_carried_wander_is_named_in_the_automatic_mode() {
+    use crosscal::app::simulate::{config, SimulateOptions};
+    let o = SimulateOptions {
+        duration_s: 166.7,
+        gyro_noise_deg_s: 0.002,
+        accel_noise_g: 2e-5,
+        gyro_bias_instability_deg_h: 10.0,
+        rrw_deg_h_rt_h: 5.0,
+        accel_bias_instability_ug: 30.0,
+        accel_random_walk: 2e-5,
+        carry_noise: true,
+        hidden: vec!["gyro-g-sensitivity".to_string()],
+        set: vec![("gyro.g_xy".to_string(), 5e-5), ("gyro.g_zx".to_string(), -4e-5)],
+        ..SimulateOptions::default()
+    };
+    let s = config(&o).unwrap().generate();
+    let d = crate::diagnose::run_diagnose(&s);
+    let steps: Vec<&str> = d.steps.iter().map(|s| s.effect.as_str()).collect();
+    assert_eq!(steps, ["gyro-g-sensitivity"], "{:?} {:?}", d.verdict, d.warnings);
+    assert_eq!(d.verdict, crosscal::diagnose::Verdict::Explained, "{:?}", d.warnings);
+}

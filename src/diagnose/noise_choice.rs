@@ -26,13 +26,15 @@
 //!    high harmonic of one channel now and then (under a strongly coloured model the
 //!    basis fit is loose), on the same one of all three almost never.
 //! 5. it did not clear a channel of a sensor on which, under the AR model, a catalogued
-//!    law of the motion alone (rate, angular acceleration, specific force) that the first
-//!    diagnosis did not add still takes residual that left-out runs confirm (rules 1 and 2
+//!    law of the motion alone (rate, angular acceleration, specific force) that neither
+//!    diagnosis added still takes residual that left-out runs confirm (rules 1 and 2
 //!    of [`super::select`]): what the other runs' motion predicts in a run is locked to the
 //!    motion, whatever its true form (a play-type hysteresis over runs of one or two
 //!    revolutions, whose fundamental a wander could also be). A wander predicts nothing
 //!    through the motion; through the session clock (a drift from the neighbouring runs)
-//!    it may, so laws of time and temperature do not count.
+//!    it may, so laws of time and temperature do not count. When the second diagnosis
+//!    adds that law (under the AR model the wander left beside it kept any effect from
+//!    reaching the noise floor), the residual is the law's, not absorbed as noise.
 //!
 //! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
 //! this module only chooses. The second starts from the motion the first corrected (its
@@ -177,15 +179,18 @@ pub(super) fn confirmed(k: &Candidate) -> bool {
     k.evidence.predicts() && k.evidence.heldout_gain >= PREDICTED_SHARE * k.rss_before
 }
 
-/// The catalogued effect, not added by `d`, that best predicts left-out runs on the sensor
-/// of channel `c` (rule 5), with its χ² gain there as a share of the sensor's χ².
-fn predicted_by(d: &Diagnosis, c: usize) -> Option<(String, f64)> {
+/// The catalogued effect, added by neither `d` nor `second`, that best predicts left-out
+/// runs on the sensor of channel `c` in `d` (rule 5), with its χ² gain there as a share of
+/// the sensor's χ². One the second diagnosis adds (or one it names as the same finding as
+/// a step) takes the motion-locked residual itself: it is not absorbed as noise there.
+fn predicted_by(d: &Diagnosis, second: &Diagnosis, c: usize) -> Option<(String, f64)> {
     let sensor = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
+    let added = |id: &str| {
+        d.steps.iter().chain(&second.steps).any(|s| s.effect == id || s.indistinguishable.iter().any(|e| e == id))
+    };
     d.candidates
         .iter()
-        .filter(|k| {
-            k.sensor == sensor && motion_law(&k.effect) && confirmed(k) && !d.steps.iter().any(|s| s.effect == k.effect)
-        })
+        .filter(|k| k.sensor == sensor && motion_law(&k.effect) && confirmed(k) && !added(&k.effect))
         .max_by(|a, b| a.evidence.heldout_gain.total_cmp(&b.evidence.heldout_gain))
         .map(|k| (k.effect.clone(), k.evidence.heldout_gain / k.rss_before))
 }
@@ -229,7 +234,7 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
         return first;
     }
     let predicted: Vec<(usize, (String, f64))> =
-        cleared.iter().filter_map(|&c| predicted_by(&first, c).map(|p| (c, p))).collect();
+        cleared.iter().filter_map(|&c| predicted_by(&first, &second, c).map(|p| (c, p))).collect();
     if let Some((_, (effect, gain))) = predicted.first() {
         let predicted: Vec<usize> = predicted.iter().map(|p| p.0).collect();
         first.warnings.push(format!(

@@ -406,14 +406,13 @@ pub fn run_noise(
     let residual_ms = std::array::from_fn(|c| {
         r.get(c).map_or(0.0, |rc| rc[..n].iter().map(|v| v * v).sum::<f64>()) / n.max(1) as f64
     });
-    let cleaned = &mut r;
-    for cl in cleaned.iter_mut() {
+    for cl in r.iter_mut() {
         cl.truncate(n);
     }
     for k0 in (0..n).step_by(ROWS) {
         let len = (n - k0).min(ROWS);
         basis.rows_into(&t[k0..k0 + len], &mut row, &mut rows, ROWS);
-        for (c, cl) in cleaned.iter_mut().enumerate() {
+        for (c, cl) in r.iter_mut().enumerate() {
             for b in 0..nb {
                 let w = coef[(b, c)];
                 for (o, v) in cl[k0..k0 + len].iter_mut().zip(&rows[b * ROWS..][..len]) {

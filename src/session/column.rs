@@ -138,11 +138,7 @@ impl<T: bytemuck::Pod> Column<T> {
         if self.is_mapped() || self.is_empty() {
             return Ok(self.clone());
         }
-        let mut file = tempfile::tempfile()?;
-        file.write_all(bytemuck::cast_slice(&self[..]))?;
-        let store = Arc::new(Store::Mapped(map_file(&file)?));
-        governor::watch(&store);
-        Ok(Column { store, start: 0, len: self.len })
+        mapped(tempfile::tempfile()?, &self[..], self.len)
     }
 
     fn all(&self) -> &[T] {
@@ -332,18 +328,28 @@ impl<T: bytemuck::Pod + Send + Sync> ColumnBuilder<T> {
                 let store = Store::Heap(std::mem::take(&mut self.heap), std::mem::take(&mut self.reserved));
                 Ok(Column { store: Arc::new(store), start: 0, len })
             }
-            Some((mut file, written)) => {
-                file.write_all(bytemuck::cast_slice(&self.heap))?;
+            Some((file, written)) => {
                 let len = written + self.heap.len();
                 if len == 0 {
                     return Ok(Column::default());
                 }
-                let store = Arc::new(Store::Mapped(map_file(&file)?));
-                governor::watch(&store);
-                Ok(Column { store, start: 0, len })
+                mapped(file, &self.heap, len)
             }
         }
     }
+}
+
+/// The column of a spill file's first `len` samples, `tail` written at its end first: the
+/// file mapped read-only and watched by the governor.
+fn mapped<T: bytemuck::Pod + Send + Sync + 'static>(
+    mut file: std::fs::File,
+    tail: &[T],
+    len: usize,
+) -> std::io::Result<Column<T>> {
+    file.write_all(bytemuck::cast_slice(tail))?;
+    let store = Arc::new(Store::Mapped(map_file(&file)?));
+    governor::watch(&store);
+    Ok(Column { store, start: 0, len })
 }
 
 /// Maps a finished spill file read-only.
