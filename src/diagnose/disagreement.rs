@@ -28,8 +28,9 @@ pub struct Disagreement {
 pub const DISAGREEMENT_Z: f64 = 6.0;
 
 /// Refits the model on each run alone and lists coefficients that disagree with the
-/// all-run fit by more than [`DISAGREEMENT_Z`] standard errors of their difference. Coefficients a single run
-/// cannot identify are held at their all-run values, so the rest stay comparable.
+/// all-run fit by more than [`DISAGREEMENT_Z`] standard errors of their difference.
+/// Coefficients a single run cannot identify are held at their all-run values, so the rest
+/// stay comparable.
 pub fn per_run_disagreements(model: &Model, all: &Fit, runs: &[FitRun<'_>], opts: &FitOptions) -> Vec<Disagreement> {
     // Each run's fits are independent: the runs in parallel, their lists joined in run order.
     let per_run: Vec<Vec<Disagreement>> = runs.par_iter().map(|run| run_disagreements(model, all, run, opts)).collect();
@@ -47,14 +48,10 @@ fn run_disagreements(model: &Model, all: &Fit, run: &FitRun<'_>, opts: &FitOptio
     let Ok(first) = refit(model, one, &quick) else { return Vec::new() };
     let held: Vec<&String> =
         first.gyro.unidentifiable.iter().chain(&first.accel.unidentifiable).map(|c| &c.held).collect();
-    // With nothing the run cannot identify, the first fit is the one to compare.
-    let f = if held.is_empty() {
-        if !opts.slow_noise {
-            first
-        } else {
-            let Ok(f) = refit(model, one, opts) else { return Vec::new() };
-            f
-        }
+    // With nothing the run cannot identify and no slow noise to measure, the first fit is
+    // the one to compare.
+    let f = if held.is_empty() && !opts.slow_noise {
+        first
     } else {
         let mut m = model.clone();
         for name in held {
