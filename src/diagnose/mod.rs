@@ -19,6 +19,7 @@
 //!    residual's systematic part or lines sit: channel, harmonic or frequency, runs, size).
 
 pub mod algebra;
+mod analysis;
 mod disagreement;
 mod knobs;
 mod ladder;
@@ -51,6 +52,7 @@ pub use temperature::{DegreeChoice, DegreeScore};
 use crate::estimate::{EstimateError, Fit, FitOptions, FitRequest, FitRun};
 use crate::model::{find, Model};
 use crate::units::{SensorKind, AXES};
+use analysis::{analyse, noise_reports, Analysis};
 pub use ladder::{compare, ladder_model, Rung};
 pub use noise_choice::{diagnose_with_mode, SlowNoiseMode};
 use rayon::prelude::*;
@@ -263,96 +265,6 @@ impl Diagnosis {
     }
 }
 
-/// The analysed session: the base fit, the feature space and the runs' names.
-struct Analysis {
-    base_fit: Fit,
-    space: Space,
-    names: Vec<String>,
-}
-
-/// Analyses each run around a fitted model (in parallel; each run's residual lives only
-/// while its Grams are built).
-fn analyse(model: &Model, base_fit: Fit, runs: &[FitRun<'_>], motions: &RunMotions<'_>, has_temp: bool) -> Analysis {
-    // A user effect's linear part at the parameters the fit estimated (a knee at its fitted
-    // rate): the residual and the Grams are then those of the fitted model.
-    let bound = crate::estimate::bound_at_fit(model, &base_fit);
-    let model = &bound;
-    let universe = space::Universe::new(model, &base_fit, has_temp);
-    let residual = |i: usize| picture::run_residual(model, &base_fit, &runs[i]);
-    let stats: Vec<space::RunNoiseStats> =
-        (0..runs.len()).into_par_iter().map(|i| space::run_noise(&runs[i], motions[i], residual(i))).collect();
-    let pooled = space::pooled_noise(&stats);
-    let span_s: f64 = runs.iter().map(run_span).sum();
-    // The slow noise the fit measured (restricted likelihood on the runs' block means, with
-    // `FitOptions::slow_noise`): a random effect on each run's slow basis. Without it, none.
-    let slow: Vec<Option<crate::estimate::slow::SlowNoise>> = base_fit
-        .gyro
-        .channels
-        .iter()
-        .chain(&base_fit.accel.channels)
-        .map(|c| c.slow_noise)
-        .chain(std::iter::repeat(None))
-        .take(6)
-        .collect();
-    let gram_of = |i: usize, st| {
-        let r = residual(i).0;
-        space::run_gram(&universe, model, &base_fit, &runs[i], st, &pooled, &r, (slow.as_slice(), span_s))
-    };
-    let grams: Vec<space::RunGram> = stats.into_par_iter().enumerate().map(|(i, st)| gram_of(i, st)).collect();
-    let names = runs.iter().map(|r| r.name.to_string()).collect();
-    let mut space = Space::new(universe, grams);
-    space.slow = slow;
-    Analysis { base_fit, space, names }
-}
-
-/// The noise model per channel, pooled over runs.
-fn noise_reports(space: &Space) -> Vec<NoiseReport> {
-    (0..6)
-        .map(|c| {
-            let (mut n, mut var, mut innov, mut lag1, mut order) = (0.0, 0.0, 0.0, 0.0, 0);
-            for rg in &space.runs {
-                let rn = &rg.noise[c];
-                let w = rn.n as f64;
-                n += w;
-                var += w * rn.ar.marginal_var;
-                innov += w * rn.ar.innovation_var;
-                lag1 += w * lag_one(&rn.ar);
-                order = order.max(rn.ar.order());
-            }
-            let n = n.max(1.0);
-            NoiseReport {
-                sensor: if c < 3 { SensorKind::Gyro } else { SensorKind::Accel },
-                axis: AXES[c % 3],
-                sigma: (var / n).sqrt(),
-                lag1: lag1 / n,
-                ar_order: order,
-                colour: if innov > 0.0 { var / innov } else { 1.0 },
-                bias_instability: space.slow.get(c).copied().flatten().map_or(0.0, |s| s.bias_instability),
-                random_walk: space.slow.get(c).copied().flatten().map_or(0.0, |s| s.random_walk),
-            }
-        })
-        .collect()
-}
-
-/// Lag-one autocorrelation of an AR model by simulating its impulse response (exact to
-/// 1e-6 for stable models): ρ₁ = Σ ψ_k ψ_{k+1} / Σ ψ_k².
-fn lag_one(ar: &crate::stats::ArModel) -> f64 {
-    if ar.phi.is_empty() {
-        return 0.0;
-    }
-    let mut psi = vec![1.0];
-    for k in 1..4096 {
-        let v: f64 = ar.phi.iter().enumerate().filter(|(i, _)| *i < k).map(|(i, p)| p * psi[k - 1 - i]).sum();
-        psi.push(v);
-        if k > 64 && v.abs() < 1e-9 {
-            break;
-        }
-    }
-    let num: f64 = psi.windows(2).map(|w| w[0] * w[1]).sum();
-    let den: f64 = psi.iter().map(|v| v * v).sum();
-    num / den
-}
-
 /// The channel picture of a set of effects: residual RMS from its fit, the systematic
 /// part from the Grams.
 fn picture(
@@ -483,16 +395,16 @@ fn conclude(
     let base_set = a.space.base_set();
     let channels = pictures(&a, &base_set, &a.base_fit, &noise);
     warnings.extend(absorbed(&channels, &noise));
-    let disagreements = if model.nonlinear().is_empty() && runs.len() > 1 {
-        per_run_disagreements(model, &a.base_fit, runs, opts)
-    } else {
-        Vec::new()
-    };
+    // The per-run refits compare with the base model's fit; they are made once the climb
+    // has kept the motion (a stand group found starts the diagnosis again).
+    let disagree = model.nonlinear().is_empty() && runs.len() > 1;
+    let base_fit = if disagree { Some(a.base_fit.clone()) } else { None };
     let (mut steps, mut first_round, mut a, restart) =
         climb(a, model, runs, motions, opts, has_temp, &mut warnings, stand_check.as_mut())?;
     if restart {
         return Ok(None);
     }
+    let disagreements = base_fit.map_or_else(Vec::new, |f| per_run_disagreements(model, &f, runs, opts));
     // Each temperature polynomial's degree, again with every effect found in the model.
     let mut changed = temperature::revisit_degrees(&a.space, &mut steps, &mut warnings);
     // A sensor still systematic after its effects: no catalogued effect brings it to the

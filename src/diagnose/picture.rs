@@ -62,6 +62,29 @@ pub fn residuals(model: &Model, f: &Fit, runs: &[FitRun<'_>], motions: &RunMotio
 /// and each channel's sum of squared outputs. A user effect's linear part is evaluated at
 /// the parameters `f` estimated (a knee at its fitted rate, not its start value).
 pub fn run_residual(model: &Model, f: &Fit, run: &FitRun<'_>) -> (Vec<Vec<f64>>, [f64; 6]) {
+    let n = run.len();
+    let mut r: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
+    let mut output_ss = [0.0; 6];
+    visit_residual(model, f, run, 1, |k, _, y, e| {
+        for c in 0..6 {
+            r[c][k] = e[c];
+            output_ss[c] += y[c] * y[c];
+        }
+    });
+    (r, output_ss)
+}
+
+/// Visits every `stride`-th sample k of a run (0, stride, …) with its state on the run's
+/// own motion, its six outputs and their residuals (output − the fitted model on the
+/// motion each sensor sees; SI, gyro x, y, z, accel x, y, z): [`run_residual`]'s numbers
+/// at those samples, without the model evaluated at the others.
+pub fn visit_residual(
+    model: &Model,
+    f: &Fit,
+    run: &FitRun<'_>,
+    stride: usize,
+    mut visit: impl FnMut(usize, &State, &[f64; 6], &[f64; 6]),
+) {
     let bound;
     let model = if model.has_bound_parameters() {
         bound = crate::estimate::bound_at_fit(model, f);
@@ -70,8 +93,7 @@ pub fn run_residual(model: &Model, f: &Fit, run: &FitRun<'_>) -> (Vec<Vec<f64>>,
         model
     };
     let n = run.len();
-    let mut r: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
-    let mut output_ss = [0.0; 6];
+    let stride = stride.max(1);
     let terms = SensorKind::BOTH.map(|s| model.terms(s));
     let values = SensorKind::BOTH.map(|s| values_of(f, model, s));
     let predict = [0, 1].map(|si| crate::model::Predictor::new(&terms[si], &values[si]));
@@ -79,30 +101,32 @@ pub fn run_residual(model: &Model, f: &Fit, run: &FitRun<'_>) -> (Vec<Vec<f64>>,
         .map(|s| crate::estimate::seen_tracks(model, f, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
     let how = [0, 1].map(|si| run.seen_from(seen[si].as_ref()));
     // A block at a time: the run's states once per block, each sensor's seen states from
-    // them ([`FitRun::seen_states`]), the model by [`Predictor::block`] (the numbers of
+    // them ([`FitRun::seen_states_at`]), the model by [`Predictor::block`] (the numbers of
     // `Predictor::at`).
     const BLOCK: usize = 256;
+    let mut ks: Vec<usize> = Vec::with_capacity(BLOCK);
     let mut base: Vec<State> = Vec::with_capacity(BLOCK);
     let mut states: [Vec<State>; 2] = [Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK)];
-    let mut u = vec![[0.0; 3]; BLOCK];
+    let mut u = [vec![[0.0; 3]; BLOCK], vec![[0.0; 3]; BLOCK]];
     let mut tmp = vec![0.0; BLOCK];
-    for k0 in (0..n).step_by(BLOCK) {
-        let k1 = (k0 + BLOCK).min(n);
+    let mut next = 0;
+    while next < n {
+        ks.clear();
+        ks.extend((next..n).step_by(stride).take(BLOCK));
+        next = ks.last().map_or(n, |k| k + stride);
         base.clear();
-        base.extend((k0..k1).map(|k| run.state(k)));
+        base.extend(ks.iter().map(|&k| run.state(k)));
         for si in 0..2 {
-            run.seen_states(&how[si], &base, k0, &mut states[si]);
-            predict[si].block(&states[si], &mut u, &mut tmp);
-            for (i, k) in (k0..k1).enumerate() {
-                let y = run.output(SensorKind::BOTH[si], k);
-                for ch in 0..3 {
-                    r[3 * si + ch][k] = y[ch] - u[i][ch];
-                    output_ss[3 * si + ch] += y[ch] * y[ch];
-                }
-            }
+            run.seen_states_at(&how[si], &base, &ks, &mut states[si]);
+            predict[si].block(&states[si], &mut u[si], &mut tmp);
+        }
+        for (i, &k) in ks.iter().enumerate() {
+            let (g, a) = (run.output(SensorKind::Gyro, k), run.output(SensorKind::Accel, k));
+            let y = [g[0], g[1], g[2], a[0], a[1], a[2]];
+            let e: [f64; 6] = std::array::from_fn(|c| y[c] - u[c / 3][i][c % 3]);
+            visit(k, &base[i], &y, &e);
         }
     }
-    (r, output_ss)
 }
 
 /// Channel reports (residual RMS, noise floor, systematic part) from residuals.

@@ -251,25 +251,25 @@ pub fn shape_of(
     let i = c % 3;
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
     let vars = variables(sensor, i, has_temp);
-    // Values per variable and residuals, gathered once (one pass over the runs), on every
-    // `stride`-th sample of a long session.
+    // Values per variable (single precision: what a bin needs, half the memory) and
+    // residuals, gathered once (one pass over the runs, the model evaluated only at the
+    // samples kept), on every `stride`-th sample of a long session.
     let stride = runs.iter().map(|r| r.len()).sum::<usize>().div_ceil(SHAPE_SAMPLES).max(1);
     let noise = noise.strided(stride);
-    let mut xs: Vec<Vec<f64>> = vec![Vec::new(); vars.len()];
-    let mut res = Vec::new();
-    let mut run_of = Vec::new();
+    let kept: usize = runs.iter().map(|r| r.len().div_ceil(stride)).sum();
+    let mut xs: Vec<Vec<f32>> = vec![Vec::with_capacity(kept); vars.len()];
+    let mut res = Vec::with_capacity(kept);
+    let mut run_of = Vec::with_capacity(kept);
     for (ri, run) in runs.iter().enumerate() {
-        let (r, _) = super::picture::run_residual(model, fit, run);
         let phase = crate::motion::cone_phase(motions[ri]);
-        for (k, rk) in r[c].iter().enumerate().step_by(stride) {
-            let s = run.state(k);
+        super::picture::visit_residual(model, fit, run, stride, |k, s, _, e| {
             let theta = phase.map(|p| p.theta(run.track.t_s[k]));
             for (vi, (v, _)) in vars.iter().enumerate() {
-                xs[vi].push(v.value(&s, theta));
+                xs[vi].push(v.value(s, theta) as f32);
             }
-            res.push(*rk);
+            res.push(e[c]);
             run_of.push(ri);
-        }
+        });
     }
     let mut plots: Vec<(PartialResidual, Option<usize>)> = vars
         .iter()
@@ -280,7 +280,10 @@ pub fn shape_of(
     plots.push((run_plot(&run_of, &res, runs.len(), noise), None));
     plots.sort_by(|a, b| b.0.z.total_cmp(&a.0.z));
     let (words, kind, toml) = match plots.first() {
-        Some((p, Some(vi))) => describe(p, vars[*vi].0, sensor, i, (xs[*vi].as_slice(), res.as_slice())),
+        Some((p, Some(vi))) => {
+            let x: Vec<f64> = xs[*vi].iter().map(|&v| f64::from(v)).collect();
+            describe(p, vars[*vi].0, sensor, i, (x.as_slice(), res.as_slice()))
+        }
         Some((p, None)) => {
             let spread = spread(&p.bins);
             let (u, k) = sensor.display_unit();
@@ -317,16 +320,19 @@ fn named(mut p: PartialResidual, v: Var, own: bool) -> PartialResidual {
 }
 
 /// Bins of `x` (finite values, equal width from min to max) with the mean residual.
-fn binned(x: &[f64], r: &[f64], noise: NoiseScale, bins: usize) -> Option<PartialResidual> {
-    let (lo, hi) =
-        x.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| (a.0.min(v), a.1.max(v)));
+fn binned(x: &[f32], r: &[f64], noise: NoiseScale, bins: usize) -> Option<PartialResidual> {
+    let (lo, hi) = x
+        .iter()
+        .map(|&v| f64::from(v))
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, v| (a.0.min(v), a.1.max(v)));
     if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
     let w = (hi - lo) / bins as f64;
     let mut sum = vec![0.0; bins];
     let mut n = vec![0u64; bins];
-    for (xv, rv) in x.iter().zip(r) {
+    for (xv, rv) in x.iter().map(|&v| f64::from(v)).zip(r) {
         if xv.is_finite() {
             let b = (((xv - lo) / w) as usize).min(bins - 1);
             sum[b] += rv;

@@ -564,24 +564,13 @@ fn long_run_variance(ar: &ArModel) -> f64 {
     }
 }
 
-/// The whitened Grams of one run (module documentation, step 3) with the session's noise
-/// models; each run keeps its own innovation variance. With slow noise (`slow`, per
-/// channel, over a session of `span_s`), the run keeps the covariance of its basis
-/// coefficients under it, for the systematic test ([`super::slow`]).
-#[allow(clippy::too_many_arguments)]
-pub fn run_gram(
-    u: &Universe,
-    base: &Model,
-    fit: &Fit,
-    run: &FitRun<'_>,
-    stats: RunNoiseStats,
-    pooled: &[ArModel],
-    r: &[Vec<f64>],
-    slow: (&[Option<SlowNoise>], f64),
-) -> RunGram {
-    let n = run.len();
+/// A run's noise per channel: the session's pooled AR model (`pooled`) with the run's
+/// own innovation variance, from its autocovariances with what its basis took from the
+/// noise added back.
+pub fn run_noises(stats: &RunNoiseStats, pooled: &[ArModel]) -> Vec<RunNoise> {
+    let n = stats.n;
     let b = stats.basis;
-    let noise: Vec<RunNoise> = (0..6)
+    (0..6)
         .map(|c| {
             // The run's own autocovariances, with its basis's share of the bias added back.
             let share = b.size as f64 / n.max(1) as f64;
@@ -601,11 +590,37 @@ pub fn run_gram(
             };
             RunNoise { ar, n }
         })
-        .collect();
+        .collect()
+}
+
+/// Per channel the covariance of a run's basis coefficients under the slow noise
+/// (`slow`: per channel, over a session of that many seconds; [`super::slow`]).
+pub fn run_slow(run: &FitRun<'_>, stats: &RunNoiseStats, slow: (&[Option<SlowNoise>], f64)) -> Vec<DMatrix<f64>> {
+    let b = stats.basis;
+    let basis = super::slow::Basis { size: b.size, cone_hz: b.cone_hz(), row: &|t, out: &mut [f64]| b.row(t, out) };
+    super::slow::basis_covariances(&basis, &run.track.t_s[..run.len()], &stats.basis_ms, slow.0, slow.1)
+}
+
+/// The whitened Grams of one run (module documentation, step 3) with the session's noise
+/// models; each run keeps its own innovation variance. With slow noise (`slow`, per
+/// channel, over a session of `span_s`), the run keeps the covariance of its basis
+/// coefficients under it, for the systematic test ([`super::slow`]).
+#[allow(clippy::too_many_arguments)]
+pub fn run_gram(
+    u: &Universe,
+    base: &Model,
+    fit: &Fit,
+    run: &FitRun<'_>,
+    stats: RunNoiseStats,
+    pooled: &[ArModel],
+    r: &[Vec<f64>],
+    slow: (&[Option<SlowNoise>], f64),
+) -> RunGram {
+    let b = stats.basis;
+    let noise = run_noises(&stats, pooled);
     let secants = Secants::new(&u.nonlinear, base, fit, run);
     let gram = channel_grams(u, run, &noise, &b, r, &secants);
-    let basis = super::slow::Basis { size: b.size, cone_hz: b.cone_hz(), row: &|t, out: &mut [f64]| b.row(t, out) };
-    let slow_cov = super::slow::basis_covariances(&basis, &run.track.t_s[..n], &stats.basis_ms, slow.0, slow.1);
+    let slow_cov = run_slow(run, &stats, slow);
     RunGram {
         gram,
         basis: b.size,

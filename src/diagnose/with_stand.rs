@@ -58,17 +58,8 @@ impl Believed {
 /// (its residual's mean square over the noise model's variance, at least 1).
 fn noise_models(a: &Analysis) -> Vec<stand::RunNoiseModel> {
     let space: &Space = &a.space;
-    let floor = super::noise_reports(space);
-    let dispersion: [f64; 6] = std::array::from_fn(|c| {
-        let sensor = crate::units::SensorKind::BOTH[c / 3];
-        let rms = a.base_fit.sensor(sensor).channels.get(c % 3).map_or(0.0, |ch| ch.residual_rms);
-        let sigma = floor[c].sigma;
-        if sigma > 0.0 && rms.is_finite() {
-            (rms / sigma).powi(2).max(1.0)
-        } else {
-            1.0
-        }
-    });
+    let dispersion =
+        dispersion(&a.base_fit, |c| super::analysis::floor_sigma(space.runs.iter().map(|rg| rg.noise.as_slice()), c));
     space
         .runs
         .iter()
@@ -79,6 +70,42 @@ fn noise_models(a: &Analysis) -> Vec<stand::RunNoiseModel> {
             dispersion,
         })
         .collect()
+}
+
+/// [`noise_models`] of the analysis of `model` fitted as `fit` on `runs`, without its Grams
+/// (the noise side only, [`super::analysis::NoiseStage`]): the same numbers, for judging carried stand
+/// groups before the whole analysis is drawn.
+fn noise_alone(model: &Model, fit: &Fit, runs: &[FitRun<'_>], motions: &[&MotionSpec]) -> Vec<stand::RunNoiseModel> {
+    let bound = crate::estimate::bound_at_fit(model, fit);
+    let stage = super::analysis::NoiseStage::new(&bound, fit, runs, motions);
+    let noises: Vec<Vec<super::space::RunNoise>> =
+        stage.stats.iter().map(|s| super::space::run_noises(s, &stage.pooled)).collect();
+    let dispersion = dispersion(fit, |c| super::analysis::floor_sigma(noises.iter().map(Vec::as_slice), c));
+    runs.iter()
+        .zip(&stage.stats)
+        .zip(noises)
+        .map(|((run, st), noise)| stand::RunNoiseModel {
+            ar: noise.into_iter().map(|n| n.ar).collect(),
+            basis: st.basis,
+            slow: super::space::run_slow(run, st, (&stage.slow, stage.span_s)),
+            dispersion,
+        })
+        .collect()
+}
+
+/// Each channel's dispersion: the fit's residual mean square over the noise floor
+/// `sigma(c)` squared, at least 1.
+fn dispersion(fit: &Fit, sigma: impl Fn(usize) -> f64) -> [f64; 6] {
+    std::array::from_fn(|c| {
+        let sensor = crate::units::SensorKind::BOTH[c / 3];
+        let rms = fit.sensor(sensor).channels.get(c % 3).map_or(0.0, |ch| ch.residual_rms);
+        let sigma = sigma(c);
+        if sigma > 0.0 && rms.is_finite() {
+            (rms / sigma).powi(2).max(1.0)
+        } else {
+            1.0
+        }
+    })
 }
 
 impl StandCheck<'_, '_, '_> {
@@ -268,6 +295,15 @@ pub(super) fn diagnose(
             Some(f) if !suspect.changed() => f,
             _ => refit(model, &moved, opts)?,
         };
+        // Carried groups are judged again before the analysis is drawn: one that no longer
+        // passes goes back to its labels, and the analysis is drawn on the motion without
+        // it. The first check judges the groups kept again, on the same numbers.
+        if suspect.carries_groups() {
+            let noise = noise_alone(model, &fit, &moved, &now.motions());
+            if suspect.judge_carried(&suspect.accepted_systems(model, &fit, &moved, &noise)) {
+                continue;
+            }
+        }
         let a = analyse(model, fit, &moved, &now.motions(), has_temp);
         let check = StandCheck { suspect: &mut suspect, declared: runs, last: None };
         if let Some(d) = conclude(a, model, &moved, &now.motions(), opts, has_temp, Some(check))? {

@@ -140,6 +140,20 @@ impl<'a> FitRun<'a> {
         }
     }
 
+    /// [`Self::seen_states`] of the samples `ks` (not necessarily consecutive), whose own
+    /// states are `base`.
+    pub fn seen_states_at(&self, how: &SeenFrom<'_>, base: &[State], ks: &[usize], out: &mut Vec<State>) {
+        match how {
+            SeenFrom::Other(t) => {
+                out.clear();
+                let r = FitRun { track: t, ..*self };
+                out.extend(ks.iter().map(|&k| r.state(k)));
+            }
+            // The seen states follow from the run's own, whatever their samples.
+            _ => self.seen_states(how, base, 0, out),
+        }
+    }
+
     /// The sensor output at sample k.
     #[inline]
     pub fn output(&self, sensor: SensorKind, k: usize) -> [f64; 3] {

@@ -128,6 +128,9 @@ pub struct Suspect {
     /// Its groups were found by the first look on every k-th sample of a large session
     /// ([`Self::looked_over`]): on every sample they are not picked again.
     looked: bool,
+    /// Carried from a diagnosis under another noise model ([`Self::carried_over`]), not
+    /// from the first look.
+    other_noise: bool,
 }
 
 /// The whitened system of one run (global stand parameters after the model's).
@@ -269,6 +272,7 @@ impl Suspect {
             mounts: Vec::new(),
             carried: false,
             looked: false,
+            other_noise: false,
         })
     }
 

@@ -15,14 +15,14 @@ impl Suspect {
     /// search for new groups to the next check, on the model with that effect (a check
     /// with every stand column costs a pass over every sample with each of them).
     pub fn carried_over(self) -> Self {
-        Self { carried: true, ..self }
+        Self { carried: true, other_noise: true, ..self }
     }
 
     /// [`Self::carried_over`] from the first look at the stand on every k-th sample of a
     /// large session: the groups it found are estimated again on every sample at the end
     /// of the diagnosis there, and not picked again ([`Self::pick`]).
     pub fn looked_over(self) -> Self {
-        Self { looked: true, ..self.carried_over() }
+        Self { looked: true, other_noise: false, ..self.carried_over() }
     }
 
     /// Whether the groups were carried from another diagnosis and not yet judged again.
@@ -36,8 +36,21 @@ impl Suspect {
     /// model's coefficients: p < `P_ACCEPT` and k ln n − χ² < `BIC_EVIDENCE`) goes back to
     /// its labels and is not tried again. Whether any did (the motion changed).
     pub fn rejudge(&mut self, sys: &Systems) -> bool {
-        use statrs::distribution::{ChiSquared, ContinuousCDF};
         self.carried = false;
+        self.judge_carried(sys)
+    }
+
+    /// Whether groups were carried from a diagnosis under another noise model and are yet
+    /// to be judged again. Those the first look found on every k-th sample are not asked:
+    /// on every sample their evidence grows k-fold, and they are judged at the first check.
+    pub fn carries_groups(&self) -> bool {
+        self.carried && self.other_noise && !self.accepted.is_empty()
+    }
+
+    /// [`Self::rejudge`], with the groups still carried (judged again at the first check)
+    /// when none was dropped.
+    pub fn judge_carried(&mut self, sys: &Systems) -> bool {
+        use statrs::distribution::{ChiSquared, ContinuousCDF};
         let per_run_found =
             |id: &str| self.accepted.iter().any(|(g, _)| self.groups[*g].id.strip_suffix("-per-run") == Some(id));
         let groups: Vec<usize> =
@@ -65,6 +78,9 @@ impl Suspect {
             let common = id.strip_suffix("-per-run").unwrap_or(id);
             self.accepted.retain(|(g, _)| self.groups[*g].id != id && self.groups[*g].id != common);
             self.refused.push(gi);
+        }
+        if !dropped.is_empty() {
+            self.carried = false;
         }
         !dropped.is_empty()
     }
