@@ -250,7 +250,7 @@ fn fit_core(
         }
     }
     if opts.slow_noise && !opts.screening && opts.known_sigma.is_none() {
-        slow_noise(&designs, &mut solved, sources, counts.iter().sum())?;
+        slow_noise(&designs, &mut solved, sources, counts.iter().sum(), opts.slow_noise_held.as_ref())?;
     }
     Ok(designs.iter().zip(solved).map(|(d, sol)| finish(&d.terms, d.sensor, sol)).collect())
 }
@@ -262,6 +262,7 @@ fn slow_noise(
     solved: &mut [Solved],
     sources: &[&dyn Samples],
     total: usize,
+    held: Option<&[Option<super::slow::SlowNoise>; 6]>,
 ) -> Result<(), crate::session::SessionError> {
     use rayon::prelude::*;
     let plans: Vec<Vec<super::slow::ChannelDesign>> = designs
@@ -290,7 +291,9 @@ fn slow_noise(
         .enumerate()
         .flat_map(|(di, sol)| sol.channels.iter_mut().enumerate().map(move |(ch, c)| (3 * di + ch, c)))
         .collect();
-    channels.par_iter_mut().for_each(|(i, c)| c.slow_noise = super::slow::inflate(&blocks, *i, c));
+    // A held model is per channel of the whole unit: gyro x..z, then accel x..z.
+    let kept = |i: usize| held.map(|h| h[3 * usize::from(designs[i / 3].sensor == SensorKind::Accel) + i % 3]);
+    channels.par_iter_mut().for_each(|(i, c)| c.slow_noise = super::slow::inflate(&blocks, *i, c, kept(*i)));
     for sol in solved.iter_mut() {
         for ch in 0..3 {
             rescale(&mut sol.channels[ch], &sol.fitted_sets[ch], &mut sol.std_errors, 1.0);

@@ -66,11 +66,23 @@ pub struct FitOptions {
     /// pass over the samples for block sums; the standard errors then cover a bias that
     /// wanders over the session (`fit --slow-noise`).
     pub slow_noise: bool,
+    /// With `slow_noise`: the slow noise of each channel (gyro x..z, accel x..z) as another
+    /// fit measured it, carried in the covariance without measuring it again (a run's fit
+    /// compared with the session's, whose many runs tell the wander far better than one).
+    pub slow_noise_held: Option<[Option<slow::SlowNoise>; 6]>,
 }
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { chunk: 1024, rcond: 1e-9, robust: false, known_sigma: None, screening: false, slow_noise: false }
+        Self {
+            chunk: 1024,
+            rcond: 1e-9,
+            robust: false,
+            known_sigma: None,
+            screening: false,
+            slow_noise: false,
+            slow_noise_held: None,
+        }
     }
 }
 

@@ -671,8 +671,14 @@ fn spd_inverse(v: DMatrix<f64>) -> Option<(DMatrix<f64>, f64)> {
 }
 
 /// Adds the slow part to channel `c`'s covariance (module documentation) and returns what
-/// was measured; the caller updates the standard errors from the covariance.
-pub(crate) fn inflate(sources: &[SourceBlocks], c: usize, ch: &mut ChannelFit) -> Option<SlowNoise> {
+/// was measured, or carries `held` (Some(None): no slow noise on the channel) without
+/// measuring it; the caller updates the standard errors from the covariance.
+pub(crate) fn inflate(
+    sources: &[SourceBlocks],
+    c: usize,
+    ch: &mut ChannelFit,
+    held: Option<Option<SlowNoise>>,
+) -> Option<SlowNoise> {
     let q = ch.covariance.len();
     if q == 0 || sources.is_empty() {
         return None;
@@ -706,16 +712,24 @@ pub(crate) fn inflate(sources: &[SourceBlocks], c: usize, ch: &mut ChannelFit) -
     let t0 = sources.first().and_then(|s| s.centre_s.first()).copied().unwrap_or(0.0);
     let span = (end - t0).max(t_min);
     let flick = poles(t_min, span);
-    let start = measure(sources, c, t_min, span);
-    let t_first = sources
-        .iter()
-        .zip(&offsets)
-        .flat_map(|(s, o)| s.centre_s.first().zip(s.length_s.first()).map(|(c, l)| c - 0.5 * l + o))
-        .fold(f64::INFINITY, f64::min);
-    let blocks = coarse_blocks(sources, c, &offsets, t_first, q);
-    let ([n2, b2, k2], ll) = reml(&blocks, &flick, start).map_or((start, None), |(t, ll)| (t, Some(ll)));
-    // The turn-on alternative on the same block means ([`SlowNoise::turn_on_log_lr`]).
-    let turn_on_log_lr = ll.zip(turn_on_likelihood(&blocks, n2)).map_or(0.0, |(a, b)| b - a);
+    let ([n2, b2, k2], turn_on_log_lr) = match held {
+        Some(h) => {
+            let h = h?;
+            ([h.white_density.powi(2), h.bias_instability.powi(2), h.random_walk.powi(2)], h.turn_on_log_lr)
+        }
+        None => {
+            let start = measure(sources, c, t_min, span);
+            let t_first = sources
+                .iter()
+                .zip(&offsets)
+                .flat_map(|(s, o)| s.centre_s.first().zip(s.length_s.first()).map(|(c, l)| c - 0.5 * l + o))
+                .fold(f64::INFINITY, f64::min);
+            let blocks = coarse_blocks(sources, c, &offsets, t_first, q);
+            let (theta, ll) = reml(&blocks, &flick, start).map_or((start, None), |(t, ll)| (t, Some(ll)));
+            // The turn-on alternative on the same block means ([`SlowNoise::turn_on_log_lr`]).
+            (theta, ll.zip(turn_on_likelihood(&blocks, theta[0])).map_or(0.0, |(a, b)| b - a))
+        }
+    };
     // Offsets that jump between runs are not wander: none is modelled (the diagnosis draws
     // them as a turn-on bias).
     if (b2 == 0.0 && k2 == 0.0) || turn_on_log_lr > TURN_ON_EVIDENCE {
