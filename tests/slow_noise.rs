@@ -334,3 +334,49 @@ fn a_motion_law_under_a_carried_wander_is_named_in_the_automatic_mode() {
     assert_eq!(steps, ["gyro-g-sensitivity"], "{:?} {:?}", d.verdict, d.warnings);
     assert_eq!(d.verdict, crosscal::diagnose::Verdict::Explained, "{:?}", d.warnings);
 }
+
+/// A fit that carries the slow noise another fit measured (`slow_noise_held`, how the
+/// per-run disagreements weigh one run) gives the standard errors of measuring it there:
+/// held at the values this session's own fit measured, the same errors; held at none, the
+/// plain fit's; held at four times the flicker, every standard error at least as large.
+#[test]
+fn a_held_slow_noise_gives_the_standard_errors_it_implies() {
+    let model = Model::default_model();
+    let s = session(36_500).generate();
+    let measured = fit_session(&s, &model, &FitOptions { slow_noise: true, ..FitOptions::default() }).unwrap();
+    let plain = fit_session(&s, &model, &FitOptions::default()).unwrap();
+    let slow: [Option<crosscal::estimate::slow::SlowNoise>; 6] = std::array::from_fn(|c| {
+        let f = if c < 3 { &measured.gyro } else { &measured.accel };
+        f.channels[c % 3].slow_noise
+    });
+    assert!(slow.iter().all(|s| s.is_some_and(|s| s.bias_instability > 0.0 || s.random_walk > 0.0)), "{slow:?}");
+    let held = |h: [Option<crosscal::estimate::slow::SlowNoise>; 6]| {
+        fit_session(&s, &model, &FitOptions { slow_noise: true, slow_noise_held: Some(h), ..FitOptions::default() })
+            .unwrap()
+    };
+    let errors = |f: &Fit| -> Vec<(String, f64)> {
+        f.gyro
+            .coefficients
+            .iter()
+            .chain(&f.accel.coefficients)
+            .filter_map(|c| Some((c.name.clone(), c.std_error?)))
+            .collect()
+    };
+    let same = held(slow);
+    for ((name, a), (_, b)) in errors(&same).iter().zip(errors(&measured)) {
+        assert!((a - b).abs() <= 1e-9 * b, "{name}: held {a} vs measured {b}");
+    }
+    let none = held([None; 6]);
+    for ((name, a), (_, b)) in errors(&none).iter().zip(errors(&plain)) {
+        assert!((a - b).abs() <= 1e-9 * b, "{name}: held none {a} vs plain {b}");
+    }
+    let louder =
+        held(slow.map(|s| {
+            s.map(|s| crosscal::estimate::slow::SlowNoise { bias_instability: 4.0 * s.bias_instability, ..s })
+        }));
+    let grew = errors(&louder).iter().zip(errors(&measured)).filter(|((_, a), (_, b))| a > &(b * 1.01)).count();
+    for ((name, a), (_, b)) in errors(&louder).iter().zip(errors(&measured)) {
+        assert!(*a >= b * (1.0 - 1e-9), "{name}: louder flicker {a} below {b}");
+    }
+    assert!(grew > 0, "four times the flicker changed no standard error");
+}
