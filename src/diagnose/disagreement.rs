@@ -30,7 +30,8 @@ pub const DISAGREEMENT_Z: f64 = 6.0;
 /// Refits the model on each run alone and lists coefficients that disagree with the
 /// all-run fit by more than [`DISAGREEMENT_Z`] standard errors of their difference.
 /// Coefficients a single run cannot identify are held at their all-run values, so the rest
-/// stay comparable.
+/// stay comparable; with slow noise, each run's errors carry the slow noise the all-run fit
+/// measured ([`FitOptions::slow_noise_held`]).
 pub fn per_run_disagreements(model: &Model, all: &Fit, runs: &[FitRun<'_>], opts: &FitOptions) -> Vec<Disagreement> {
     // Each run's fits are independent: the runs in parallel, their lists joined in run order.
     let per_run: Vec<Vec<Disagreement>> = runs.par_iter().map(|run| run_disagreements(model, all, run, opts)).collect();
