@@ -30,6 +30,9 @@ pub(super) struct StandCheck<'s, 'r, 'a> {
     /// The systems of the last check that found no new group, while the climb is still
     /// around the model and analysis it made them on: the final estimate's first step.
     last: Option<stand::Systems>,
+    /// The carried groups' systems, built to judge them before the analysis was drawn
+    /// (around the same model, fit and noise models as the first check): that check's.
+    judged: Option<stand::Systems>,
 }
 
 /// The runs on the motion a stand suspect now believes: their tracks and motions.
@@ -123,8 +126,9 @@ impl StandCheck<'_, '_, '_> {
         let noise = noise_models(a);
         // Groups carried from a whole diagnosis, at the first check where a sensor effect
         // follows: judged again on their own columns (`Suspect::carried_over`).
+        let judged = self.judged.take();
         if self.suspect.carried() && sensor_bic.is_some() {
-            let sys = self.suspect.accepted_systems(current, &a.base_fit, runs, &noise);
+            let sys = judged.unwrap_or_else(|| self.suspect.accepted_systems(current, &a.base_fit, runs, &noise));
             let dropped = self.suspect.rejudge(&sys);
             self.last = Some(sys);
             return Ok(dropped);
@@ -222,7 +226,7 @@ fn first_look(
         return Ok(suspect);
     }
     let sensor_bic = scored.iter().filter(|c| c.0.rejected.is_none()).map(|c| c.0.delta_bic).reduce(f64::min);
-    let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None };
+    let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged: None };
     if !check.check(model, &a, &moved, sensor_bic, opts)? {
         return Ok(suspect);
     }
@@ -236,7 +240,7 @@ fn first_look(
         let now = Believed::new(&suspect, runs, motions);
         let moved = now.runs(runs);
         let a = analyse(&reached, refit(&reached, &moved, opts)?, &moved, &now.motions(), has_temp);
-        let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None };
+        let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged: None };
         let (steps, _, a, restart) =
             super::climb(a, &reached, &moved, &now.motions(), opts, has_temp, &mut Vec::new(), Some(&mut check))?;
         let last = check.last.take();
@@ -298,14 +302,17 @@ pub(super) fn diagnose(
         // Carried groups are judged again before the analysis is drawn: one that no longer
         // passes goes back to its labels, and the analysis is drawn on the motion without
         // it. The first check judges the groups kept again, on the same numbers.
+        let mut judged = None;
         if suspect.carries_groups() {
             let noise = noise_alone(model, &fit, &moved, &now.motions());
-            if suspect.judge_carried(&suspect.accepted_systems(model, &fit, &moved, &noise)) {
+            let sys = suspect.accepted_systems(model, &fit, &moved, &noise);
+            if suspect.judge_carried(&sys) {
                 continue;
             }
+            judged = Some(sys);
         }
         let a = analyse(model, fit, &moved, &now.motions(), has_temp);
-        let check = StandCheck { suspect: &mut suspect, declared: runs, last: None };
+        let check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged };
         if let Some(d) = conclude(a, model, &moved, &now.motions(), opts, has_temp, Some(check))? {
             return Ok((d, Some(suspect)));
         }
