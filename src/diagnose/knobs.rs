@@ -3,8 +3,9 @@
 //! inputs pushed through the model, a block of samples at a time.
 
 use crate::frames::Mount;
+use crate::frames::V3;
 use crate::model::{Predictor, State};
-use crate::motion::stand::{sincos_near, to_sensor, Angle, StandAt, StandMotion};
+use crate::motion::stand::{rotate_t, sincos_near, to_sensor, Angle, StandAt, StandMotion};
 
 /// Motion parameters of a conic run: its own cone, rate (relative), phase and rate drift
 /// (relative per second), then the common tilt ×2, ripple ×4, wobble ×2, Earth ×3.
@@ -17,6 +18,22 @@ pub(super) const STEP: [f64; KNOBS] =
     [1e-6, 1e-6, 1e-6, 1e-7, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-8, 1e-8, 1e-8];
 /// Samples per whitened block.
 pub(super) const BLOCK: usize = 256;
+
+/// A knob whose nudge moves one quantity of the state by a rotated constant vector: the
+/// base's up (a tilt: the specific force) or the Earth's rate (the rate), in stand axes.
+/// Its nudged state is the believed one with that quantity worked out again (one rotation
+/// instead of the whole kinematics); the other quantities are the believed state's, as the
+/// whole kinematics would give them.
+#[derive(Debug, Clone, Copy)]
+enum Shortcut {
+    /// The whole kinematics of the nudged motion.
+    None,
+    /// The nudged motion's up: the specific force is g·Rᵀ up.
+    Up([f64; 3]),
+    /// The Earth's rate moved by this vector (the knob's step along an axis): the rate
+    /// moves by Rᵀ of it.
+    Earth([f64; 3]),
+}
 
 /// How a local stand column moves the motion.
 #[derive(Debug, Clone, Copy)]
@@ -40,6 +57,9 @@ pub(super) struct Knobs<'m> {
     stand: Option<(StandAt, Vec<StandAt>, &'m Mount)>,
     /// Per local parameter: its direction and step.
     dirs: Vec<(Dir, f64)>,
+    /// Per local parameter: how its nudged state is worked out.
+    short: Vec<Shortcut>,
+    g_m_s2: f64,
     /// The block's states as believed, then per local parameter its nudged states.
     base: Vec<State>,
     nudged: Vec<State>,
@@ -80,8 +100,26 @@ impl<'m> Knobs<'m> {
                 .collect();
             (now.fixed(g_m_s2), nudged, mount)
         });
+        let short = dirs
+            .iter()
+            .enumerate()
+            .map(|(j, &(d, h))| match (d, &stand) {
+                (Dir::Knob(4 | 5), Some((_, nudged, _))) => Shortcut::Up({
+                    let n: &Vec<StandAt> = nudged;
+                    n[j].motion.up()
+                }),
+                (Dir::Knob(kn @ 12..=14), Some(_)) => {
+                    let mut v = [0.0; 3];
+                    v[kn - 12] = h;
+                    Shortcut::Earth(v)
+                }
+                _ => Shortcut::None,
+            })
+            .collect();
         let nl = dirs.len();
         Self {
+            short,
+            g_m_s2,
             reads: [0, 1].map(|si| predict[si].reads()),
             predict,
             stand,
@@ -91,7 +129,7 @@ impl<'m> Knobs<'m> {
             moved: vec![[true; 3]; nl],
             out0: vec![[0.0; 3]; BLOCK],
             out1: vec![[0.0; 3]; BLOCK],
-            tmp: vec![0.0; BLOCK],
+            tmp: vec![0.0; Predictor::SCRATCH * BLOCK],
         }
     }
 
@@ -110,6 +148,25 @@ impl<'m> Knobs<'m> {
         for (j, &(dir, h)) in self.dirs.iter().enumerate() {
             let mut s1 = *st;
             match (dir, &self.stand, &at) {
+                (Dir::Knob(_), Some((_, _, mount)), Some((_, sc0, (_, sa, ca))))
+                    if !matches!(self.short[j], Shortcut::None) =>
+                {
+                    // As the whole kinematics: rotated to the body, scaled, then to the sensor.
+                    let body = |v: [f64; 3]| rotate_t([sc0.0, sc0.1], [*sa, *ca], v);
+                    match self.short[j] {
+                        Shortcut::Up(up) => {
+                            let g = self.g_m_s2;
+                            s1.a = mount.to_sensor(V3::new(body(up).map(|x| g * x))).xyz;
+                        }
+                        Shortcut::Earth(v) => {
+                            let d = mount.to_sensor(V3::new(body(v))).xyz;
+                            for k in 0..3 {
+                                s1.w[k] += d[k];
+                            }
+                        }
+                        Shortcut::None => {}
+                    }
+                }
                 (Dir::Knob(kn), Some((_, nudged, mount)), Some((an0, sc0, cone0))) => {
                     let m = &nudged[j];
                     let x = if moves_angle(kn) {

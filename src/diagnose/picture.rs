@@ -108,7 +108,7 @@ pub fn visit_residual(
     let mut base: Vec<State> = Vec::with_capacity(BLOCK);
     let mut states: [Vec<State>; 2] = [Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK)];
     let mut u = [vec![[0.0; 3]; BLOCK], vec![[0.0; 3]; BLOCK]];
-    let mut tmp = vec![0.0; BLOCK];
+    let mut tmp = vec![0.0; crate::model::Predictor::SCRATCH * BLOCK];
     let mut next = 0;
     while next < n {
         ks.clear();

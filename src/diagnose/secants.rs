@@ -95,7 +95,7 @@ impl Secants {
     ) {
         let len = base.len();
         let from = |si: usize| self.seen[si].as_ref().unwrap_or(run.track);
-        out.tmp.resize(len, 0.0);
+        out.tmp.resize(Predictor::SCRATCH * len, 0.0);
         out.out.resize(len, [0.0; 3]);
         // The model's output on the motion it sees, once per sensor (every secant starts
         // there), its states from the run's (`base`).

@@ -96,19 +96,27 @@ impl<'a> Predictor<'a> {
 
     /// The outputs at each of `states` into `out` (same length), term by term over the
     /// whole block (one dynamic call per term and block, [`Effect::regressors`]); `tmp` is
-    /// scratch of at least the block's length. The same sums in the same order as
-    /// [`Self::at`], so the same numbers bit for bit.
+    /// scratch of at least four times the block's length ([`Self::SCRATCH`]): the
+    /// regressor, then each output channel's sums kept apart, so that adding a weighted
+    /// regressor is one contiguous pass ([`crate::stats::kernels::axpy`]) instead of a
+    /// stride of three. The same sums in the same order as [`Self::at`], so the same numbers
+    /// bit for bit.
     pub fn block(&self, states: &[State], out: &mut [[f64; 3]], tmp: &mut [f64]) {
-        let n = states.len().min(out.len()).min(tmp.len());
-        let (out, tmp) = (&mut out[..n], &mut tmp[..n]);
-        out.iter_mut().for_each(|u| *u = [0.0; 3]);
+        debug_assert!(tmp.len() >= Self::SCRATCH * states.len().min(out.len()), "scratch for the block");
+        let n = states.len().min(out.len()).min(tmp.len() / Self::SCRATCH);
+        let (reg, sums) = tmp[..Self::SCRATCH * n].split_at_mut(n);
+        sums.fill(0.0);
         for &(e, k, ch, w) in &self.parts {
-            e.regressors(k, &states[..n], tmp);
-            for (u, v) in out.iter_mut().zip(tmp.iter()) {
-                u[ch] += w * v;
-            }
+            e.regressors(k, &states[..n], reg);
+            crate::stats::kernels::axpy(&mut sums[ch * n..(ch + 1) * n], w, reg);
+        }
+        for (i, u) in out[..n].iter_mut().enumerate() {
+            *u = [sums[i], sums[n + i], sums[2 * n + i]];
         }
     }
+
+    /// Scratch [`Self::block`] needs per state.
+    pub const SCRATCH: usize = 4;
 }
 
 #[cfg(test)]
@@ -142,7 +150,7 @@ mod tests {
                 states.push(s);
             }
             let mut out = vec![[f64::NAN; 3]; states.len()];
-            p.block(&states, &mut out, &mut vec![0.0; states.len()]);
+            p.block(&states, &mut out, &mut vec![0.0; Predictor::SCRATCH * states.len()]);
             for (s, u) in states.iter().zip(&out) {
                 assert_eq!(u.map(f64::to_bits), p.at(s).map(f64::to_bits));
             }

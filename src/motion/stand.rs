@@ -258,7 +258,7 @@ pub fn to_sensor(k: Kinematics, mount: &Mount) -> SensorKinematics {
 /// Rᵀ v with R = Rz(−θ)·Ry(α)·Rz(θ): Rᵀ = Rz(−θ)·Ry(−α)·Rz(θ), from (sin θ, cos θ) and
 /// (sin α, cos α).
 #[inline]
-fn rotate_t([s, c]: [f64; 2], [sa, ca]: [f64; 2], v: [f64; 3]) -> [f64; 3] {
+pub fn rotate_t([s, c]: [f64; 2], [sa, ca]: [f64; 2], v: [f64; 3]) -> [f64; 3] {
     let w = [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]];
     let x = [ca * w[0] - sa * w[2], w[1], sa * w[0] + ca * w[2]];
     [c * x[0] + s * x[1], -s * x[0] + c * x[1], x[2]]

@@ -45,12 +45,15 @@ pub fn add_block_cross(out: &mut Mat<f64>, a: &[f64], b: &[f64], ld: usize, rows
 }
 
 /// `w[i] = scale·(x[p+i] − φ_1 x[p+i−1] − … − φ_p x[i])` for i < w.len(), x holding p
-/// samples of history first, the sum in that order. Eight outputs at a time, their sums
+/// samples of history first, the sum in that order. Thirty-two outputs at a time, their sums
 /// in registers across the lags (one load of `x` per lag and output, one store of `w`): a
 /// pass over the block per lag loads and stores `w` at every lag and took twice the time.
-#[inline(never)]
+/// Inlined into [`WhitenedGram::commit`]'s vectorised body, where the lanes are four
+/// AVX-512 or eight AVX2 registers: independent chains of subtractions, so that the vector
+/// unit is not waiting on one chain's latency.
+#[inline(always)]
 fn ar_filter(w: &mut [f64], x: &[f64], phi: &[f64], scale: f64) {
-    const LANES: usize = 8;
+    const LANES: usize = 32;
     let (p, rows) = (phi.len(), w.len());
     debug_assert!(x.len() >= p + rows, "history and block");
     let whole = rows - rows % LANES;
@@ -74,6 +77,31 @@ fn ar_filter(w: &mut [f64], x: &[f64], phi: &[f64], scale: f64) {
             a -= f * x[p - 1 - l + i];
         }
         w[i] = a * scale;
+    }
+}
+
+/// One block's columns through [`ar_filter`], as a `pulp` operation: its body is inlined
+/// into the function compiled for the processor's vector unit.
+struct Whiten<'a> {
+    raw: &'a [f64],
+    white: &'a mut [f64],
+    ld: usize,
+    block: usize,
+    start: usize,
+    rows: usize,
+    phi: &'a [f64],
+    scale: f64,
+}
+
+impl pulp::WithSimd for Whiten<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let p = self.phi.len();
+        for (x, w) in self.raw.chunks_exact(self.ld).zip(self.white.chunks_exact_mut(self.block)) {
+            ar_filter(&mut w[..self.rows], &x[self.start - p..self.start + self.rows], self.phi, self.scale);
+        }
     }
 }
 
@@ -131,11 +159,19 @@ impl WhitenedGram {
         let skip = p.saturating_sub(self.seen).min(len);
         let rows = len - skip;
         let start = p + skip;
-        for col in 0..m {
-            let x = &self.raw[col * ld..(col + 1) * ld];
-            let w = &mut self.white[col * self.block..][..rows];
-            ar_filter(w, &x[start - p..start + rows], &self.phi, self.scale);
-        }
+        // Compiled for the widest vector unit the processor has (pulp's runtime dispatch:
+        // AVX-512 or AVX2, else the baseline); the sums are the same, in the same order
+        // (no fused multiply-add: Rust does not contract `a - f * v`).
+        pulp::Arch::new().dispatch(Whiten {
+            raw: &self.raw,
+            white: &mut self.white,
+            ld,
+            block: self.block,
+            start,
+            rows,
+            phi: &self.phi,
+            scale: self.scale,
+        });
         add_block_lower(&mut self.gram, &self.white, self.block, rows, 1.0);
         // The last p samples (history and block together) are the next block's history.
         for col in 0..m {

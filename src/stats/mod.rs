@@ -9,6 +9,7 @@ pub mod ar;
 pub mod autocov;
 pub mod gram;
 pub mod harmonics;
+pub mod kernels;
 pub mod qr;
 pub mod segment;
 pub mod spectrum;
