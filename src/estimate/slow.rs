@@ -225,13 +225,12 @@ pub(crate) fn pass(
     per_block: usize,
     fill: &FillFn<'_>,
 ) -> Result<SourceBlocks, crate::session::SessionError> {
+    use crate::stats::kernels::axpy;
     let sensors = designs.len();
     let q = |c: usize| designs[c / 3][c % 3].columns.len();
-    let mut out = SourceBlocks {
-        channels: vec![ChannelBlocks::default(); 3 * sensors],
-        gram: (0..3 * sensors).map(|c| DMatrix::zeros(q(c), q(c))).collect(),
-        ..Default::default()
-    };
+    let mut out = SourceBlocks { channels: vec![ChannelBlocks::default(); 3 * sensors], ..Default::default() };
+    // ΦᵀΦ's lower triangle per channel, a stretch of samples at a time (faer's product).
+    let mut lower: Vec<faer::Mat<f64>> = (0..3 * sensors).map(|c| faer::Mat::zeros(q(c), q(c))).collect();
     let mut open = Open {
         t0: 0.0,
         t1: 0.0,
@@ -240,45 +239,61 @@ pub(crate) fn pass(
         rsum: vec![0.0; 3 * sensors],
     };
     let mut cols: Vec<Vec<f64>> = width.iter().map(|w| vec![0.0; (w + 3) * BLOCK]).collect();
-    let mut x = Vec::new();
+    // A stretch's plan columns (column-major, stride BLOCK) and prediction.
+    let qmax = (0..3 * sensors).map(q).max().unwrap_or(0);
+    let mut x = vec![0.0; qmax * BLOCK];
+    let mut pred = vec![0.0; BLOCK];
+    // Each plan column (and the prediction) as its weighted design columns summed in their
+    // order, a stretch of samples at once: element by element the sums of one sample.
+    let combine = |to: &mut [f64], parts: &[(usize, f64)], c: &[f64], k: usize| {
+        to.fill(-0.0);
+        for &(j, wt) in parts {
+            axpy(to, wt, &c[j * BLOCK + k..][..to.len()]);
+        }
+    };
     src.for_each_block(&mut |states, g, a| {
         for (s, c) in cols.iter_mut().enumerate() {
             fill(s, states, g, a, c);
         }
-        for (k, st) in states.iter().enumerate() {
+        // Stretches of the block that fall in one block of means.
+        let mut k = 0;
+        while k < states.len() {
+            let take = (per_block - open.n).min(states.len() - k);
             if open.n == 0 {
-                open.t0 = st.t_session_s;
+                open.t0 = states[k].t_session_s;
             }
-            open.t1 = st.t_session_s;
-            open.n += 1;
+            open.t1 = states[k + take - 1].t_session_s;
             for s in 0..sensors {
                 let c = &cols[s];
                 for (ch, d) in designs[s].iter().enumerate() {
                     let i = 3 * s + ch;
-                    x.clear();
-                    x.extend(d.columns.iter().map(|col| col.iter().map(|&(j, wt)| wt * c[j * BLOCK + k]).sum::<f64>()));
-                    for (acc, v) in open.sums[i].iter_mut().zip(&x) {
-                        *acc += v;
-                    }
-                    let pred: f64 = d.predict.iter().map(|&(j, wt)| wt * c[j * BLOCK + k]).sum();
-                    open.rsum[i] += c[(width[s] + ch) * BLOCK + k] - pred;
-                    let gram = &mut out.gram[i];
-                    for a in 0..x.len() {
-                        for b in 0..=a {
-                            gram[(a, b)] += x[a] * x[b];
+                    for (col, (xa, acc)) in d.columns.iter().zip(x.chunks_exact_mut(BLOCK).zip(&mut open.sums[i])) {
+                        let xa = &mut xa[..take];
+                        combine(xa, col, c, k);
+                        for v in xa.iter() {
+                            *acc += v;
                         }
                     }
+                    combine(&mut pred[..take], &d.predict, c, k);
+                    let y = &c[(width[s] + ch) * BLOCK + k..][..take];
+                    for (y, p) in y.iter().zip(&pred[..take]) {
+                        open.rsum[i] += y - p;
+                    }
+                    crate::stats::gram::add_block_lower(&mut lower[i], &x, BLOCK, take, 1.0);
                 }
             }
+            open.n += take;
+            k += take;
             if open.n == per_block {
                 out.close(&mut open);
             }
         }
     })?;
     out.close(&mut open);
-    for g in &mut out.gram {
-        g.fill_upper_triangle_with_lower_triangle();
-    }
+    out.gram = lower
+        .iter()
+        .map(|l| DMatrix::from_fn(l.nrows(), l.ncols(), |i, j| if i >= j { l[(i, j)] } else { l[(j, i)] }))
+        .collect();
     Ok(out)
 }
 
