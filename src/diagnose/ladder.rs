@@ -129,6 +129,7 @@ pub fn compare(
     // The diagnosis with the stand as a suspect, and the ladder on the motion it corrected:
     // a stand that does not move as declared is not a rung of sensor effects.
     let (d, suspect) = diagnose_from(&base, runs, motions, opts, None)?;
+    let d = super::with_stand::with_shapes(d, &base, runs, motions, suspect.as_ref());
     let suspect = suspect.filter(super::stand::Suspect::changed);
     let tracks = suspect.as_ref().map(|s| s.tracks(runs));
     let runs: Vec<FitRun<'_>> = match &tracks {

@@ -323,7 +323,8 @@ pub fn diagnose(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
 ) -> Result<Diagnosis, EstimateError> {
-    diagnose_from(model, runs, motions, opts, None).map(|d| d.0)
+    let (d, stand) = diagnose_from(model, runs, motions, opts, None)?;
+    Ok(with_stand::with_shapes(d, model, runs, motions, stand.as_ref()))
 }
 
 /// [`diagnose`], with the stand starting from `start` (a suspect carried from a diagnosis
@@ -346,11 +347,12 @@ fn diagnose_from(
 }
 
 /// The shape of what no effect explains on each channel still systematic (module `shape`),
-/// around the model at the end of the ladder.
+/// around the model at the end of the ladder (`steps` added, fitted as `fit` on `runs`),
+/// each channel's noise as `noise` reports it and the slow noise the fit measured.
 fn draw_shapes(
-    a: &Analysis,
     model: &Model,
     steps: &[Step],
+    fit: &Fit,
     runs: &[FitRun<'_>],
     motions: &RunMotions<'_>,
     remaining: &[&ChannelReport],
@@ -370,8 +372,9 @@ fn draw_shapes(
         .map(|ch| {
             let c = channel_of(ch.sensor, ch.axis);
             let n = &noise[c];
-            let scale = shape::NoiseScale::new(n.sigma, n.lag1, a.space.slow.get(c).copied().flatten(), span_s, run_s);
-            shape::shape_of(&m, &a.base_fit, runs, motions, c, scale)
+            let slow = fit.sensor(SensorKind::BOTH[c / 3]).channels.get(c % 3).and_then(|x| x.slow_noise);
+            let scale = shape::NoiseScale::new(n.sigma, n.lag1, slow, span_s, run_s);
+            shape::shape_of(&m, fit, runs, motions, c, scale)
         })
         .collect()
 }
@@ -464,7 +467,6 @@ fn conclude(
         None => l.describe(),
     }));
     let final_noise = noise_reports(&a.space);
-    let shapes = draw_shapes(&a, model, &steps, runs, motions, &remaining, &final_noise);
     let unidentifiable = unidentifiable(&final_fit, &first_round);
     let stand = with_stand::findings(stand_check, opts, model, &steps, &final_fit, runs, &a);
     // The stand explains what the unit does not need to: nothing left is "explained".
@@ -475,7 +477,8 @@ fn conclude(
         model: model.name.clone(),
         channels,
         noise: final_noise,
-        shapes,
+        // Drawn by the caller once this diagnosis is the answer (`with_stand::with_shapes`).
+        shapes: Vec::new(),
         tried,
         lines: found,
         candidates: first_round,

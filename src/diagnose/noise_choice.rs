@@ -45,6 +45,7 @@
 //! departure from the labels, [`super::stand::Suspect::rejudge`]); one that no longer
 //! passes goes back to its labels.
 
+use super::with_stand::with_shapes;
 use super::{channel_of, diagnose, diagnose_from, Candidate, Diagnosis, Verdict};
 use crate::estimate::{EstimateError, FitOptions, FitRun};
 use crate::units::{SensorKind, AXES};
@@ -114,24 +115,41 @@ fn by_mode(
         SlowNoiseMode::Off => diagnose(model, runs, motions, &with(false)),
         SlowNoiseMode::Auto => {
             let (first, stand) = diagnose_from(model, runs, motions, &with(false), None)?;
+            let shaped = |d, s: Option<&super::stand::Suspect>| with_shapes(d, model, runs, motions, s);
             if first.verdict != Verdict::Unexplained {
-                return Ok(first);
+                return Ok(shaped(first, stand.as_ref()));
             }
             // The second starts from the motion the first corrected, its stand groups
             // judged again under the slow noise: measured on the residual of the declared
             // motion, the slow noise would take in the stand's error (a base tilt's once per
             // revolution is as slow as a wander on runs of a few revolutions) and hide it.
-            // The first answer stands when the second cannot be had, and says so.
-            match diagnose_from(model, runs, motions, &with(true), stand.map(super::stand::Suspect::carried_over)) {
-                Ok((second, _)) => Ok(choose(first, second)),
+            // The first answer stands when the second cannot be had, and says so. Only the
+            // answer's shapes are drawn.
+            match diagnose_from(
+                model,
+                runs,
+                motions,
+                &with(true),
+                stand.clone().map(super::stand::Suspect::carried_over),
+            ) {
+                Ok((second, stand2)) => Ok(match choose(first, second) {
+                    Chosen::First(d) => shaped(d, stand.as_ref()),
+                    Chosen::Second(d) => shaped(d, stand2.as_ref()),
+                }),
                 Err(e) => {
                     let mut first = first;
                     first.warnings.push(format!("slow noise was not tried: {e}"));
-                    Ok(first)
+                    Ok(shaped(first, stand.as_ref()))
                 }
             }
         }
     }
+}
+
+/// The diagnosis [`choose`] keeps: the first (AR noise model) or the second (slow noise).
+enum Chosen {
+    First(Diagnosis),
+    Second(Diagnosis),
 }
 
 /// Share of a sensor's whitened χ² the left-out runs must confirm for rule 5: a residual
@@ -208,7 +226,7 @@ fn motion_law(id: &str) -> bool {
 /// The choice (module documentation): the diagnosis with slow noise when it keeps the
 /// first one's effects, clears channels without clearing a turn-on bias or a residual
 /// locked to the cone, and leaves nothing new; else the first. The chosen one says why in its warnings.
-fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
+fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Chosen {
     let keeps = first.steps.iter().all(|s| second.steps.iter().any(|t| t.effect == s.effect));
     let (before, after) = (systematic(&first), systematic(&second));
     let fewer = after.iter().all(|c| before.contains(c)) && after.len() < before.len();
@@ -222,7 +240,7 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
     let name = |c: usize| format!("{} {}", if c < 3 { "gyro" } else { "accel" }, AXES[c % 3]);
     let names = |cs: &[usize]| cs.iter().map(|&c| name(c)).collect::<Vec<_>>().join(", ");
     if !(keeps && fewer) {
-        return first;
+        return Chosen::First(first);
     }
     let locked: Vec<(usize, usize)> = locked(&first).into_iter().filter(|(c, _)| cleared.contains(c)).collect();
     if !locked.is_empty() {
@@ -231,7 +249,7 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
             "the systematic residual on {} sits on a harmonic of the cone: locked to the motion, it is not treated as slow noise (--slow-noise on would)",
             said.join(", ")
         ));
-        return first;
+        return Chosen::First(first);
     }
     let predicted: Vec<(usize, (String, f64))> =
         cleared.iter().filter_map(|&c| predicted_by(&first, &second, c).map(|p| (c, p))).collect();
@@ -242,18 +260,18 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Diagnosis {
             names(&predicted),
             100.0 * gain
         ));
-        return first;
+        return Chosen::First(first);
     }
     if jumps.is_empty() {
         second.warnings.push(format!(
             "the slow variation on {} wanders like flicker and bias random walk (different in every run, carried from one run into the next, locked to nothing): it is treated as noise, as --slow-noise on does (--slow-noise off shows it as a systematic residual)",
             names(&cleared)
         ));
-        return second;
+        return Chosen::Second(second);
     }
     first.warnings.push(format!(
         "the run offsets on {} jump between runs and stay flat within them (a turn-on bias is likelier than flicker and walk there): not treated as noise",
         names(&jumps)
     ));
-    first
+    Chosen::First(first)
 }

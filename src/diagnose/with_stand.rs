@@ -4,7 +4,7 @@
 //! starts again on it.
 
 use super::select::Space;
-use super::{analyse, conclude, refit, stand, Analysis, Diagnosis, RunMotions, Step};
+use super::{analyse, conclude, refit, stand, Analysis, ChannelReport, Diagnosis, RunMotions, Step};
 use crate::estimate::{EstimateError, Fit, FitOptions, FitRun};
 use crate::model::Model;
 use crate::session::MotionSpec;
@@ -55,6 +55,33 @@ impl Believed {
     fn motions(&self) -> Vec<&MotionSpec> {
         self.motions.iter().collect()
     }
+}
+
+/// `d` with the shapes of what no effect explains drawn (module `shape`; nothing when no
+/// channel is left systematic), on the motion its stand `suspect` believes (the declared
+/// motion without one). A diagnosis leaves them to this last step, so that one that is
+/// not the answer (the automatic slow-noise mode diagnoses twice and keeps one) draws none.
+pub(super) fn with_shapes(
+    mut d: Diagnosis,
+    model: &Model,
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    suspect: Option<&stand::Suspect>,
+) -> Diagnosis {
+    let last = d.steps.last().map_or(&d.channels, |s| &s.channels);
+    let remaining: Vec<&ChannelReport> = last.iter().filter(|c| c.systematic).collect();
+    if remaining.is_empty() {
+        return d;
+    }
+    let shapes = match suspect {
+        Some(s) => {
+            let now = Believed::new(s, runs, motions);
+            super::draw_shapes(model, &d.steps, &d.final_fit, &now.runs(runs), &now.motions(), &remaining, &d.noise)
+        }
+        None => super::draw_shapes(model, &d.steps, &d.final_fit, runs, motions, &remaining, &d.noise),
+    };
+    d.shapes = shapes;
+    d
 }
 
 /// The noise model of every run and channel of an analysis, with each channel's dispersion
