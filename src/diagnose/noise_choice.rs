@@ -37,7 +37,8 @@
 //!    reaching the noise floor), the residual is the law's, not absorbed as noise.
 //!
 //! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
-//! this module only chooses. The second starts from the motion the first corrected (its
+//! this module only chooses, and the shapes of what no effect explains are drawn for the
+//! one it keeps ([`super::with_stand::with_shapes`]). The second starts from the motion the first corrected (its
 //! stand suspect carried over): the slow noise is measured on the residual, and a base
 //! tilt's once per revolution on runs of a few revolutions is as slow as a wander, so on
 //! the declared motion it would take in the stand's error and let sensor effects explain
