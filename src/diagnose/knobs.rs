@@ -87,7 +87,7 @@ impl<'m> Knobs<'m> {
                 Dir::Rate(_) => (d, STEP[KNOBS - 1]),
             })
             .collect();
-        let stand = conic.map(|(declared_rate, now, mount)| {
+        let stand: Option<(StandAt, Vec<StandAt>, &Mount)> = conic.map(|(declared_rate, now, mount)| {
             let nudged = dirs
                 .iter()
                 .map(|&(d, h)| {
@@ -104,10 +104,7 @@ impl<'m> Knobs<'m> {
             .iter()
             .enumerate()
             .map(|(j, &(d, h))| match (d, &stand) {
-                (Dir::Knob(4 | 5), Some((_, nudged, _))) => Shortcut::Up({
-                    let n: &Vec<StandAt> = nudged;
-                    n[j].motion.up()
-                }),
+                (Dir::Knob(4 | 5), Some((_, nudged, _))) => Shortcut::Up(nudged[j].motion.up()),
                 (Dir::Knob(kn @ 12..=14), Some(_)) => {
                     let mut v = [0.0; 3];
                     v[kn - 12] = h;
@@ -145,29 +142,23 @@ impl<'m> Knobs<'m> {
             let sc = libm::sincos(an.theta);
             (an, sc, now.cone_trig(sc))
         });
+        // A shortcut's vector as the whole kinematics turns it: to the body (then scaled, then
+        // to the sensor), from the stand angle's and cone angle's sines and cosines.
+        let body = |(s, c): (f64, f64), (_, sa, ca): (f64, f64, f64), v: [f64; 3]| rotate_t([s, c], [sa, ca], v);
         for (j, &(dir, h)) in self.dirs.iter().enumerate() {
             let mut s1 = *st;
-            match (dir, &self.stand, &at) {
-                (Dir::Knob(_), Some((_, _, mount)), Some((_, sc0, (_, sa, ca))))
-                    if !matches!(self.short[j], Shortcut::None) =>
-                {
-                    // As the whole kinematics: rotated to the body, scaled, then to the sensor.
-                    let body = |v: [f64; 3]| rotate_t([sc0.0, sc0.1], [*sa, *ca], v);
-                    match self.short[j] {
-                        Shortcut::Up(up) => {
-                            let g = self.g_m_s2;
-                            s1.a = mount.to_sensor(V3::new(body(up).map(|x| g * x))).xyz;
-                        }
-                        Shortcut::Earth(v) => {
-                            let d = mount.to_sensor(V3::new(body(v))).xyz;
-                            for k in 0..3 {
-                                s1.w[k] += d[k];
-                            }
-                        }
-                        Shortcut::None => {}
+            match (dir, self.short[j], &self.stand, &at) {
+                (_, Shortcut::Up(up), Some((_, _, mount)), Some((_, sc0, cone0))) => {
+                    let g = self.g_m_s2;
+                    s1.a = mount.to_sensor(V3::new(body(*sc0, *cone0, up).map(|x| g * x))).xyz;
+                }
+                (_, Shortcut::Earth(v), Some((_, _, mount)), Some((_, sc0, cone0))) => {
+                    let d = mount.to_sensor(V3::new(body(*sc0, *cone0, v))).xyz;
+                    for k in 0..3 {
+                        s1.w[k] += d[k];
                     }
                 }
-                (Dir::Knob(kn), Some((_, nudged, mount)), Some((an0, sc0, cone0))) => {
+                (Dir::Knob(kn), _, Some((_, nudged, mount)), Some((an0, sc0, cone0))) => {
                     let m = &nudged[j];
                     let x = if moves_angle(kn) {
                         let an = m.motion.angle_or_logged(t_s, logged);
