@@ -38,15 +38,7 @@ impl NoiseStage {
             .collect();
         let pooled = space::pooled_noise(&stats);
         let span_s: f64 = runs.iter().map(run_span).sum();
-        let slow = base_fit
-            .gyro
-            .channels
-            .iter()
-            .chain(&base_fit.accel.channels)
-            .map(|c| c.slow_noise)
-            .chain(std::iter::repeat(None))
-            .take(6)
-            .collect();
+        let slow = (0..6).map(|c| base_fit.slow_noise(c)).collect();
         Self { stats, pooled, slow, span_s }
     }
 }

@@ -46,11 +46,8 @@ fn run_disagreements(model: &Model, all: &Fit, run: &FitRun<'_>, opts: &FitOptio
     // The first fit only tells what the run cannot identify; the fit compared carries the
     // slow noise the whole session measured (one run tells its wander poorly).
     let quick = FitOptions { slow_noise: false, ..*opts };
-    let held: [Option<crate::estimate::slow::SlowNoise>; 6] = std::array::from_fn(|c| {
-        let s = crate::units::SensorKind::BOTH[c / 3];
-        all.sensor(s).channels.get(c % 3).and_then(|ch| ch.slow_noise)
-    });
-    let opts = &FitOptions { slow_noise_held: Some(held), ..*opts };
+    let session_slow = std::array::from_fn(|c| all.slow_noise(c));
+    let opts = &FitOptions { slow_noise_held: Some(session_slow), ..*opts };
     let Ok(first) = refit(model, one, &quick) else { return Vec::new() };
     let held: Vec<&String> =
         first.gyro.unidentifiable.iter().chain(&first.accel.unidentifiable).map(|c| &c.held).collect();

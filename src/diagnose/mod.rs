@@ -372,8 +372,7 @@ fn draw_shapes(
         .map(|ch| {
             let c = channel_of(ch.sensor, ch.axis);
             let n = &noise[c];
-            let slow = fit.sensor(SensorKind::BOTH[c / 3]).channels.get(c % 3).and_then(|x| x.slow_noise);
-            let scale = shape::NoiseScale::new(n.sigma, n.lag1, slow, span_s, run_s);
+            let scale = shape::NoiseScale::new(n.sigma, n.lag1, fit.slow_noise(c), span_s, run_s);
             shape::shape_of(&m, fit, runs, motions, c, scale)
         })
         .collect()

@@ -232,12 +232,11 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Chosen {
     let (before, after) = (systematic(&first), systematic(&second));
     let fewer = after.iter().all(|c| before.contains(c)) && after.len() < before.len();
     let cleared: Vec<usize> = before.iter().copied().filter(|c| !after.contains(c)).collect();
-    let slow = |c: usize| {
-        let s = if c < 3 { SensorKind::Gyro } else { SensorKind::Accel };
-        second.final_fit.sensor(s).channels.get(c % 3).and_then(|ch| ch.slow_noise)
-    };
-    let jumps: Vec<usize> =
-        cleared.iter().copied().filter(|&c| slow(c).is_some_and(|s| s.jumps_between_runs())).collect();
+    let jumps: Vec<usize> = cleared
+        .iter()
+        .copied()
+        .filter(|&c| second.final_fit.slow_noise(c).is_some_and(|s| s.jumps_between_runs()))
+        .collect();
     let name = |c: usize| format!("{} {}", if c < 3 { "gyro" } else { "accel" }, AXES[c % 3]);
     let names = |cs: &[usize]| cs.iter().map(|&c| name(c)).collect::<Vec<_>>().join(", ");
     if !(keeps && fewer) {

@@ -132,6 +132,12 @@ impl Fit {
         }
     }
 
+    /// The slow noise (flicker and bias random walk) the fit measured or held on channel `c`
+    /// (0..6: gyro x..z, accel x..z); None without one.
+    pub fn slow_noise(&self, c: usize) -> Option<super::slow::SlowNoise> {
+        self.sensor(SensorKind::BOTH[(c / 3).min(1)]).channels.get(c % 3).and_then(|ch| ch.slow_noise)
+    }
+
     /// Fails, naming every lost coefficient and its remedy, when something was unidentifiable.
     pub fn ensure_identifiable(&self) -> Result<(), EstimateError> {
         let lost: Vec<String> = self
