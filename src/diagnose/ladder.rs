@@ -128,9 +128,9 @@ pub fn compare(
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
     // The diagnosis with the stand as a suspect, and the ladder on the motion it corrected:
     // a stand that does not move as declared is not a rung of sensor effects.
-    let (d, suspect) = diagnose_from(&base, runs, motions, opts, None)?;
-    let d = super::with_stand::with_shapes(d, &base, runs, motions, suspect.as_ref());
-    let suspect = suspect.filter(super::stand::Suspect::changed);
+    let c = diagnose_from(&base, runs, motions, opts, None)?;
+    let suspect = c.stand.clone().filter(super::stand::Suspect::changed);
+    let d = super::with_stand::finish(c, &base, runs, motions);
     let tracks = suspect.as_ref().map(|s| s.tracks(runs));
     let runs: Vec<FitRun<'_>> = match &tracks {
         Some(t) => runs.iter().zip(t).map(|(r, t)| FitRun { track: t, ..*r }).collect(),

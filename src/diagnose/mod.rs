@@ -323,8 +323,22 @@ pub fn diagnose(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
 ) -> Result<Diagnosis, EstimateError> {
-    let (d, stand) = diagnose_from(model, runs, motions, opts, None)?;
-    Ok(with_stand::with_shapes(d, model, runs, motions, stand.as_ref()))
+    Ok(with_stand::finish(diagnose_from(model, runs, motions, opts, None)?, model, runs, motions))
+}
+
+/// A diagnosis concluded, with what its last and costly parts need: they are worked out
+/// ([`with_stand::finish`]) only for the diagnosis that is the answer (the automatic
+/// slow-noise mode concludes two and keeps one).
+pub(super) struct Concluded {
+    /// The diagnosis, without its shapes and per-run disagreements.
+    pub(super) d: Diagnosis,
+    /// The stand suspect at the end (None: the declared motion); the shapes are drawn on
+    /// the motion it believes.
+    pub(super) stand: Option<stand::Suspect>,
+    /// The default model's fit the single-run fits are compared with (None: no comparison,
+    /// [`per_run_disagreements`]), on the motion the stand suspect believed when the
+    /// diagnosis kept it (None: the declared one), and the fit's options.
+    pub(super) compare: Option<(Fit, Option<stand::Suspect>, FitOptions)>,
 }
 
 /// [`diagnose`], with the stand starting from `start` (a suspect carried from a diagnosis
@@ -335,12 +349,11 @@ fn diagnose_from(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
     start: Option<stand::Suspect>,
-) -> Result<(Diagnosis, Option<stand::Suspect>), EstimateError> {
+) -> Result<Concluded, EstimateError> {
     let has_temp = runs.iter().all(|r| r.temp_c.is_some() || r.temp_const_c.is_some());
     let Some(suspect) = start.or_else(|| stand::Suspect::new(runs, motions)) else {
         let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
         return conclude(a, model, runs, motions, opts, has_temp, None)?
-            .map(|d| (d, None))
             .ok_or_else(|| EstimateError::NotConverged("the diagnosis did not settle".into()));
     };
     with_stand::diagnose(suspect, model, runs, motions, opts, has_temp)
@@ -378,8 +391,8 @@ fn draw_shapes(
         .collect()
 }
 
-/// The diagnosis of an analysed session (None: the stand check corrected the motion and
-/// the diagnosis starts again).
+/// The diagnosis of an analysed session, its stand suspect left for the caller to set
+/// (None: the stand check corrected the motion and the diagnosis starts again).
 fn conclude(
     a: Analysis,
     model: &Model,
@@ -388,7 +401,7 @@ fn conclude(
     opts: &FitOptions,
     has_temp: bool,
     mut stand_check: Option<with_stand::StandCheck<'_, '_, '_>>,
-) -> Result<Option<Diagnosis>, EstimateError> {
+) -> Result<Option<Concluded>, EstimateError> {
     let mut warnings = Vec::new();
     if !has_temp {
         warnings.push("no temperature in some runs: temperature effects were not tried".to_string());
@@ -397,8 +410,8 @@ fn conclude(
     let base_set = a.space.base_set();
     let channels = pictures(&a, &base_set, &a.base_fit, &noise);
     warnings.extend(absorbed(&channels, &noise));
-    // The per-run refits compare with the base model's fit; they are made once the climb
-    // has kept the motion (a stand group found starts the diagnosis again).
+    // The per-run refits compare with the base model's fit, on the motion the climb keeps
+    // (a stand group found starts the diagnosis again); they are made for the answer.
     let disagree = model.nonlinear().is_empty() && runs.len() > 1;
     let base_fit = if disagree { Some(a.base_fit.clone()) } else { None };
     let (mut steps, mut first_round, mut a, restart) =
@@ -406,7 +419,7 @@ fn conclude(
     if restart {
         return Ok(None);
     }
-    let disagreements = base_fit.map_or_else(Vec::new, |f| per_run_disagreements(model, &f, runs, opts));
+    let compare = base_fit.map(|f| (f, stand_check.as_ref().map(|sc| sc.believed()), *opts));
     // Each temperature polynomial's degree, again with every effect found in the model.
     let mut changed = temperature::revisit_degrees(&a.space, &mut steps, &mut warnings);
     // A sensor still systematic after its effects: no catalogued effect brings it to the
@@ -472,11 +485,11 @@ fn conclude(
     let verdict = if verdict == Verdict::Adequate && !stand.is_empty() { Verdict::Explained } else { verdict };
     let proposal =
         if verdict == Verdict::Explained { steps.iter().map(|s| s.effect.clone()).collect() } else { Vec::new() };
-    Ok(Some(Diagnosis {
+    let d = Diagnosis {
         model: model.name.clone(),
         channels,
         noise: final_noise,
-        // Drawn by the caller once this diagnosis is the answer (`with_stand::with_shapes`).
+        // Drawn, with the disagreements, once this diagnosis is the answer (`with_stand::finish`).
         shapes: Vec::new(),
         tried,
         lines: found,
@@ -488,9 +501,10 @@ fn conclude(
         unidentifiable,
         warnings,
         final_fit,
-        disagreements,
+        disagreements: Vec::new(),
         stand,
-    }))
+    };
+    Ok(Some(Concluded { d, stand: None, compare }))
 }
 
 fn run_span(r: &FitRun<'_>) -> f64 {

@@ -37,8 +37,8 @@
 //!    reaching the noise floor), the residual is the law's, not absorbed as noise.
 //!
 //! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
-//! this module only chooses, and the shapes of what no effect explains are drawn for the
-//! one it keeps ([`super::with_stand::with_shapes`]). The second starts from the motion the first corrected (its
+//! this module only chooses, and the one it keeps is finished: its per-run disagreements
+//! and the shapes of what no effect explains ([`super::with_stand::finish`]). The second starts from the motion the first corrected (its
 //! stand suspect carried over): the slow noise is measured on the residual, and a base
 //! tilt's once per revolution on runs of a few revolutions is as slow as a wander, so on
 //! the declared motion it would take in the stand's error and let sensor effects explain
@@ -46,8 +46,8 @@
 //! departure from the labels, [`super::stand::Suspect::rejudge`]); one that no longer
 //! passes goes back to its labels.
 
-use super::with_stand::with_shapes;
-use super::{channel_of, diagnose, diagnose_from, Candidate, Diagnosis, Verdict};
+use super::with_stand::finish;
+use super::{channel_of, diagnose, diagnose_from, Candidate, Concluded, Diagnosis, Verdict};
 use crate::estimate::{EstimateError, FitOptions, FitRun};
 use crate::units::{SensorKind, AXES};
 use serde::{Deserialize, Serialize};
@@ -115,42 +115,28 @@ fn by_mode(
         SlowNoiseMode::On => diagnose(model, runs, motions, &with(true)),
         SlowNoiseMode::Off => diagnose(model, runs, motions, &with(false)),
         SlowNoiseMode::Auto => {
-            let (first, stand) = diagnose_from(model, runs, motions, &with(false), None)?;
-            let shaped = |d, s: Option<&super::stand::Suspect>| with_shapes(d, model, runs, motions, s);
-            if first.verdict != Verdict::Unexplained {
-                return Ok(shaped(first, stand.as_ref()));
+            let first = diagnose_from(model, runs, motions, &with(false), None)?;
+            let finished = |c| finish(c, model, runs, motions);
+            if first.d.verdict != Verdict::Unexplained {
+                return Ok(finished(first));
             }
             // The second starts from the motion the first corrected, its stand groups
             // judged again under the slow noise: measured on the residual of the declared
             // motion, the slow noise would take in the stand's error (a base tilt's once per
             // revolution is as slow as a wander on runs of a few revolutions) and hide it.
             // The first answer stands when the second cannot be had, and says so. Only the
-            // answer's shapes are drawn.
-            match diagnose_from(
-                model,
-                runs,
-                motions,
-                &with(true),
-                stand.clone().map(super::stand::Suspect::carried_over),
-            ) {
-                Ok((second, stand2)) => Ok(match choose(first, second) {
-                    Chosen::First(d) => shaped(d, stand.as_ref()),
-                    Chosen::Second(d) => shaped(d, stand2.as_ref()),
-                }),
+            // answer is finished (its disagreements and shapes).
+            let carried = first.stand.clone().map(super::stand::Suspect::carried_over);
+            match diagnose_from(model, runs, motions, &with(true), carried) {
+                Ok(second) => Ok(finished(choose(first, second))),
                 Err(e) => {
                     let mut first = first;
-                    first.warnings.push(format!("slow noise was not tried: {e}"));
-                    Ok(shaped(first, stand.as_ref()))
+                    first.d.warnings.push(format!("slow noise was not tried: {e}"));
+                    Ok(finished(first))
                 }
             }
         }
     }
-}
-
-/// The diagnosis [`choose`] keeps: the first (AR noise model) or the second (slow noise).
-enum Chosen {
-    First(Diagnosis),
-    Second(Diagnosis),
 }
 
 /// Share of a sensor's whitened χ² the left-out runs must confirm for rule 5: a residual
@@ -227,9 +213,10 @@ fn motion_law(id: &str) -> bool {
 /// The choice (module documentation): the diagnosis with slow noise when it keeps the
 /// first one's effects, clears channels without clearing a turn-on bias or a residual
 /// locked to the cone, and leaves nothing new; else the first. The chosen one says why in its warnings.
-fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Chosen {
+fn choose(mut first_c: Concluded, mut second_c: Concluded) -> Concluded {
+    let (first, second) = (&mut first_c.d, &mut second_c.d);
     let keeps = first.steps.iter().all(|s| second.steps.iter().any(|t| t.effect == s.effect));
-    let (before, after) = (systematic(&first), systematic(&second));
+    let (before, after) = (systematic(first), systematic(second));
     let fewer = after.iter().all(|c| before.contains(c)) && after.len() < before.len();
     let cleared: Vec<usize> = before.iter().copied().filter(|c| !after.contains(c)).collect();
     let jumps: Vec<usize> = cleared
@@ -240,19 +227,19 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Chosen {
     let name = |c: usize| format!("{} {}", if c < 3 { "gyro" } else { "accel" }, AXES[c % 3]);
     let names = |cs: &[usize]| cs.iter().map(|&c| name(c)).collect::<Vec<_>>().join(", ");
     if !(keeps && fewer) {
-        return Chosen::First(first);
+        return first_c;
     }
-    let locked: Vec<(usize, usize)> = locked(&first).into_iter().filter(|(c, _)| cleared.contains(c)).collect();
+    let locked: Vec<(usize, usize)> = locked(first).into_iter().filter(|(c, _)| cleared.contains(c)).collect();
     if !locked.is_empty() {
         let said: Vec<String> = locked.iter().map(|&(c, h)| format!("{} (harmonic {h})", name(c))).collect();
         first.warnings.push(format!(
             "the systematic residual on {} sits on a harmonic of the cone: locked to the motion, it is not treated as slow noise (--slow-noise on would)",
             said.join(", ")
         ));
-        return Chosen::First(first);
+        return first_c;
     }
     let predicted: Vec<(usize, (String, f64))> =
-        cleared.iter().filter_map(|&c| predicted_by(&first, &second, c).map(|p| (c, p))).collect();
+        cleared.iter().filter_map(|&c| predicted_by(first, second, c).map(|p| (c, p))).collect();
     if let Some((_, (effect, gain))) = predicted.first() {
         let predicted: Vec<usize> = predicted.iter().map(|p| p.0).collect();
         first.warnings.push(format!(
@@ -260,18 +247,18 @@ fn choose(mut first: Diagnosis, mut second: Diagnosis) -> Chosen {
             names(&predicted),
             100.0 * gain
         ));
-        return Chosen::First(first);
+        return first_c;
     }
     if jumps.is_empty() {
         second.warnings.push(format!(
             "the slow variation on {} wanders like flicker and bias random walk (different in every run, carried from one run into the next, locked to nothing): it is treated as noise, as --slow-noise on does (--slow-noise off shows it as a systematic residual)",
             names(&cleared)
         ));
-        return Chosen::Second(second);
+        return second_c;
     }
     first.warnings.push(format!(
         "the run offsets on {} jump between runs and stay flat within them (a turn-on bias is likelier than flicker and walk there): not treated as noise",
         names(&jumps)
     ));
-    Chosen::First(first)
+    first_c
 }

@@ -4,7 +4,7 @@
 //! starts again on it.
 
 use super::select::Space;
-use super::{analyse, conclude, refit, stand, Analysis, ChannelReport, Diagnosis, RunMotions, Step};
+use super::{analyse, conclude, refit, stand, Analysis, ChannelReport, Concluded, Diagnosis, RunMotions, Step};
 use crate::estimate::{EstimateError, Fit, FitOptions, FitRun};
 use crate::model::Model;
 use crate::session::MotionSpec;
@@ -57,23 +57,25 @@ impl Believed {
     }
 }
 
-/// `d` with the shapes of what no effect explains drawn (module `shape`; nothing when no
-/// channel is left systematic), on the motion its stand `suspect` believes (the declared
-/// motion without one). A diagnosis leaves them to this last step, so that one that is
-/// not the answer (the automatic slow-noise mode diagnoses twice and keeps one) draws none.
-pub(super) fn with_shapes(
-    mut d: Diagnosis,
-    model: &Model,
-    runs: &[FitRun<'_>],
-    motions: &RunMotions<'_>,
-    suspect: Option<&stand::Suspect>,
-) -> Diagnosis {
+/// The diagnosis `c` with its last parts worked out, once it is the answer (the automatic
+/// slow-noise mode concludes two and keeps one): the per-run disagreements, on the motion
+/// the diagnosis kept, and the shapes of what no effect explains (module `shape`; nothing
+/// when no channel is left systematic), on the motion its stand suspect believes at the end
+/// (the declared motion without one).
+pub(super) fn finish(c: Concluded, model: &Model, runs: &[FitRun<'_>], motions: &RunMotions<'_>) -> Diagnosis {
+    let Concluded { mut d, stand, compare } = c;
+    if let Some((fit, on, opts)) = compare {
+        d.disagreements = match on {
+            Some(s) => super::per_run_disagreements(model, &fit, &Believed::new(&s, runs, motions).runs(runs), &opts),
+            None => super::per_run_disagreements(model, &fit, runs, &opts),
+        };
+    }
     let last = d.steps.last().map_or(&d.channels, |s| &s.channels);
     let remaining: Vec<&ChannelReport> = last.iter().filter(|c| c.systematic).collect();
     if remaining.is_empty() {
         return d;
     }
-    let shapes = match suspect {
+    let shapes = match &stand {
         Some(s) => {
             let now = Believed::new(s, runs, motions);
             super::draw_shapes(model, &d.steps, &d.final_fit, &now.runs(runs), &now.motions(), &remaining, &d.noise)
@@ -180,6 +182,11 @@ impl StandCheck<'_, '_, '_> {
                 Ok(false)
             }
         }
+    }
+
+    /// The stand as the check now believes it (the motion the climb is on).
+    pub(super) fn believed(&self) -> stand::Suspect {
+        self.suspect.clone()
     }
 
     /// The model or its analysis moved on from the last check's (an effect was added, or
@@ -291,7 +298,7 @@ fn first_look(
 }
 
 /// Diagnoses `model` on `runs` with the stand as a suspect, with the suspect at the end
-/// (None when the diagnosis fell back to the declared motion). A suspect carried from
+/// (None when the diagnosis fell back to the declared motion); [`finish`] completes it. A suspect carried from
 /// another diagnosis ([`stand::Suspect::carried_over`]) keeps its mounts and starts from
 /// its motion.
 pub(super) fn diagnose(
@@ -301,7 +308,7 @@ pub(super) fn diagnose(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
     has_temp: bool,
-) -> Result<(Diagnosis, Option<stand::Suspect>), EstimateError> {
+) -> Result<Concluded, EstimateError> {
     let total: usize = runs.iter().map(FitRun::len).sum();
     if !suspect.carried() && total > PRE_FROM {
         let copy = super::reduced::Reduced::new(runs, super::reduced::step_for(runs, PRE_SAMPLES), |_| false);
@@ -340,15 +347,15 @@ pub(super) fn diagnose(
         }
         let a = analyse(model, fit, &moved, &now.motions(), has_temp);
         let check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged };
-        if let Some(d) = conclude(a, model, &moved, &now.motions(), opts, has_temp, Some(check))? {
-            return Ok((d, Some(suspect)));
+        if let Some(c) = conclude(a, model, &moved, &now.motions(), opts, has_temp, Some(check))? {
+            return Ok(Concluded { stand: Some(suspect), ..c });
         }
     }
     // The stand kept explaining more (a residual no stand group removes, e.g. a unit outside
     // its profile's temperature range): the diagnosis of the declared motion, without the
     // stand as a suspect, is the honest answer.
     let a = analyse(model, refit(model, runs, opts)?, runs, motions, has_temp);
-    conclude(a, model, runs, motions, opts, has_temp, None)?.map(|d| (d, None)).ok_or_else(|| {
+    conclude(a, model, runs, motions, opts, has_temp, None)?.ok_or_else(|| {
         EstimateError::NotConverged(format!(
             "the stand kept explaining more after {MAX_STAND_FINDINGS} corrections; check the runs' labels"
         ))
