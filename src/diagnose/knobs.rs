@@ -5,7 +5,7 @@
 use crate::frames::Mount;
 use crate::frames::V3;
 use crate::model::{Predictor, State};
-use crate::motion::stand::{rotate_t, sincos_near, to_sensor, Angle, StandAt, StandMotion};
+use crate::motion::stand::{rotate_t, sincos_near, to_sensor, Angle, AnglePartials, StandAt, StandMotion};
 
 /// Motion parameters of a conic run: its own cone, rate (relative), phase and rate drift
 /// (relative per second), then the common tilt ×2, ripple ×4, wobble ×2, Earth ×3.
@@ -18,6 +18,9 @@ pub(super) const STEP: [f64; KNOBS] =
     [1e-6, 1e-6, 1e-6, 1e-7, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6, 1e-8, 1e-8, 1e-8];
 /// Samples per whitened block.
 pub(super) const BLOCK: usize = 256;
+/// Forward-difference steps of the stand's angle, rate and angular acceleration (rad,
+/// rad/s, rad/s²) for the knobs that move the angle ([`Shortcut::Angle`]).
+const ANGLE_STEP: [f64; 3] = [1e-6, 1e-6, 1e-6];
 
 /// A knob whose nudge moves one quantity of the state by a rotated constant vector: the
 /// base's up (a tilt: the specific force) or the Earth's rate (the rate), in stand axes.
@@ -33,6 +36,25 @@ enum Shortcut {
     /// The Earth's rate moved by this vector (the knob's step along an axis): the rate
     /// moves by Rᵀ of it.
     Earth([f64; 3]),
+    /// A knob of the angle's law (rate, phase, drift, ripple): the model's outputs move
+    /// through the angle, its rate and its angular acceleration alone, so its column is the
+    /// chain rule Σ ∂y/∂θ⁽ᵏ⁾ · ∂θ⁽ᵏ⁾/∂knob: three nudged states shared by every such knob
+    /// instead of one each, and the angle's exact partials ([`StandMotion::angle_partials`],
+    /// times the factor: the declared rate for the relative rate, else 1).
+    Angle(fn(&AnglePartials) -> Angle, f64),
+}
+
+/// The partial of the angle's law that knob `k` (one that moves the angle) moves.
+fn angle_partial(k: usize) -> fn(&AnglePartials) -> Angle {
+    match k {
+        1 => |p| p.rate,
+        2 => |p| p.phase,
+        3 => |p| p.drift,
+        6 => |p| p.ripple[0][0],
+        7 => |p| p.ripple[0][1],
+        8 => |p| p.ripple[1][0],
+        _ => |p| p.ripple[1][1],
+    }
 }
 
 /// How a local stand column moves the motion.
@@ -65,6 +87,15 @@ pub(super) struct Knobs<'m> {
     nudged: Vec<State>,
     /// Per local parameter: whether its nudge moved ω, ε and a in the block.
     moved: Vec<[bool; 3]>,
+    /// Whether a local parameter moves the angle; the states with the angle, its rate and
+    /// its angular acceleration nudged ([`ANGLE_STEP`]), whether each moved ω, ε and a in
+    /// the block, and per local parameter and sample its partials of the three.
+    through_angle: bool,
+    angle_nudged: Vec<State>,
+    angle_moved: [[bool; 3]; 3],
+    partials: Vec<[f64; 3]>,
+    /// Scratch: the outputs' forward differences along the three, per unit.
+    slopes: Vec<[f64; 3]>,
     /// Scratch: outputs at the base and nudged states, and a regressor block.
     out0: Vec<[f64; 3]>,
     out1: Vec<[f64; 3]>,
@@ -100,7 +131,7 @@ impl<'m> Knobs<'m> {
                 .collect();
             (now.fixed(g_m_s2), nudged, mount)
         });
-        let short = dirs
+        let short: Vec<Shortcut> = dirs
             .iter()
             .enumerate()
             .map(|(j, &(d, h))| match (d, &stand) {
@@ -110,11 +141,20 @@ impl<'m> Knobs<'m> {
                     v[kn - 12] = h;
                     Shortcut::Earth(v)
                 }
+                (Dir::Knob(kn), Some(_)) if moves_angle(kn) => {
+                    Shortcut::Angle(angle_partial(kn), if kn == 1 { conic.map_or(1.0, |c| c.0) } else { 1.0 })
+                }
                 _ => Shortcut::None,
             })
             .collect();
         let nl = dirs.len();
+        let through_angle = short.iter().any(|s| matches!(s, Shortcut::Angle(..)));
         Self {
+            through_angle,
+            angle_nudged: vec![State::default(); if through_angle { 3 * BLOCK } else { 0 }],
+            angle_moved: [[true; 3]; 3],
+            partials: vec![[0.0; 3]; if through_angle { nl * BLOCK } else { 0 }],
+            slopes: vec![[0.0; 3]; if through_angle { 3 * BLOCK } else { 0 }],
             short,
             g_m_s2,
             reads: [0, 1].map(|si| predict[si].reads()),
@@ -145,9 +185,41 @@ impl<'m> Knobs<'m> {
         // A shortcut's vector as the whole kinematics turns it: to the body (then scaled, then
         // to the sensor), from the stand angle's and cone angle's sines and cosines.
         let body = |(s, c): (f64, f64), (_, sa, ca): (f64, f64, f64), v: [f64; 3]| rotate_t([s, c], [sa, ca], v);
+        let partials = match (&self.stand, &at) {
+            (Some((now, _, mount)), Some((an0, sc0, cone0))) if self.through_angle => {
+                // The believed motion with its angle, rate and angular acceleration nudged in
+                // turn; the angle's step exactly (its sine by angle addition).
+                let (sh, ch) = libm::sincos(ANGLE_STEP[0]);
+                for (d, h) in ANGLE_STEP.iter().enumerate() {
+                    let (mut an, mut sc) = (*an0, *sc0);
+                    match d {
+                        0 => sc = (sc0.0 * ch + sc0.1 * sh, sc0.1 * ch - sc0.0 * sh),
+                        1 => an.rate += h,
+                        _ => an.accel += h,
+                    }
+                    let x = to_sensor(now.at_angle_trig(an, sc, Some(*cone0)), mount);
+                    let s1 = &mut self.angle_nudged[d * BLOCK + i];
+                    *s1 = *st;
+                    s1.w = x.w_rad_s.xyz;
+                    s1.e = x.e_rad_s2.xyz;
+                    s1.a = x.a_m_s2.xyz;
+                }
+                // A logged angle moves with the phase alone (the encoder's offset).
+                Some(match logged {
+                    Some(_) => AnglePartials::logged(),
+                    None => now.motion.angle_partials(t_s),
+                })
+            }
+            _ => None,
+        };
         for (j, &(dir, h)) in self.dirs.iter().enumerate() {
             let mut s1 = *st;
             match (dir, self.short[j], &self.stand, &at) {
+                (_, Shortcut::Angle(of, factor), ..) => {
+                    let a = partials.as_ref().map_or(Angle { theta: 0.0, rate: 0.0, accel: 0.0 }, of);
+                    self.partials[j * BLOCK + i] = [a.theta * factor, a.rate * factor, a.accel * factor];
+                    continue;
+                }
                 (_, Shortcut::Up(up), Some((_, _, mount)), Some((_, sc0, cone0))) => {
                     let g = self.g_m_s2;
                     s1.a = mount.to_sensor(V3::new(body(*sc0, *cone0, up).map(|x| g * x))).xyz;
@@ -209,19 +281,59 @@ impl<'m> Knobs<'m> {
         // the base states there, so its columns are exactly zero without evaluating it.
         let base = &self.base[..len];
         for (j, m) in self.moved.iter_mut().enumerate() {
+            if let Shortcut::Angle(..) = self.short[j] {
+                continue;
+            }
             let nudged = &self.nudged[j * BLOCK..][..len];
             let differs = |f: fn(&State) -> [f64; 3]| {
                 nudged.iter().zip(base).any(|(x, y)| f(x).iter().zip(&f(y)).any(|(a, b)| a.to_bits() != b.to_bits()))
             };
             *m = [differs(|s| s.w), differs(|s| s.e), differs(|s| s.a)];
         }
+        if self.through_angle {
+            for (d, m) in self.angle_moved.iter_mut().enumerate() {
+                let nudged = &self.angle_nudged[d * BLOCK..][..len];
+                let differs = |f: fn(&State) -> [f64; 3]| {
+                    nudged
+                        .iter()
+                        .zip(base)
+                        .any(|(x, y)| f(x).iter().zip(&f(y)).any(|(a, b)| a.to_bits() != b.to_bits()))
+                };
+                *m = [differs(|s| s.w), differs(|s| s.e), differs(|s| s.a)];
+            }
+        }
         for (si, p) in self.predict.iter().enumerate() {
             let reads = self.reads[si];
+            let felt = |[w, e, a]: [bool; 3]| (w && reads.rate) || (e && reads.ang_accel) || (a && reads.force);
             p.block(base, &mut self.out0, &mut self.tmp);
+            if self.through_angle {
+                for (d, h) in ANGLE_STEP.iter().enumerate() {
+                    let slopes = &mut self.slopes[d * BLOCK..][..len];
+                    if !felt(self.angle_moved[d]) {
+                        slopes.fill([0.0; 3]);
+                        continue;
+                    }
+                    p.block(&self.angle_nudged[d * BLOCK..][..len], &mut self.out1, &mut self.tmp);
+                    let inv_h = 1.0 / h;
+                    for (i, sl) in slopes.iter_mut().enumerate() {
+                        *sl = std::array::from_fn(|ch| (self.out1[i][ch] - self.out0[i][ch]) * inv_h);
+                    }
+                }
+            }
             for (j, &(_, h)) in self.dirs.iter().enumerate() {
-                let [w, e, a] = self.moved[j];
-                let felt = (w && reads.rate) || (e && reads.ang_accel) || (a && reads.force);
-                if !felt {
+                if let Shortcut::Angle(..) = self.short[j] {
+                    let partials = &self.partials[j * BLOCK..][..len];
+                    for ch in 0..3 {
+                        let col = &mut dcol[(j * 6 + 3 * si + ch) * BLOCK..][..len];
+                        for (i, (d, q)) in col.iter_mut().zip(partials).enumerate() {
+                            *d = self.slopes[i][ch] * q[0]
+                                + self.slopes[BLOCK + i][ch] * q[1]
+                                + self.slopes[2 * BLOCK + i][ch] * q[2];
+                        }
+                    }
+                    continue;
+                }
+                if !felt(self.moved[j]) {
                     for ch in 0..3 {
                         dcol[(j * 6 + 3 * si + ch) * BLOCK..][..len].fill(0.0);
                     }

@@ -60,6 +60,31 @@ pub struct Angle {
     pub accel: f64,
 }
 
+/// How the stand's angle moves with the parameters of its law
+/// ([`StandMotion::angle_partials`]): each field the change of θ, θ̇ and θ̈ per unit change
+/// of one parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AnglePartials {
+    /// Per rad/s of the rate.
+    pub rate: Angle,
+    /// Per rad of the phase.
+    pub phase: Angle,
+    /// Per 1/s of the rate's drift.
+    pub drift: Angle,
+    /// Per rad of each ripple coefficient, `[harmonic − 1][cos, sin]` as in
+    /// [`StandMotion::ripple_rad`].
+    pub ripple: [[Angle; 2]; 2],
+}
+
+impl AnglePartials {
+    /// The partials of a logged angle ([`StandMotion::angle_or_logged`]): it moves with
+    /// the phase alone (the encoder's offset), one for one.
+    pub fn logged() -> Self {
+        let zero = Angle { theta: 0.0, rate: 0.0, accel: 0.0 };
+        Self { rate: zero, phase: Angle { theta: 1.0, ..zero }, drift: zero, ripple: [[zero; 2]; 2] }
+    }
+}
+
 impl StandMotion {
     /// The ideal stand of a conic run (paper eq. 1): every imperfection zero.
     pub fn ideal(cone_angle_rad: f64, rate_rad_s: f64, phase_rad: f64) -> Self {
@@ -91,6 +116,54 @@ impl StandMotion {
             d2 += h * h * (-c * cs - s * sn);
         }
         Angle { theta, rate: w0 * d1, accel: w0 * w0 * d2 + e0 * d1 }
+    }
+
+    /// How the angle at `t_s` ([`Self::angle`]) moves with each parameter of its law: per
+    /// unit change of the rate (rad/s), the phase (rad), the drift (1/s) and each ripple
+    /// coefficient (rad), the change of θ, θ̇ and θ̈. Exact, not a difference: with
+    /// θ = θ₀ + R(θ₀), θ̇ = θ̇₀ θ′ and θ̈ = θ̇₀² θ″ + θ̈₀ θ′ (θ′ = 1 + R′, θ″ = R″), a parameter
+    /// moving θ₀, θ̇₀, θ̈₀ by δθ₀, δθ̇₀, δθ̈₀ and the ripple R directly by δR moves
+    /// θ by θ′ δθ₀ + δR, θ̇ by δθ̇₀ θ′ + θ̇₀ (R″ δθ₀ + δR′) and θ̈ by
+    /// 2 θ̇₀ δθ̇₀ θ″ + θ̇₀² (R‴ δθ₀ + δR″) + δθ̈₀ θ′ + θ̈₀ (R″ δθ₀ + δR′).
+    pub fn angle_partials(&self, t_s: f64) -> AnglePartials {
+        let w = self.rate_rad_s;
+        let d = self.rate_drift_per_s;
+        let tau = t_s - self.drift_from_s;
+        let (th0, w0, e0) = if d == 0.0 {
+            (w * t_s + self.phase_rad, w, 0.0)
+        } else {
+            (w * (t_s + 0.5 * d * tau * tau) + self.phase_rad, w * (1.0 + d * tau), w * d)
+        };
+        let (s1, c1) = libm::sincos(th0);
+        // sin and cos of hθ₀ for h = 1, 2 (the double angle).
+        let harm = [(s1, c1), (2.0 * s1 * c1, c1 * c1 - s1 * s1)];
+        let (mut r1, mut r2, mut r3) = (0.0, 0.0, 0.0);
+        for (h, [c, s]) in self.ripple_rad.iter().enumerate() {
+            let (sn, cs) = harm[h];
+            let h = (h + 1) as f64;
+            r1 += h * (-c * sn + s * cs);
+            r2 += h * h * (-c * cs - s * sn);
+            r3 += h * h * h * (c * sn - s * cs);
+        }
+        let d1 = 1.0 + r1;
+        // (δθ₀, δθ̇₀, δθ̈₀) and (δR, δR′, δR″) to the change of the angle.
+        let moved = |[t0, w0d, e0d]: [f64; 3], [r, rd, rdd]: [f64; 3]| Angle {
+            theta: d1 * t0 + r,
+            rate: w0d * d1 + w0 * (r2 * t0 + rd),
+            accel: 2.0 * w0 * w0d * r2 + w0 * w0 * (r3 * t0 + rdd) + e0d * d1 + e0 * (r2 * t0 + rd),
+        };
+        let none = [0.0; 3];
+        let ripple = |h: usize| {
+            let (sn, cs) = harm[h];
+            let k = (h + 1) as f64;
+            [moved(none, [cs, -k * sn, -k * k * cs]), moved(none, [sn, k * cs, -k * k * sn])]
+        };
+        AnglePartials {
+            rate: moved([t_s + 0.5 * d * tau * tau, 1.0 + d * tau, d], none),
+            phase: moved([1.0, 0.0, 0.0], none),
+            drift: moved([0.5 * w * tau * tau, w * tau, w], none),
+            ripple: [ripple(0), ripple(1)],
+        }
     }
 
     /// The stand's angle at `t_s`, or, for a stand that logs it, the `logged` angle offset
@@ -391,6 +464,49 @@ mod tests {
         let rz = |a: f64| *Rotation3::from_axis_angle(&Vector3::z_axis(), a).matrix();
         let ry = |a: f64| *Rotation3::from_axis_angle(&Vector3::y_axis(), a).matrix();
         rz(-theta) * ry(alpha) * rz(theta)
+    }
+
+    #[test]
+    fn the_angles_partials_are_its_central_differences() {
+        let s = StandMotion {
+            rate_rad_s: -0.7,
+            phase_rad: 0.3,
+            ripple_rad: [[0.02, -0.01], [0.005, 0.01]],
+            rate_drift_per_s: -3e-3,
+            drift_from_s: 1.5,
+            ..StandMotion::default()
+        };
+        // Each parameter by name, with the partial that claims to be its derivative.
+        type Knob = (&'static str, fn(&mut StandMotion) -> &mut f64, fn(&AnglePartials) -> Angle);
+        let knobs: [Knob; 7] = [
+            ("rate", |m| &mut m.rate_rad_s, |p| p.rate),
+            ("phase", |m| &mut m.phase_rad, |p| p.phase),
+            ("drift", |m| &mut m.rate_drift_per_s, |p| p.drift),
+            ("c1", |m| &mut m.ripple_rad[0][0], |p| p.ripple[0][0]),
+            ("s1", |m| &mut m.ripple_rad[0][1], |p| p.ripple[0][1]),
+            ("c2", |m| &mut m.ripple_rad[1][0], |p| p.ripple[1][0]),
+            ("s2", |m| &mut m.ripple_rad[1][1], |p| p.ripple[1][1]),
+        ];
+        for base in [s, StandMotion { ripple_rad: [[0.0; 2]; 2], rate_drift_per_s: 0.0, ..s }] {
+            for k in 0..12 {
+                let t = 0.83 * k as f64 + 0.1;
+                let p = base.angle_partials(t);
+                for (name, field, partial) in knobs {
+                    let h = 1e-6;
+                    let at = |d: f64| {
+                        let mut m = base;
+                        *field(&mut m) += d;
+                        m.angle(t)
+                    };
+                    let (hi, lo) = (at(h), at(-h));
+                    let num = [hi.theta - lo.theta, hi.rate - lo.rate, hi.accel - lo.accel].map(|x| x / (2.0 * h));
+                    let a = partial(&p);
+                    for (x, y) in num.iter().zip([a.theta, a.rate, a.accel]) {
+                        assert!((x - y).abs() < 1e-6 * (1.0 + y.abs()), "{name} at t {t}: {num:?} against {a:?}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]
