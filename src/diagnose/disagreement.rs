@@ -24,6 +24,10 @@ pub struct Disagreement {
     pub z: f64,
 }
 
+/// Samples of a run, about, that the first fit of its disagreements (what the run cannot
+/// identify) is made on.
+const QUICK_SAMPLES: usize = 8192;
+
 /// |z| above which a single-run estimate disagrees (many comparisons are made).
 pub const DISAGREEMENT_Z: f64 = 6.0;
 
@@ -48,14 +52,15 @@ fn run_disagreements(model: &Model, all: &Fit, run: &FitRun<'_>, opts: &FitOptio
     let quick = FitOptions { slow_noise: false, ..*opts };
     let session_slow = std::array::from_fn(|c| all.slow_noise(c));
     let opts = &FitOptions { slow_noise_held: Some(session_slow), ..*opts };
-    let Ok(first) = refit(model, one, &quick) else { return Vec::new() };
+    // What a run identifies is a property of its motion, which every k-th sample holds as
+    // well (the stand's motion is slow against the sampling): the first fit on those.
+    let reduced = super::reduced::Reduced::new(one, super::reduced::step_for(one, QUICK_SAMPLES), |_| false);
+    let Ok(first) = refit(model, &reduced.runs(one), &quick) else { return Vec::new() };
     let held: Vec<&String> =
         first.gyro.unidentifiable.iter().chain(&first.accel.unidentifiable).map(|c| &c.held).collect();
-    // With nothing the run cannot identify and no slow noise to measure, the first fit is
-    // the one to compare.
-    let f = if held.is_empty() && !opts.slow_noise {
-        first
-    } else {
+    // The fit compared is on every sample; what the run cannot identify is held at the
+    // all-run values.
+    let f = {
         let mut m = model.clone();
         for name in held {
             if let Some(v) = all.get(name).map(|c| c.value) {
