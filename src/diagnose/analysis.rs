@@ -52,12 +52,26 @@ pub(super) fn analyse(
     motions: &RunMotions<'_>,
     has_temp: bool,
 ) -> Analysis {
+    analyse_from(model, base_fit, runs, motions, has_temp, None)
+}
+
+/// [`analyse`], with the noise side already drawn (`stage`: [`NoiseStage::new`] of the same
+/// model, fit, runs and motions) or drawn here (None).
+pub(super) fn analyse_from(
+    model: &Model,
+    base_fit: Fit,
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    has_temp: bool,
+    stage: Option<NoiseStage>,
+) -> Analysis {
     // A user effect's linear part at the parameters the fit estimated (a knee at its fitted
     // rate): the residual and the Grams are then those of the fitted model.
     let bound = crate::estimate::bound_at_fit(model, &base_fit);
     let model = &bound;
     let universe = space::Universe::new(model, &base_fit, has_temp);
-    let NoiseStage { stats, pooled, slow, span_s } = NoiseStage::new(model, &base_fit, runs, motions);
+    let NoiseStage { stats, pooled, slow, span_s } =
+        stage.unwrap_or_else(|| NoiseStage::new(model, &base_fit, runs, motions));
     let gram_of = |i: usize, st| {
         let r = picture::run_residual(model, &base_fit, &runs[i]).0;
         space::run_gram(&universe, model, &base_fit, &runs[i], st, &pooled, &r, (slow.as_slice(), span_s))

@@ -3,6 +3,7 @@
 //! residual better than any sensor effect, the motion is corrected and the diagnosis
 //! starts again on it.
 
+use super::analysis::NoiseStage;
 use super::select::Space;
 use super::{analyse, conclude, refit, stand, Analysis, ChannelReport, Concluded, Diagnosis, RunMotions, Step};
 use crate::estimate::{EstimateError, Fit, FitOptions, FitRun};
@@ -105,15 +106,21 @@ fn noise_models(a: &Analysis) -> Vec<stand::RunNoiseModel> {
 }
 
 /// [`noise_models`] of the analysis of `model` fitted as `fit` on `runs`, without its Grams
-/// (the noise side only, [`super::analysis::NoiseStage`]): the same numbers, for judging carried stand
-/// groups before the whole analysis is drawn.
-fn noise_alone(model: &Model, fit: &Fit, runs: &[FitRun<'_>], motions: &[&MotionSpec]) -> Vec<stand::RunNoiseModel> {
+/// (the noise side only, [`NoiseStage`]): the same numbers, for judging carried stand groups
+/// before the whole analysis is drawn, with the stage (the analysis then starts from it).
+fn noise_alone(
+    model: &Model,
+    fit: &Fit,
+    runs: &[FitRun<'_>],
+    motions: &[&MotionSpec],
+) -> (Vec<stand::RunNoiseModel>, NoiseStage) {
     let bound = crate::estimate::bound_at_fit(model, fit);
-    let stage = super::analysis::NoiseStage::new(&bound, fit, runs, motions);
+    let stage = NoiseStage::new(&bound, fit, runs, motions);
     let noises: Vec<Vec<super::space::RunNoise>> =
         stage.stats.iter().map(|s| super::space::run_noises(s, &stage.pooled)).collect();
     let dispersion = dispersion(fit, |c| super::analysis::floor_sigma(noises.iter().map(Vec::as_slice), c));
-    runs.iter()
+    let models = runs
+        .iter()
         .zip(&stage.stats)
         .zip(noises)
         .map(|((run, st), noise)| stand::RunNoiseModel {
@@ -122,7 +129,8 @@ fn noise_alone(model: &Model, fit: &Fit, runs: &[FitRun<'_>], motions: &[&Motion
             slow: super::space::run_slow(run, st, (&stage.slow, stage.span_s)),
             dispersion,
         })
-        .collect()
+        .collect();
+    (models, stage)
 }
 
 /// Each channel's dispersion: the fit's residual mean square over the noise floor
@@ -336,16 +344,16 @@ pub(super) fn diagnose(
         // Carried groups are judged again before the analysis is drawn: one that no longer
         // passes goes back to its labels, and the analysis is drawn on the motion without
         // it. The first check judges the groups kept again, on the same numbers.
-        let mut judged = None;
+        let (mut judged, mut stage) = (None, None);
         if suspect.carries_groups() {
-            let noise = noise_alone(model, &fit, &moved, &now.motions());
+            let (noise, drawn) = noise_alone(model, &fit, &moved, &now.motions());
             let sys = suspect.accepted_systems(model, &fit, &moved, &noise);
             if suspect.judge_carried(&sys) {
                 continue;
             }
-            judged = Some(sys);
+            (judged, stage) = (Some(sys), Some(drawn));
         }
-        let a = analyse(model, fit, &moved, &now.motions(), has_temp);
+        let a = super::analysis::analyse_from(model, fit, &moved, &now.motions(), has_temp, stage);
         let check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged };
         if let Some(c) = conclude(a, model, &moved, &now.motions(), opts, has_temp, Some(check))? {
             return Ok(Concluded { stand: Some(suspect), ..c });
