@@ -1,6 +1,8 @@
 //! The stand's columns of one run ([`super::stand`]): the change of the fitted model's
 //! outputs per unit change of each local stand parameter, a forward difference of the true
-//! inputs pushed through the model, a block of samples at a time.
+//! inputs pushed through the model, a block of samples at a time. The knobs of the angle's
+//! law share three such differences (in the angle, its rate and its angular acceleration)
+//! through the chain rule ([`Shortcut::Angle`]).
 
 use crate::frames::Mount;
 use crate::frames::V3;
@@ -281,25 +283,13 @@ impl<'m> Knobs<'m> {
         // the base states there, so its columns are exactly zero without evaluating it.
         let base = &self.base[..len];
         for (j, m) in self.moved.iter_mut().enumerate() {
-            if let Shortcut::Angle(..) = self.short[j] {
-                continue;
+            if !matches!(self.short[j], Shortcut::Angle(..)) {
+                *m = moved(&self.nudged[j * BLOCK..][..len], base);
             }
-            let nudged = &self.nudged[j * BLOCK..][..len];
-            let differs = |f: fn(&State) -> [f64; 3]| {
-                nudged.iter().zip(base).any(|(x, y)| f(x).iter().zip(&f(y)).any(|(a, b)| a.to_bits() != b.to_bits()))
-            };
-            *m = [differs(|s| s.w), differs(|s| s.e), differs(|s| s.a)];
         }
         if self.through_angle {
             for (d, m) in self.angle_moved.iter_mut().enumerate() {
-                let nudged = &self.angle_nudged[d * BLOCK..][..len];
-                let differs = |f: fn(&State) -> [f64; 3]| {
-                    nudged
-                        .iter()
-                        .zip(base)
-                        .any(|(x, y)| f(x).iter().zip(&f(y)).any(|(a, b)| a.to_bits() != b.to_bits()))
-                };
-                *m = [differs(|s| s.w), differs(|s| s.e), differs(|s| s.a)];
+                *m = moved(&self.angle_nudged[d * BLOCK..][..len], base);
             }
         }
         for (si, p) in self.predict.iter().enumerate() {
@@ -350,6 +340,14 @@ impl<'m> Knobs<'m> {
             }
         }
     }
+}
+
+/// Whether the `nudged` states differ from the `base` ones in ω, ε and a.
+fn moved(nudged: &[State], base: &[State]) -> [bool; 3] {
+    let differs = |f: fn(&State) -> [f64; 3]| {
+        nudged.iter().zip(base).any(|(x, y)| f(x).iter().zip(&f(y)).any(|(a, b)| a.to_bits() != b.to_bits()))
+    };
+    [differs(|s| s.w), differs(|s| s.e), differs(|s| s.a)]
 }
 
 /// Whether knob `k` moves the stand's angle (rate, phase, drift, ripple).
