@@ -38,13 +38,13 @@
 //!
 //! Otherwise the first diagnosis stands. Both are the one diagnosis ([`super::diagnose`]);
 //! this module only chooses, and the one it keeps is finished: its per-run disagreements
-//! and the shapes of what no effect explains ([`super::with_stand::finish`]). The second starts from the motion the first corrected (its
-//! stand suspect carried over): the slow noise is measured on the residual, and a base
-//! tilt's once per revolution on runs of a few revolutions is as slow as a wander, so on
-//! the declared motion it would take in the stand's error and let sensor effects explain
-//! the rest. The carried groups are judged again under the slow noise (a Wald test of their
-//! departure from the labels, [`super::stand::Suspect::rejudge`]); one that no longer
-//! passes goes back to its labels.
+//! and the shapes of what no effect explains ([`super::with_stand::finish`]). The second
+//! starts from the motion the first corrected (its stand suspect carried over): the slow
+//! noise is measured on the residual, and a base tilt's once per revolution on runs of a
+//! few revolutions is as slow as a wander, so on the declared motion it would take in the
+//! stand's error and let sensor effects explain the rest. The carried groups are judged
+//! again under the slow noise (a Wald test of their departure from the labels,
+//! [`super::stand::Suspect::rejudge`]); one that no longer passes goes back to its labels.
 
 use super::with_stand::finish;
 use super::{channel_of, diagnose, diagnose_from, Candidate, Concluded, Diagnosis, Verdict};

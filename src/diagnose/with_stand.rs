@@ -306,9 +306,9 @@ fn first_look(
 }
 
 /// Diagnoses `model` on `runs` with the stand as a suspect, with the suspect at the end
-/// (None when the diagnosis fell back to the declared motion); [`finish`] completes it. A suspect carried from
-/// another diagnosis ([`stand::Suspect::carried_over`]) keeps its mounts and starts from
-/// its motion.
+/// (None when the diagnosis fell back to the declared motion); [`finish`] completes it.
+/// A suspect carried from another diagnosis ([`stand::Suspect::carried_over`]) keeps its
+/// mounts and starts from its motion.
 pub(super) fn diagnose(
     mut suspect: stand::Suspect,
     model: &Model,
