@@ -333,6 +333,21 @@ pub(super) fn diagnose(
             suspect.set_mount(i, mount, finding);
         }
     }
+    // Carried groups are first judged again on the first look's every k-th sample: one
+    // that fails there goes back to its labels before any work on every sample is done
+    // for it (the survivors are judged again there).
+    if suspect.carries_groups() && total > PRE_FROM {
+        let copy = super::reduced::Reduced::new(runs, super::reduced::step_for(runs, PRE_SAMPLES), |_| false);
+        let reduced = copy.runs(runs);
+        let now = Believed::new(&suspect, &reduced, motions);
+        let moved = now.runs(&reduced);
+        let fit = refit(model, &moved, opts)?;
+        let (noise, _) = noise_alone(model, &fit, &moved, &now.motions());
+        let sys = suspect.accepted_systems(model, &fit, &moved, &noise);
+        if suspect.judge_carried(&sys) {
+            suspect = suspect.carried_over();
+        }
+    }
     for _ in 0..=MAX_STAND_FINDINGS {
         let now = Believed::new(&suspect, runs, motions);
         let moved = now.runs(runs);
