@@ -7,7 +7,7 @@
 use crate::frames::Mount;
 use crate::frames::V3;
 use crate::model::{Predictor, State};
-use crate::motion::stand::{rotate_t, sincos_near, to_sensor, Angle, AnglePartials, StandAt, StandMotion};
+use crate::motion::stand::{rotate_t, sincos_near, to_sensor, Angle, AnglePartials, NearTrig, StandAt, StandMotion};
 
 /// Motion parameters of a conic run: its own cone, rate (relative), phase and rate drift
 /// (relative per second), then the common tilt ×2, ripple ×4, wobble ×2, Earth ×3.
@@ -93,6 +93,10 @@ pub(super) struct Knobs<'m> {
     /// its angular acceleration nudged ([`ANGLE_STEP`]), whether each moved ω, ε and a in
     /// the block, and per local parameter and sample its partials of the three.
     through_angle: bool,
+    /// The believed stand angle's sines, sample after sample.
+    trig: NearTrig,
+    /// The sine and cosine of the angle's step.
+    angle_step_trig: (f64, f64),
     angle_nudged: Vec<State>,
     angle_moved: [[bool; 3]; 3],
     partials: Vec<[f64; 3]>,
@@ -153,6 +157,8 @@ impl<'m> Knobs<'m> {
         let through_angle = short.iter().any(|s| matches!(s, Shortcut::Angle(..)));
         Self {
             through_angle,
+            angle_step_trig: libm::sincos(ANGLE_STEP[0]),
+            trig: NearTrig::default(),
             angle_nudged: vec![State::default(); if through_angle { 3 * BLOCK } else { 0 }],
             angle_moved: [[true; 3]; 3],
             partials: vec![[0.0; 3]; if through_angle { nl * BLOCK } else { 0 }],
@@ -181,7 +187,7 @@ impl<'m> Knobs<'m> {
         self.base[i] = *st;
         let at = self.stand.as_ref().map(|(now, ..)| {
             let an = now.motion.angle_or_logged(t_s, logged);
-            let sc = libm::sincos(an.theta);
+            let sc = self.trig.of(an.theta);
             (an, sc, now.cone_trig(sc))
         });
         // A shortcut's vector as the whole kinematics turns it: to the body (then scaled, then
@@ -191,7 +197,7 @@ impl<'m> Knobs<'m> {
             (Some((now, _, mount)), Some((an0, sc0, cone0))) if self.through_angle => {
                 // The believed motion with its angle, rate and angular acceleration nudged in
                 // turn; the angle's step exactly (its sine by angle addition).
-                let (sh, ch) = libm::sincos(ANGLE_STEP[0]);
+                let (sh, ch) = self.angle_step_trig;
                 for (d, h) in ANGLE_STEP.iter().enumerate() {
                     let (mut an, mut sc) = (*an0, *sc0);
                     match d {

@@ -115,7 +115,7 @@ pub fn visit_residual(
         ks.extend((next..n).step_by(stride).take(BLOCK));
         next = ks.last().map_or(n, |k| k + stride);
         base.clear();
-        base.extend(ks.iter().map(|&k| run.state(k)));
+        run.states_into(ks.iter().copied(), &mut base);
         for si in 0..2 {
             run.seen_states_at(&how[si], &base, &ks, &mut states[si]);
             predict[si].block(&states[si], &mut u[si], &mut tmp);

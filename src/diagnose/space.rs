@@ -755,7 +755,7 @@ fn channel_grams(
         let k1 = (k0 + BLOCK).min(n);
         let len = k1 - k0;
         states.clear();
-        states.extend((k0..k1).map(|k| run.state(k)));
+        run.states_into(k0..k1, &mut states);
         if !u.nonlinear.is_empty() {
             secants.fill(&predict, run, k0, &states, &mut secant_block);
         }

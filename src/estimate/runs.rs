@@ -93,8 +93,21 @@ impl<'a> FitRun<'a> {
     /// change from the track, 0 at a declared constant temperature).
     #[inline]
     pub fn state(&self, k: usize) -> State {
+        self.state_of(k, self.track.at(k))
+    }
+
+    /// The states of samples `ks` (in increasing order, best consecutive) appended to
+    /// `out`: [`Self::state`]'s numbers (to a unit in the last place of the stand angle's
+    /// sine), its kinematics walked along the track ([`crate::motion::Walk`]).
+    pub fn states_into(&self, ks: impl IntoIterator<Item = usize>, out: &mut Vec<State>) {
+        let mut walk = self.track.walk();
+        out.extend(ks.into_iter().map(|k| self.state_of(k, walk.at(k))));
+    }
+
+    /// The state at sample `k` whose kinematics are `s`.
+    #[inline(always)]
+    fn state_of(&self, k: usize, s: crate::motion::SensorKinematics) -> State {
         let tr = self.track;
-        let s = tr.at(k);
         State {
             t_session_s: session_time(self.start_s, tr.t_s[k], tr.t_s[0]),
             w: s.w_rad_s.xyz,
@@ -134,8 +147,7 @@ impl<'a> FitRun<'a> {
             SeenFrom::Same => out.extend_from_slice(base),
             SeenFrom::Maps(maps) => out.extend(base.iter().map(|s| mapped_state(s, maps))),
             SeenFrom::Other(t) => {
-                let r = FitRun { track: t, ..*self };
-                out.extend((k0..k0 + base.len()).map(|k| r.state(k)));
+                FitRun { track: t, ..*self }.states_into(k0..k0 + base.len(), out);
             }
         }
     }
@@ -146,8 +158,7 @@ impl<'a> FitRun<'a> {
         match how {
             SeenFrom::Other(t) => {
                 out.clear();
-                let r = FitRun { track: t, ..*self };
-                out.extend(ks.iter().map(|&k| r.state(k)));
+                FitRun { track: t, ..*self }.states_into(ks.iter().copied(), out);
             }
             // The seen states follow from the run's own, whatever their samples.
             _ => self.seen_states(how, base, 0, out),
@@ -249,12 +260,15 @@ mod tests {
             let how = run.seen_from(seen);
             let direct = FitRun { track: seen.unwrap_or(&track), ..run };
             let (k0, k1) = (256, 512);
-            let base: Vec<State> = (k0..k1).map(|k| run.state(k)).collect();
+            let mut base = Vec::new();
+            run.states_into(k0..k1, &mut base);
             let mut out = Vec::new();
             run.seen_states(&how, &base, k0, &mut out);
             assert_eq!(out.len(), k1 - k0);
+            let mut walked = Vec::new();
+            direct.states_into(k0..k1, &mut walked);
             for (i, k) in (k0..k1).enumerate() {
-                let want = direct.state(k);
+                let want = walked[i];
                 assert!(out[i].w.iter().zip(&want.w).all(|(a, b)| a.to_bits() == b.to_bits()), "sample {k}");
                 assert!(out[i].e.iter().zip(&want.e).all(|(a, b)| a.to_bits() == b.to_bits()), "sample {k}");
                 assert!(out[i].a.iter().zip(&want.a).all(|(a, b)| a.to_bits() == b.to_bits()), "sample {k}");
@@ -263,5 +277,46 @@ mod tests {
         }
         assert!(matches!(run.seen_from(Some(&mapped)), SeenFrom::Maps(m) if m.len() == 1));
         assert!(matches!(run.seen_from(Some(&delayed)), SeenFrom::Other(_)));
+    }
+
+    #[test]
+    fn walked_states_are_each_samples_own_to_rounding() {
+        let n = 3000;
+        let rec = Recording {
+            t_s: (0..n).map(|k| k as f64 * 5e-4 + 1e-6 * ((k * 7919) % 13) as f64).collect(),
+            gyro: vec![[0.0; 3]; n].into(),
+            accel: vec![[0.0; 3]; n].into(),
+            ..Default::default()
+        };
+        let motion = MotionSpec::Conic { cone_angle_deg: 15.0, rate_deg_s: -300.0, phase_deg: 5.0 };
+        let mount = crate::frames::Mount::identity();
+        let conic = crate::motion::track_for(&motion, &mount, &rec, 9.81, &DerivativeConfig::default());
+        let stand = crate::motion::stand::StandMotion {
+            tilt_rad: [0.003, -0.002],
+            wobble_rad: [0.001, 0.0005],
+            ripple_rad: [[0.01, 0.0], [0.0, 0.003]],
+            ..crate::motion::stand::StandMotion::ideal(0.26, -5.2, 0.09)
+        };
+        let stood = conic.on_stand(stand, 9.81, mount.clone());
+        for track in [&conic, &stood] {
+            let run = FitRun {
+                name: "r",
+                track,
+                gyro: &rec.gyro,
+                accel: &rec.accel,
+                temp_c: None,
+                temp_const_c: None,
+                start_s: None,
+            };
+            let mut walked = Vec::new();
+            run.states_into(0..n, &mut walked);
+            for (k, got) in walked.iter().enumerate() {
+                let want = run.state(k);
+                for (g, w) in [(got.w, want.w), (got.e, want.e), (got.a, want.a)] {
+                    let scale = w.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
+                    assert!(g.iter().zip(&w).all(|(a, b)| (a - b).abs() <= 4e-15 * scale), "sample {k}: {g:?} {w:?}");
+                }
+            }
+        }
     }
 }

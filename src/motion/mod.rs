@@ -14,7 +14,7 @@ mod track;
 
 use crate::frames::{Stand, V3};
 pub use derivative::{derivative_offline, DerivativeConfig, SlopeWeights};
-pub use track::{interpolate, track, track_for, SampleMap, SensorKinematics, Track};
+pub use track::{interpolate, track, track_for, SampleMap, SensorKinematics, Track, Walk};
 
 use crate::session::MotionSpec;
 
@@ -103,8 +103,19 @@ impl ConicAt {
     /// Kinematics at time t (paper eq. 1; eq. 2 with the spec's sign).
     #[inline]
     pub fn at(&self, t_s: f64) -> Kinematics {
+        self.at_trig(libm::sincos(self.conic.theta(t_s)))
+    }
+
+    /// Cone phase θ at time t, rad.
+    #[inline]
+    pub fn theta(&self, t_s: f64) -> f64 {
+        self.conic.theta(t_s)
+    }
+
+    /// [`Self::at`] with sin θ and cos θ given.
+    #[inline]
+    pub fn at_trig(&self, (st, ct): (f64, f64)) -> Kinematics {
         let (sa, ca, g_m_s2) = (self.sa, self.ca, self.g_m_s2);
-        let (st, ct) = libm::sincos(self.conic.theta(t_s));
         let ws = self.conic.rate_rad_s;
         Kinematics {
             w_rad_s: V3::new([ws * sa * ct, -ws * sa * st, ws * (1.0 - ca)]),

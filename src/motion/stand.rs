@@ -224,6 +224,39 @@ pub struct StandAt {
     g_m_s2: f64,
 }
 
+/// The farthest θ₀ may be from θ for [`sincos_near`] to take sin θ and cos θ from it, rad.
+pub const NEAR_RAD: f64 = 0.01;
+
+/// Sines and cosines of angles that change little from one call to the next (a stand's
+/// angle, sample after sample): each from the last angle libm was asked for when within
+/// [`NEAR_RAD`] of it ([`sincos_near`]: the same to a unit in the last place), so that a
+/// run's samples cost a libm sine every few dozen instead of one each.
+#[derive(Debug, Clone, Copy)]
+pub struct NearTrig {
+    /// The last angle libm's sine and cosine were taken of (NaN before the first).
+    theta: f64,
+    sc: (f64, f64),
+}
+
+impl Default for NearTrig {
+    fn default() -> Self {
+        Self { theta: f64::NAN, sc: (0.0, 1.0) }
+    }
+}
+
+impl NearTrig {
+    /// (sin θ, cos θ).
+    #[inline]
+    pub fn of(&mut self, theta: f64) -> (f64, f64) {
+        if (theta - self.theta).abs() <= NEAR_RAD {
+            return sincos_near(theta, self.theta, self.sc);
+        }
+        self.sc = libm::sincos(theta);
+        self.theta = theta;
+        self.sc
+    }
+}
+
 /// sin θ and cos θ from those of a nearby θ₀ (`sc0`): angle addition with the Taylor
 /// series of the difference d = θ − θ₀ (terms to d⁷; the first left out is below 1e-23 for
 /// |d| ≤ 0.01 rad), or libm's when θ is farther. A stand parameter's nudge (the diagnosis's
@@ -232,7 +265,7 @@ pub struct StandAt {
 #[inline]
 pub fn sincos_near(theta: f64, theta0: f64, (s0, c0): (f64, f64)) -> (f64, f64) {
     let d = theta - theta0;
-    if d.abs() > 0.01 {
+    if d.abs() > NEAR_RAD {
         return libm::sincos(theta);
     }
     // Products by the reciprocals: a division is ten times a multiplication's latency, and

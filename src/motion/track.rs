@@ -50,6 +50,22 @@ enum Source {
     Logged { s: super::stand::StandAt, angles: Arc<[super::stand::Angle]>, mount: Mount },
 }
 
+/// A track evaluated at many samples in order ([`Track::walk`]): a conic stand's angle's
+/// sine and cosine from those of a nearby sample's ([`super::stand::NearTrig`]).
+pub struct Walk<'t> {
+    track: &'t Track,
+    trig: super::stand::NearTrig,
+}
+
+impl Walk<'_> {
+    /// The state at sample `k` ([`Track::at`], to a unit in the last place of the sines).
+    #[inline]
+    pub fn at(&mut self, k: usize) -> SensorKinematics {
+        let trig = &mut self.trig;
+        self.track.at_with(k, |theta| trig.of(theta))
+    }
+}
+
 /// True motion of one run in sensor axes, one state per recorded sample (SI units).
 #[derive(Debug, Clone)]
 pub struct Track {
@@ -113,10 +129,22 @@ impl Track {
     /// The state at sample `k` (panics when `k` is out of range, like indexing).
     #[inline]
     pub fn at(&self, k: usize) -> SensorKinematics {
+        self.at_with(k, libm::sincos)
+    }
+
+    /// A walk over this track's samples in order ([`Walk`]).
+    pub fn walk(&self) -> Walk<'_> {
+        Walk { track: self, trig: super::stand::NearTrig::default() }
+    }
+
+    /// [`Self::at`] with a conic stand's angle's sine and cosine from `trig`.
+    #[inline(always)]
+    fn at_with(&self, k: usize, mut trig: impl FnMut(f64) -> (f64, f64)) -> SensorKinematics {
         let mut s = match &self.source {
             Source::Sampled { w, e, a } => SensorKinematics { w_rad_s: w[k], e_rad_s2: e[k], a_m_s2: a[k] },
             Source::Conic { c, mount, lag_s } => {
-                let st = c.at(self.t_s[k] - lag_s);
+                let t = self.t_s[k] - lag_s;
+                let st = c.at_trig(trig(c.theta(t)));
                 SensorKinematics {
                     w_rad_s: mount.to_sensor(st.w_rad_s),
                     e_rad_s2: mount.to_sensor(st.e_rad_s2),
@@ -127,9 +155,13 @@ impl Track {
                 let _ = self.t_s[k];
                 *s
             }
-            Source::Stand { s, mount, lag_s } => s.sensor_at(self.t_s[k] - lag_s, mount),
+            Source::Stand { s, mount, lag_s } => {
+                let an = s.motion.angle(self.t_s[k] - lag_s);
+                super::stand::to_sensor(s.at_angle_trig(an, trig(an.theta), None), mount)
+            }
             Source::Logged { s, angles, mount } => {
-                super::stand::to_sensor(s.at_angle(s.motion.angle_or_logged(0.0, Some(angles[k]))), mount)
+                let an = s.motion.angle_or_logged(0.0, Some(angles[k]));
+                super::stand::to_sensor(s.at_angle_trig(an, trig(an.theta), None), mount)
             }
         };
         for m in &self.maps {

@@ -455,7 +455,7 @@ impl Suspect {
             let k1 = (k0 + BLOCK).min(n);
             let len = k1 - k0;
             base.clear();
-            base.extend((k0..k1).map(|k| run.state(k)));
+            run.states_into(k0..k1, &mut base);
             for (si, s) in states.iter_mut().enumerate() {
                 run.seen_states(&how[si], &base, k0, s);
             }
