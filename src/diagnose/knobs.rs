@@ -389,7 +389,7 @@ mod tests {
     fn a_nearby_angles_sine_is_libms_to_rounding() {
         for &t0 in &[0.0, 1.0, -3.0, 250.0, 1.0e4] {
             let sc0 = libm::sincos(t0);
-            for &d in &[0.0, 1e-9, -3e-6, 2e-3, -0.0099, 0.02] {
+            for &d in &[0.0, 1e-9, -3e-6, 2e-3, -0.0099, 0.02, -0.037, 0.0499, 0.07] {
                 let (s, c) = sincos_near(t0 + d, t0, sc0);
                 let (s1, c1) = libm::sincos(t0 + d);
                 assert!((s - s1).abs() < 4e-16 && (c - c1).abs() < 4e-16, "θ₀ {t0}, d {d}: {s} {s1} {c} {c1}");

@@ -225,7 +225,7 @@ pub struct StandAt {
 }
 
 /// The farthest θ₀ may be from θ for [`sincos_near`] to take sin θ and cos θ from it, rad.
-pub const NEAR_RAD: f64 = 0.01;
+pub const NEAR_RAD: f64 = 0.05;
 
 /// Sines and cosines of angles that change little from one call to the next (a stand's
 /// angle, sample after sample): each from the last angle libm was asked for when within
@@ -258,8 +258,8 @@ impl NearTrig {
 }
 
 /// sin θ and cos θ from those of a nearby θ₀ (`sc0`): angle addition with the Taylor
-/// series of the difference d = θ − θ₀ (terms to d⁷; the first left out is below 1e-23 for
-/// |d| ≤ 0.01 rad), or libm's when θ is farther. A stand parameter's nudge (the diagnosis's
+/// series of the difference d = θ − θ₀ (terms to d⁹ and d⁸; the first left out is below 1e-19 for
+/// |d| ≤ [`NEAR_RAD`]), or libm's when θ is farther. A stand parameter's nudge (the diagnosis's
 /// stand columns) moves the stand's angle and cone angle by far less, so that they cost no
 /// sine of their own.
 #[inline]
@@ -271,8 +271,9 @@ pub fn sincos_near(theta: f64, theta0: f64, (s0, c0): (f64, f64)) -> (f64, f64) 
     // Products by the reciprocals: a division is ten times a multiplication's latency, and
     // this runs for every nudged sample.
     let d2 = d * d;
-    let sd = d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0) * (1.0 - d2 * (1.0 / 42.0))));
-    let cd = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0)));
+    let sd = d
+        * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0) * (1.0 - d2 * (1.0 / 42.0) * (1.0 - d2 * (1.0 / 72.0)))));
+    let cd = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0) * (1.0 - d2 * (1.0 / 56.0))));
     (s0 * cd + c0 * sd, c0 * cd - s0 * sd)
 }
 
