@@ -144,20 +144,22 @@ fn sinusoid_fits<const K: usize>(x: &[f64], t_s: &[f64], f_hz: [f64; K]) -> [(f6
     let step = (t_s[n - 1] - t_s[0]) / (n - 1) as f64;
     let rot = w.map(|w| (w * step).sin_cos());
     let (mut s, mut c) = ([0.0; K], [1.0; K]);
-    for k in 0..n {
-        let v = x[k] - mean;
+    for k0 in (0..n).step_by(256) {
         for j in 0..K {
-            if k % 256 == 0 {
-                (s[j], c[j]) = (w[j] * (t_s[k] - t_s[0])).sin_cos();
+            (s[j], c[j]) = (w[j] * (t_s[k0] - t_s[0])).sin_cos();
+        }
+        for &xk in &x[k0..(k0 + 256).min(n)] {
+            let v = xk - mean;
+            for j in 0..K {
+                let (sj, cj) = (s[j], c[j]);
+                cc[j] += cj * cj;
+                ss[j] += sj * sj;
+                cs[j] += cj * sj;
+                xc[j] += v * cj;
+                xs[j] += v * sj;
+                let (rs, rc) = rot[j];
+                (s[j], c[j]) = (sj * rc + cj * rs, cj * rc - sj * rs);
             }
-            let (sj, cj) = (s[j], c[j]);
-            cc[j] += cj * cj;
-            ss[j] += sj * sj;
-            cs[j] += cj * sj;
-            xc[j] += v * cj;
-            xs[j] += v * sj;
-            let (rs, rc) = rot[j];
-            (s[j], c[j]) = (sj * rc + cj * rs, cj * rc - sj * rs);
         }
     }
     std::array::from_fn(|j| {
@@ -191,8 +193,10 @@ pub fn refine_frequency(x: &[f64], t_s: &[f64], f0_hz: f64, half_range_hz: f64) 
     let step = 2.0 * half_range_hz / cells as f64;
     let cell = |i: usize| f0_hz - half_range_hz + i as f64 * step;
     let screen = baseband(&x[..n], &t_s[..n], f0_hz);
-    let best_cell = (0..=cells)
-        .map(|i| (i, screen.amplitude(cell(i) - f0_hz)))
+    let best_cell = screen
+        .amplitudes(cell(0) - f0_hz, step, cells + 1)
+        .into_iter()
+        .enumerate()
         .fold((0, f64::NEG_INFINITY), |b, (i, a)| if a > b.1 { (i, a) } else { b });
     // The screened cell, its neighbours and f0 itself, fitted exactly.
     let near = [best_cell.0.saturating_sub(1), best_cell.0, (best_cell.0 + 1).min(cells)].map(cell);
@@ -222,7 +226,7 @@ pub fn refine_frequency(x: &[f64], t_s: &[f64], f0_hz: f64, half_range_hz: f64) 
 }
 
 /// A record demodulated at one frequency and summed over blocks: the amplitude of a nearby
-/// frequency is then a sum over the blocks, not the samples ([`Baseband::amplitude`]).
+/// frequency is then a sum over the blocks, not the samples ([`Baseband::amplitudes`]).
 struct Baseband {
     /// Per block: the sum of (x − mean)·e^(−iω₀t) and the block's mean time from the first
     /// stamp, s.
@@ -232,22 +236,31 @@ struct Baseband {
 
 /// [`Baseband`] of `x` at `f0_hz`, in blocks of ⌈n/2048⌉ samples: a frequency δ away turns
 /// by at most 2π·δ·(block span)/2 inside a block, 0.025 rad for δ within 16/T.
+/// Within a block the demodulating sines turn by rotation at the mean step, exact at its
+/// first sample (as in [`sinusoid_fits`]).
 fn baseband(x: &[f64], t_s: &[f64], f0_hz: f64) -> Baseband {
     let n = x.len().min(t_s.len());
     let mean = x[..n].iter().sum::<f64>() / n.max(1) as f64;
     let w = std::f64::consts::TAU * f0_hz;
     let size = n.div_ceil(2048).max(1);
+    let rot = libm::sincos(w * (t_s[n.max(2) - 1] - t_s[0]) / (n.max(2) - 1) as f64);
     let blocks = (0..n)
         .step_by(size)
         .map(|k0| {
             let k1 = (k0 + size).min(n);
             let (mut re, mut im, mut tm) = (0.0, 0.0, 0.0);
+            // cos/sin by rotation at the mean step, exact every 256 samples.
+            let mut sc = (0.0, 1.0);
             for k in k0..k1 {
                 let dt = t_s[k] - t_s[0];
-                let (s, c) = libm::sincos(w * dt);
+                if (k - k0) % 256 == 0 {
+                    sc = libm::sincos(w * dt);
+                }
+                let (s, c) = sc;
                 re += (x[k] - mean) * c;
                 im -= (x[k] - mean) * s;
                 tm += dt;
+                sc = (s * rot.1 + c * rot.0, c * rot.1 - s * rot.0);
             }
             ([re, im], tm / (k1 - k0) as f64)
         })
@@ -256,17 +269,22 @@ fn baseband(x: &[f64], t_s: &[f64], f0_hz: f64) -> Baseband {
 }
 
 impl Baseband {
-    /// About the amplitude of the sinusoid δ Hz from the demodulation frequency:
-    /// 2/n·|Σ_b z_b·e^(−i2πδ t_b)| (the fit's amplitude for a record of many cycles).
-    fn amplitude(&self, delta_hz: f64) -> f64 {
-        let w = std::f64::consts::TAU * delta_hz;
-        let (mut re, mut im) = (0.0, 0.0);
+    /// About the amplitudes of the sinusoids δ_i = `first_hz` + i·`step_hz` (i < `cells`)
+    /// from the demodulation frequency: 2/n·|Σ_b z_b·e^(−i2πδ_i t_b)| (the fit's amplitude
+    /// for a record of many cycles). Per block, e^(−i2πδ_i t_b) turns from one cell to the
+    /// next by e^(−i2π·step·t_b): a complex product per block and cell, not a sin_cos.
+    fn amplitudes(&self, first_hz: f64, step_hz: f64, cells: usize) -> Vec<f64> {
+        let mut sums = vec![[0.0f64; 2]; cells];
         for ([zr, zi], t) in &self.blocks {
-            let (s, c) = libm::sincos(w * t);
-            re += zr * c + zi * s;
-            im += zi * c - zr * s;
+            let (mut s, mut c) = libm::sincos(std::f64::consts::TAU * first_hz * t);
+            let (rs, rc) = libm::sincos(std::f64::consts::TAU * step_hz * t);
+            for sum in sums.iter_mut() {
+                sum[0] += zr * c + zi * s;
+                sum[1] += zi * c - zr * s;
+                (s, c) = (s * rc + c * rs, c * rc - s * rs);
+            }
         }
-        2.0 * re.hypot(im) / self.n.max(1) as f64
+        sums.iter().map(|[re, im]| 2.0 * re.hypot(*im) / self.n.max(1) as f64).collect()
     }
 }
 
@@ -275,6 +293,7 @@ mod tests {
     use super::*;
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
+    use std::f64::consts::TAU;
 
     #[test]
     fn fits_at_several_frequencies_in_one_pass_equal_the_fits_one_at_a_time() {
@@ -320,5 +339,52 @@ mod tests {
         assert!((found[0].frequency_hz - 7.3).abs() < p.df_hz, "{found:?}");
         let (f, a) = refine_frequency(&x, &t, found[0].frequency_hz, p.df_hz);
         assert!((a - 0.5).abs() < 0.05 && (f - 7.3).abs() < 1e-3, "{f} {a}");
+    }
+
+    /// The screen's sines turned by rotation are those worked out one by one: from cell to
+    /// cell to rounding on any stamps, and within the baseband's blocks to rounding on
+    /// regular ones (on stamps that jitter, the blocks are off by the jitter's phase, as the
+    /// fits' own rotation is between its exact points).
+    #[test]
+    fn the_screens_rotated_sines_are_each_ones_own() {
+        let n: usize = 20_000;
+        let (f0, first, step, cells) = (4.0, -0.05, 1e-3, 101);
+        for jitter in [0.0, 2e-6] {
+            let t: Vec<f64> = (0..n).map(|k| 3.0 + k as f64 * 0.005 + if k % 11 == 0 { jitter } else { 0.0 }).collect();
+            let x: Vec<f64> =
+                t.iter().map(|t| 0.7 * (TAU * 4.1 * t).cos() + 0.2 * (TAU * 13.0 * t).sin() + 0.05).collect();
+            let screen = baseband(&x, &t, f0);
+            let fast = screen.amplitudes(first, step, cells);
+            // The cells from the same blocks, each with its own sin_cos.
+            for (i, a) in fast.iter().enumerate() {
+                let w = TAU * (first + i as f64 * step);
+                let (mut re, mut im) = (0.0, 0.0);
+                for ([zr, zi], tb) in &screen.blocks {
+                    let (s, c) = (w * tb).sin_cos();
+                    re += zr * c + zi * s;
+                    im += zi * c - zr * s;
+                }
+                let slow = 2.0 * f64::hypot(re, im) / n as f64;
+                assert!((a - slow).abs() <= 1e-12 * fast.iter().copied().fold(0.0, f64::max), "cell {i}: {a} {slow}");
+            }
+            if jitter > 0.0 {
+                continue;
+            }
+            // The blocks, each sample with its own sin_cos.
+            let mean = x.iter().sum::<f64>() / n as f64;
+            let size = n.div_ceil(2048);
+            for (b, k0) in (0..n).step_by(size).enumerate() {
+                let (mut zr, mut zi) = (0.0, 0.0);
+                for k in k0..(k0 + size).min(n) {
+                    let (s, c) = (TAU * f0 * (t[k] - t[0])).sin_cos();
+                    zr += (x[k] - mean) * c;
+                    zi -= (x[k] - mean) * s;
+                }
+                let [fr, fi] = screen.blocks[b].0;
+                // The phases reach 2500 rad here: their own rounding is about 5e-13.
+                let tol = 1e-11 * zr.hypot(zi).max(1.0);
+                assert!((fr - zr).abs() <= tol && (fi - zi).abs() <= tol, "block {b}: {fr} {zr} {fi} {zi}");
+            }
+        }
     }
 }
