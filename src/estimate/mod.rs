@@ -28,6 +28,7 @@ mod lm;
 mod memory;
 mod nonlinear;
 pub mod protocol;
+mod reml;
 mod request;
 mod result;
 mod robust;

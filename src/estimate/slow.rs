@@ -505,10 +505,7 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<([f6
     let m = blocks.len();
     let comps = [
         white_component(blocks),
-        DMatrix::from_fn(m, m, |a, b| {
-            let (ba, bb) = (&blocks[a], &blocks[b]);
-            block_cov(flick, 1.0, 0.0, (ba.centre, ba.len), (bb.centre, bb.len), a == b)
-        }),
+        flicker_component(blocks, flick),
         DMatrix::from_fn(m, m, |a, b| {
             let (ba, bb) = (&blocks[a], &blocks[b]);
             if a == b {
@@ -520,9 +517,38 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<([f6
     ];
     let mut first = start;
     first[0] = white_start(blocks, first[0]);
-    let (theta, ll) = reml_climb(&comps, &x, &y, first.to_vec())?;
+    let (theta, ll) = super::reml::climb(&super::reml::Dense { comps: &comps, x: &x, y: &y }, first.to_vec())?;
     let theta = [theta[0], theta[1], theta[2]];
     theta.iter().all(|v| v.is_finite()).then_some((theta, ll))
+}
+
+/// The flicker poles' covariance of block means per unit B² ([`block_cov`] with B² = 1 and
+/// no walk), worked out on the lower triangle and mirrored, with each block's factor
+/// f = (T/L)(1 − e^(−L/T)) per pole worked out once: one exponential per pair and pole
+/// instead of three on both triangles. The lower triangle has [`block_cov`]'s numbers.
+fn flicker_component(blocks: &[Coarse], flick: &[(f64, f64)]) -> DMatrix<f64> {
+    let m = blocks.len();
+    let np = flick.len();
+    // f(T, L) as block_cov has it, per block and pole.
+    let f = |t: f64, l: f64| if l > 0.0 { (t / l) * (1.0 - (-l / t).exp()) } else { 1.0 };
+    let factors: Vec<f64> = blocks.iter().flat_map(|b| flick.iter().map(move |&(t, _)| f(t, b.len))).collect();
+    let mut out = DMatrix::<f64>::zeros(m, m);
+    for b in 0..m {
+        let bb = &blocks[b];
+        out[(b, b)] = block_cov(flick, 1.0, 0.0, (bb.centre, bb.len), (bb.centre, bb.len), true);
+        for a in b + 1..m {
+            let ba = &blocks[a];
+            let d = (ba.centre - bb.centre).abs();
+            let mut v = 0.0;
+            for (p, &(t, var)) in flick.iter().enumerate() {
+                let e = -(d - 0.5 * ba.len - 0.5 * bb.len) / t;
+                v += var * e.exp() * factors[a * np + p] * factors[b * np + p];
+            }
+            out[(a, b)] = v;
+            out[(b, a)] = v;
+        }
+    }
+    out
 }
 
 /// The block-level regression of the block means (regressors X, means y); None when there
@@ -554,80 +580,19 @@ fn white_component(blocks: &[Coarse]) -> DMatrix<f64> {
 
 /// The restricted log-likelihood of white noise plus a constant offset drawn anew in each
 /// run (a turn-on bias, variance τ² shared by the runs) on the same block means, at its
-/// REML estimate; `white` seeds the white level. None when it does not converge or the
+/// REML estimate; `white_level` seeds the white level. None when it does not converge or the
 /// blocks come from one run.
-fn turn_on_likelihood(blocks: &[Coarse], white: f64) -> Option<f64> {
+fn turn_on_likelihood(blocks: &[Coarse], white_level: f64) -> Option<f64> {
     // An offset drawn anew in each run needs two runs (in one it is that run's bias).
     if blocks.iter().all(|b| b.source == blocks[0].source) {
         return None;
     }
     let (x, y) = block_regression(blocks)?;
-    let m = blocks.len();
-    let runs = DMatrix::from_fn(m, m, |a, b| if blocks[a].source == blocks[b].source { 1.0 } else { 0.0 });
-    let comps = [white_component(blocks), runs];
-    let (_, ll) = reml_climb(&comps, &x, &y, vec![white_start(blocks, white), 0.0])?;
+    let white: Vec<f64> = blocks.iter().map(|b| 1.0 / b.len.max(f64::MIN_POSITIVE)).collect();
+    let run: Vec<usize> = blocks.iter().map(|b| b.source).collect();
+    let structure = super::reml::RunOffsets { white: &white, run: &run, x: &x, y: &y };
+    let (_, ll) = super::reml::climb(&structure, vec![white_start(blocks, white_level), 0.0])?;
     ll.is_finite().then_some(ll)
-}
-
-/// One REML climb from `theta` (component 0 the white part, kept positive; the others
-/// non-negative): average-information steps on the restricted log-likelihood
-/// ℓ = −½(ln|V| + ln|XᵀV⁻¹X| + yᵀPy) until no component moves by 1e-4 of itself or by
-/// more than 1e-8 of the total variance (traces; a component heading for its bound).
-/// None when the scores stop being finite or a matrix is singular. Returns
-/// the components and ℓ there (constants dropped: comparable between models of the same
-/// block means and regressors).
-fn reml_climb(
-    comps: &[DMatrix<f64>],
-    x: &DMatrix<f64>,
-    y: &DVector<f64>,
-    mut theta: Vec<f64>,
-) -> Option<(Vec<f64>, f64)> {
-    let nc = comps.len();
-    let at = |theta: &[f64]| comps.iter().zip(theta).fold(DMatrix::zeros(x.nrows(), x.nrows()), |v, (c, t)| v + c * *t);
-    // Each component's share of the variance, per unit of it: a component heading for its
-    // bound (the white part towards zero when flicker takes the shortest scales) has
-    // converged once its move is a negligible part of the whole.
-    let traces: Vec<f64> = comps.iter().map(|c| c.trace().abs()).collect();
-    for _ in 0..60 {
-        let (vinv, _) = spd_inverse(at(&theta))?;
-        let vx = &vinv * x;
-        let xvx = (x.transpose() * &vx).try_inverse()?;
-        let p = &vinv - &vx * xvx * vx.transpose();
-        let py = &p * y;
-        // Average information (Gilmour, Thompson & Cullis 1995): only products with P y, so
-        // no m³ product per component.
-        let u: Vec<DVector<f64>> = comps.iter().map(|c| c * &py).collect();
-        let pu: Vec<DVector<f64>> = u.iter().map(|v| &p * v).collect();
-        let score: Vec<f64> = (0..nc).map(|i| 0.5 * (py.dot(&u[i]) - p.component_mul(&comps[i]).sum())).collect();
-        if score.iter().any(|v| !v.is_finite()) {
-            return None;
-        }
-        let total: f64 = theta.iter().zip(&traces).map(|(t, c)| t * c).sum();
-        // Components at zero whose score points below zero stay at zero.
-        let free: Vec<usize> = (0..nc).filter(|&i| i == 0 || theta[i] > 0.0 || score[i] > 0.0).collect();
-        let info = DMatrix::from_fn(free.len(), free.len(), |a, b| 0.5 * u[free[a]].dot(&pu[free[b]]));
-        let step = info.try_inverse()? * DVector::from_iterator(free.len(), free.iter().map(|&i| score[i]));
-        let mut moved: f64 = 0.0;
-        for (k, &i) in free.iter().enumerate() {
-            let new = if i == 0 { (theta[i] + step[k]).max(0.1 * theta[i]) } else { (theta[i] + step[k]).max(0.0) };
-            let change = (new - theta[i]).abs();
-            if change * traces[i] > 1e-8 * total {
-                moved = moved.max(change / (new.abs() + theta[i].abs() + 1e-300));
-            }
-            theta[i] = new;
-        }
-        if moved < 1e-4 {
-            break;
-        }
-    }
-    let (vinv, ln_det_v) = spd_inverse(at(&theta))?;
-    let vx = &vinv * x;
-    let xvx = (x.transpose() * &vx).cholesky()?;
-    let ln_det_xvx = 2.0 * xvx.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
-    let vy = &vinv * y;
-    let xvy = x.transpose() * &vy;
-    let ypy = y.dot(&vy) - xvy.dot(&xvx.solve(&xvy));
-    Some((theta, -0.5 * (ln_det_v + ln_det_xvx + ypy)))
 }
 
 /// Σ_{b,b'} d_b d_bᵀ' C(b, b') over blocks `d` of (d_b, (centre s, length s)), C from
@@ -670,19 +635,6 @@ fn propagate(d: &mut [(DVector<f64>, (f64, f64))], flick: &[(f64, f64)], b2: f64
         prev = Some(*t);
     }
     add
-}
-
-/// V⁻¹ and ln|V| of a symmetric positive-definite V from its Cholesky factor L (faer's
-/// blocked factorisation and inverse: V⁻¹ = L⁻ᵀL⁻¹, ln|V| = 2 Σ ln L_ii). None when V is
-/// not positive definite.
-fn spd_inverse(v: DMatrix<f64>) -> Option<(DMatrix<f64>, f64)> {
-    use faer::linalg::solvers::DenseSolveCore;
-    let m = v.nrows();
-    let llt = faer::MatRef::from_column_major_slice(v.as_slice(), m, m).llt(faer::Side::Lower).ok()?;
-    let l = llt.L();
-    let ln_det = 2.0 * (0..m).map(|i| l[(i, i)].ln()).sum::<f64>();
-    let inv = llt.inverse();
-    Some((DMatrix::from_fn(m, m, |i, j| inv[(i, j)]), ln_det))
 }
 
 /// Adds the slow part to channel `c`'s covariance (module documentation) and returns what
@@ -822,19 +774,5 @@ mod tests {
         let scale = brute.amax();
         assert!(scale > 0.0);
         assert!((&fast - &brute).amax() <= 1e-10 * scale, "fast {fast} brute {brute}");
-    }
-
-    /// The fast inverse agrees with nalgebra's, and its log-determinant with the factor's.
-    #[test]
-    fn spd_inverse_matches_the_reference() {
-        let m = 37;
-        let a = DMatrix::from_fn(m, m, |i, j| ((i * 7 + j * 13) % 11) as f64 - 5.0);
-        let v = &a * a.transpose() + DMatrix::identity(m, m) * 3.0;
-        let (fast, ln_det) = spd_inverse(v.clone()).expect("positive definite");
-        let chol = v.clone().cholesky().expect("positive definite");
-        let reference = chol.inverse();
-        assert!((&fast - &reference).amax() <= 1e-12 * reference.amax());
-        assert!((ln_det - v.determinant().ln()).abs() <= 1e-9 * ln_det.abs());
-        assert!(spd_inverse(-v).is_none());
     }
 }
