@@ -126,7 +126,10 @@ fn by_mode(
             // revolution is as slow as a wander on runs of a few revolutions) and hide it.
             // The first answer stands when the second cannot be had, and says so. Only the
             // answer is finished (its disagreements and shapes).
-            let carried = first.stand.clone().map(super::stand::Suspect::carried_over);
+            // Where the first added no sensor effect, the second's first check likely looks
+            // for new stand groups: its carried groups are judged on every column at once.
+            let searching = first.d.steps.is_empty();
+            let carried = first.stand.clone().map(|s| s.carried_over().expecting_search(searching));
             match diagnose_from(model, runs, motions, &with(true), carried) {
                 Ok(second) => Ok(finished(choose(first, second))),
                 Err(e) => {

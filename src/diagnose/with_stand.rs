@@ -170,7 +170,12 @@ impl StandCheck<'_, '_, '_> {
             self.last = Some(sys);
             return Ok(dropped);
         }
-        let sys = self.suspect.systems(current, &a.base_fit, runs, &noise);
+        // The carried groups' systems serve when they have every column (a search was
+        // expected here: `Suspect::expecting_search`); judged again on them, the groups pass.
+        let sys = match judged {
+            Some(sys) if sys.complete() => sys,
+            _ => self.suspect.systems(current, &a.base_fit, runs, &noise),
+        };
         if self.suspect.carried() && self.suspect.rejudge(&sys) {
             return Ok(true);
         }
@@ -362,7 +367,7 @@ pub(super) fn diagnose(
         let (mut judged, mut stage) = (None, None);
         if suspect.carries_groups() {
             let (noise, drawn) = noise_alone(model, &fit, &moved, &now.motions());
-            let sys = suspect.accepted_systems(model, &fit, &moved, &noise);
+            let sys = suspect.judging_systems(model, &fit, &moved, &noise);
             if suspect.judge_carried(&sys) {
                 continue;
             }

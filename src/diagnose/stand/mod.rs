@@ -122,15 +122,8 @@ pub struct Suspect {
     /// linearisation around the labels, then run off to an implausible value): not tried again.
     refused: Vec<usize>,
     mounts: Vec<StandFinding>,
-    /// Carried from a diagnosis under another noise model: its groups are judged again
-    /// at the first check ([`Self::rejudge`]).
-    carried: bool,
-    /// Its groups were found by the first look on every k-th sample of a large session
-    /// ([`Self::looked_over`]): on every sample they are not picked again.
-    looked: bool,
-    /// Carried from a diagnosis under another noise model ([`Self::carried_over`]), not
-    /// from the first look.
-    other_noise: bool,
+    /// How its groups were carried from another diagnosis ([`rejudge::Carry`]).
+    carry: rejudge::Carry,
 }
 
 /// The whitened system of one run (global stand parameters after the model's).
@@ -150,6 +143,8 @@ pub struct Systems {
     raw: Fold,
     base: usize,
     samples: usize,
+    /// Every stand parameter has its columns (not only the accepted groups').
+    complete: bool,
 }
 
 impl Suspect {
@@ -270,9 +265,7 @@ impl Suspect {
             accepted: Vec::new(),
             refused: Vec::new(),
             mounts: Vec::new(),
-            carried: false,
-            looked: false,
-            other_noise: false,
+            carry: rejudge::Carry::default(),
         })
     }
 
@@ -397,7 +390,7 @@ impl Suspect {
         };
         let (total, raw) = (sum(&folds), sum(&raws));
         let samples = runs.iter().map(|r| 6 * r.len()).sum();
-        Systems { folds, total, raw, base: layout.count, samples }
+        Systems { folds, total, raw, base: layout.count, samples, complete: only.is_none() }
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -551,6 +544,12 @@ fn reduce(s: &Fold, base: usize, group: &[Combo]) -> (DMatrix<f64>, DVector<f64>
 }
 
 impl Systems {
+    /// Whether every stand parameter has its columns ([`Suspect::systems`], not
+    /// [`Suspect::accepted_systems`]): enough to look for new groups.
+    pub fn complete(&self) -> bool {
+        self.complete
+    }
+
     /// Whether a group with evidence `ev` and raw ΔBIC `raw_bic` takes a material share
     /// (`MIN_SHARE`) of what the noise model does not explain: the whitened χ² in excess
     /// of the sample count, less twice its spread under the noise alone (√(2n)). A residual
@@ -701,7 +700,7 @@ impl Suspect {
         // runs is about one of their standard errors from every sample's, so that its
         // refinement would take about k χ² per parameter there — near the rules' threshold,
         // and each such pick would start the diagnosis again.
-        let again = |gi: &usize| !(self.looked && self.accepted.iter().any(|a| a.0 == *gi));
+        let again = |gi: &usize| !(self.carry.looked && self.accepted.iter().any(|a| a.0 == *gi));
         let shared = sys.shared();
         let judged: Vec<(usize, Judged)> = (0..self.groups.len())
             .into_par_iter()

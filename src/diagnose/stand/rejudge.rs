@@ -2,8 +2,26 @@
 //! slow noise into the one with it, or from the first look on every k-th sample of a
 //! large session into the diagnosis on every sample — and judged again there.
 
-use super::{pinv_sym, reduce, Combo, Suspect, Systems};
+use super::{pinv_sym, reduce, Combo, RunNoiseModel, Suspect, Systems};
+use crate::estimate::{Fit, FitRun};
+use crate::model::Model;
 use nalgebra::DVector;
+
+/// How a suspect's groups were carried from another diagnosis.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Carry {
+    /// Carried from a diagnosis under another noise model: its groups are judged again
+    /// at the first check ([`Suspect::rejudge`]).
+    pub(super) carried: bool,
+    /// Its groups were found by the first look on every k-th sample of a large session
+    /// ([`Suspect::looked_over`]): on every sample they are not picked again.
+    pub(super) looked: bool,
+    /// Carried from a diagnosis under another noise model ([`Suspect::carried_over`]), not
+    /// from the first look.
+    pub(super) other_noise: bool,
+    /// The diagnosis it was carried from added no sensor effect ([`Suspect::expecting_search`]).
+    pub(super) search_expected: bool,
+}
 
 impl Suspect {
     /// This suspect, to start a diagnosis from the motion this one corrected: under another
@@ -15,19 +33,20 @@ impl Suspect {
     /// search for new groups to the next check, on the model with that effect (a check
     /// with every stand column costs a pass over every sample with each of them).
     pub fn carried_over(self) -> Self {
-        Self { carried: true, other_noise: true, ..self }
+        Self { carry: Carry { carried: true, other_noise: true, ..self.carry }, ..self }
     }
 
     /// [`Self::carried_over`] from the first look at the stand on every k-th sample of a
     /// large session: the groups it found are estimated again on every sample at the end
     /// of the diagnosis there, and not picked again ([`Self::pick`]).
     pub fn looked_over(self) -> Self {
-        Self { looked: true, other_noise: false, ..self.carried_over() }
+        let over = self.carried_over();
+        Self { carry: Carry { looked: true, other_noise: false, ..over.carry }, ..over }
     }
 
     /// Whether the groups were carried from another diagnosis and not yet judged again.
     pub fn carried(&self) -> bool {
-        self.carried
+        self.carry.carried
     }
 
     /// The carried groups judged again on `sys` (this diagnosis's noise model): a group
@@ -36,15 +55,35 @@ impl Suspect {
     /// model's coefficients: p < `P_ACCEPT` and k ln n − χ² < `BIC_EVIDENCE`) goes back to
     /// its labels and is not tried again. Whether any did (the motion changed).
     pub fn rejudge(&mut self, sys: &Systems) -> bool {
-        self.carried = false;
+        self.carry.carried = false;
         self.judge_carried(sys)
+    }
+
+    /// This suspect with the hint that the diagnosis it was carried from added no sensor
+    /// effect (`yes`): then none is likely to follow at the first check here either, and
+    /// that check looks for new groups on every stand column. The carried groups are then
+    /// judged on every column from the start ([`Self::judging_systems`]), so that one pass
+    /// over the samples serves both.
+    pub fn expecting_search(self, yes: bool) -> Self {
+        Self { carry: Carry { search_expected: yes, ..self.carry }, ..self }
+    }
+
+    /// The systems to judge the carried groups on around `model` and its fit: every stand
+    /// column when a search is expected at the first check ([`Self::expecting_search`]),
+    /// else the accepted groups' columns only. Either gives the same judgement.
+    pub fn judging_systems(&self, model: &Model, fit: &Fit, runs: &[FitRun<'_>], noise: &[RunNoiseModel]) -> Systems {
+        if self.carry.search_expected {
+            self.systems(model, fit, runs, noise)
+        } else {
+            self.accepted_systems(model, fit, runs, noise)
+        }
     }
 
     /// Whether groups were carried from a diagnosis under another noise model and are yet
     /// to be judged again. Those the first look found on every k-th sample are not asked:
     /// on every sample their evidence grows k-fold, and they are judged at the first check.
     pub fn carries_groups(&self) -> bool {
-        self.carried && self.other_noise && !self.accepted.is_empty()
+        self.carry.carried && self.carry.other_noise && !self.accepted.is_empty()
     }
 
     /// [`Self::rejudge`], with the groups still carried (judged again at the first check)
@@ -80,7 +119,7 @@ impl Suspect {
             self.refused.push(gi);
         }
         if !dropped.is_empty() {
-            self.carried = false;
+            self.carry.carried = false;
         }
         !dropped.is_empty()
     }
