@@ -70,7 +70,8 @@ impl Suspect {
 
     /// The systems to judge the carried groups on around `model` and its fit: every stand
     /// column when a search is expected at the first check ([`Self::expecting_search`]),
-    /// else the accepted groups' columns only. Either gives the same judgement.
+    /// else the accepted groups' columns only. Either gives the same judgement (the
+    /// accepted groups' entries differ at most in rounding).
     pub fn judging_systems(&self, model: &Model, fit: &Fit, runs: &[FitRun<'_>], noise: &[RunNoiseModel]) -> Systems {
         if self.carry.search_expected {
             self.systems(model, fit, runs, noise)
