@@ -417,6 +417,16 @@ fn measure(sources: &[SourceBlocks], c: usize, t_min: f64, span: f64) -> [f64; 3
     [f.white_density.powi(2), f.bias_instability.powi(2), f.random_walk.powi(2)]
 }
 
+/// A Gauss–Markov pole's factor of a block of length L between blocks:
+/// f = (T/L)(1 − e^(−L/T)), 1 for a block of no length ([`block_cov`], [`propagate`]).
+fn gm_factor(t: f64, l: f64) -> f64 {
+    if l > 0.0 {
+        (t / l) * (1.0 - (-l / t).exp())
+    } else {
+        1.0
+    }
+}
+
 /// Covariance of the block means b, b' of the slow part (flicker poles at B² = `b2`, random
 /// walk K² = `k2`), in variogram form for the walk.
 fn block_cov(flick: &[(f64, f64)], b2: f64, k2: f64, tb: (f64, f64), tc: (f64, f64), same: bool) -> f64 {
@@ -430,10 +440,9 @@ fn block_cov(flick: &[(f64, f64)], b2: f64, k2: f64, tb: (f64, f64), tc: (f64, f
         v -= 0.5 * k2 * l / 3.0;
     } else {
         let d = (tb.0 - tc.0).abs();
-        let f = |t: f64, l: f64| if l > 0.0 { (t / l) * (1.0 - (-l / t).exp()) } else { 1.0 };
         for &(t, var) in flick {
             let e = -(d - 0.5 * tb.1 - 0.5 * tc.1) / t;
-            v += b2 * var * e.exp() * f(t, tb.1) * f(t, tc.1);
+            v += b2 * var * e.exp() * gm_factor(t, tb.1) * gm_factor(t, tc.1);
         }
         v -= 0.5 * k2 * d;
     }
@@ -529,9 +538,7 @@ fn reml(blocks: &[Coarse], flick: &[(f64, f64)], start: [f64; 3]) -> Option<([f6
 fn flicker_component(blocks: &[Coarse], flick: &[(f64, f64)]) -> DMatrix<f64> {
     let m = blocks.len();
     let np = flick.len();
-    // f(T, L) as block_cov has it, per block and pole.
-    let f = |t: f64, l: f64| if l > 0.0 { (t / l) * (1.0 - (-l / t).exp()) } else { 1.0 };
-    let factors: Vec<f64> = blocks.iter().flat_map(|b| flick.iter().map(move |&(t, _)| f(t, b.len))).collect();
+    let factors: Vec<f64> = blocks.iter().flat_map(|b| flick.iter().map(move |&(t, _)| gm_factor(t, b.len))).collect();
     let mut out = DMatrix::<f64>::zeros(m, m);
     for b in 0..m {
         let bb = &blocks[b];
@@ -574,8 +581,12 @@ fn white_start(blocks: &[Coarse], given: f64) -> f64 {
 
 /// White noise of block means: diag 1/L_b.
 fn white_component(blocks: &[Coarse]) -> DMatrix<f64> {
-    let m = blocks.len();
-    DMatrix::from_fn(m, m, |a, b| if a == b { 1.0 / blocks[a].len.max(f64::MIN_POSITIVE) } else { 0.0 })
+    DMatrix::from_diagonal(&DVector::from_vec(white_weights(blocks)))
+}
+
+/// The white component's diagonal: 1/L_b per block.
+fn white_weights(blocks: &[Coarse]) -> Vec<f64> {
+    blocks.iter().map(|b| 1.0 / b.len.max(f64::MIN_POSITIVE)).collect()
 }
 
 /// The restricted log-likelihood of white noise plus a constant offset drawn anew in each
@@ -588,7 +599,7 @@ fn turn_on_likelihood(blocks: &[Coarse], white_level: f64) -> Option<f64> {
         return None;
     }
     let (x, y) = block_regression(blocks)?;
-    let white: Vec<f64> = blocks.iter().map(|b| 1.0 / b.len.max(f64::MIN_POSITIVE)).collect();
+    let white = white_weights(blocks);
     let run: Vec<usize> = blocks.iter().map(|b| b.source).collect();
     let structure = super::reml::RunOffsets { white: &white, run: &run, x: &x, y: &y };
     let (_, ll) = super::reml::climb(&structure, vec![white_start(blocks, white_level), 0.0])?;
@@ -605,7 +616,6 @@ fn turn_on_likelihood(blocks: &[Coarse], white_level: f64) -> Option<f64> {
 fn propagate(d: &mut [(DVector<f64>, (f64, f64))], flick: &[(f64, f64)], b2: f64, k2: f64) -> DMatrix<f64> {
     let q = d.first().map_or(0, |v| v.0.len());
     d.sort_by(|a, b| a.1 .0.total_cmp(&b.1 .0));
-    let f = |t: f64, l: f64| if l > 0.0 { (t / l) * (1.0 - (-l / t).exp()) } else { 1.0 };
     // Per pole: the running sum and the time it refers to (the end of the last block).
     let mut sums: Vec<(DVector<f64>, f64)> = flick.iter().map(|_| (DVector::zeros(q), f64::NEG_INFINITY)).collect();
     let (mut passed, mut walk) = (DVector::<f64>::zeros(q), DVector::<f64>::zeros(q));
@@ -620,7 +630,7 @@ fn propagate(d: &mut [(DVector<f64>, (f64, f64))], flick: &[(f64, f64)], b2: f64
         h.copy_from(&walk);
         h *= -0.5 * k2;
         for ((pole, var), (s, at)) in flick.iter().zip(&mut sums) {
-            let fb = f(*pole, *l);
+            let fb = gm_factor(*pole, *l);
             if at.is_finite() {
                 h.axpy(b2 * var * fb * (-(start - *at) / pole).exp(), s, 1.0);
                 *s *= (-(end - *at) / pole).exp();
