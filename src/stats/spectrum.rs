@@ -122,6 +122,13 @@ pub fn remove_sinusoid(x: &mut [f64], t_s: &[f64], f_hz: f64) {
     }
 }
 
+/// (sin, cos) of θ + φ from those of θ (`sc`) and of φ (`rot`): one step of the rotations
+/// that stand in for a sin_cos per sample or cell here.
+#[inline(always)]
+fn turn((s, c): (f64, f64), (rs, rc): (f64, f64)) -> (f64, f64) {
+    (s * rc + c * rs, c * rc - s * rs)
+}
+
 /// The least-squares (a, b) of a cos + b sin at `f_hz` (phase from the first stamp),
 /// after removing the mean.
 fn sinusoid_fit(x: &[f64], t_s: &[f64], f_hz: f64) -> (f64, f64) {
@@ -157,8 +164,7 @@ fn sinusoid_fits<const K: usize>(x: &[f64], t_s: &[f64], f_hz: [f64; K]) -> [(f6
                 cs[j] += cj * sj;
                 xc[j] += v * cj;
                 xs[j] += v * sj;
-                let (rs, rc) = rot[j];
-                (s[j], c[j]) = (sj * rc + cj * rs, cj * rc - sj * rs);
+                (s[j], c[j]) = turn((sj, cj), rot[j]);
             }
         }
     }
@@ -260,7 +266,7 @@ fn baseband(x: &[f64], t_s: &[f64], f0_hz: f64) -> Baseband {
                 re += (x[k] - mean) * c;
                 im -= (x[k] - mean) * s;
                 tm += dt;
-                sc = (s * rot.1 + c * rot.0, c * rot.1 - s * rot.0);
+                sc = turn(sc, rot);
             }
             ([re, im], tm / (k1 - k0) as f64)
         })
@@ -276,12 +282,13 @@ impl Baseband {
     fn amplitudes(&self, first_hz: f64, step_hz: f64, cells: usize) -> Vec<f64> {
         let mut sums = vec![[0.0f64; 2]; cells];
         for ([zr, zi], t) in &self.blocks {
-            let (mut s, mut c) = libm::sincos(std::f64::consts::TAU * first_hz * t);
-            let (rs, rc) = libm::sincos(std::f64::consts::TAU * step_hz * t);
+            let mut sc = libm::sincos(std::f64::consts::TAU * first_hz * t);
+            let rot = libm::sincos(std::f64::consts::TAU * step_hz * t);
             for sum in sums.iter_mut() {
+                let (s, c) = sc;
                 sum[0] += zr * c + zi * s;
                 sum[1] += zi * c - zr * s;
-                (s, c) = (s * rc + c * rs, c * rc - s * rs);
+                sc = turn(sc, rot);
             }
         }
         sums.iter().map(|[re, im]| 2.0 * re.hypot(*im) / self.n.max(1) as f64).collect()
