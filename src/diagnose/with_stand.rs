@@ -242,6 +242,11 @@ pub(super) fn findings(
     }
 }
 
+/// The runs of the first look at the stand: every k-th sample, about [`PRE_SAMPLES`].
+fn first_look_copy(runs: &[FitRun<'_>]) -> super::reduced::Reduced {
+    super::reduced::Reduced::new(runs, super::reduced::step_for(runs, PRE_SAMPLES), |_| false)
+}
+
 /// The first look at the stand on reduced runs (every k-th sample of a large session): the
 /// mounts, then the stand check on the declared model's residual. When it finds a stand
 /// group, the climb runs on the reduced runs with a stand check at every step (each group
@@ -324,7 +329,7 @@ pub(super) fn diagnose(
 ) -> Result<Concluded, EstimateError> {
     let total: usize = runs.iter().map(FitRun::len).sum();
     if !suspect.carried() && total > PRE_FROM {
-        let copy = super::reduced::Reduced::new(runs, super::reduced::step_for(runs, PRE_SAMPLES), |_| false);
+        let copy = first_look_copy(runs);
         // When the first look cannot be had, the diagnosis on every sample looks for itself.
         if let Ok(found) = first_look(suspect.clone(), model, &copy.runs(runs), motions, opts, has_temp) {
             suspect = found.looked_over();
@@ -342,7 +347,7 @@ pub(super) fn diagnose(
     // that fails there goes back to its labels before any work on every sample is done
     // for it (the survivors are judged again there).
     if suspect.carries_groups() && total > PRE_FROM {
-        let copy = super::reduced::Reduced::new(runs, super::reduced::step_for(runs, PRE_SAMPLES), |_| false);
+        let copy = first_look_copy(runs);
         let reduced = copy.runs(runs);
         let now = Believed::new(&suspect, &reduced, motions);
         let moved = now.runs(&reduced);
