@@ -133,6 +133,72 @@ fn discovers_dead_zone() {
     discovers("gyro-dead-zone", &[("gyro.dz_x", 0.0009), ("gyro.dz_y", 0.0005), ("gyro.dz_z", 0.0007)]);
 }
 
+/// A search started near the optimum (Newton steps from `Model::start_near`, as the
+/// diagnosis starts one from its first look) lands where the scan and simplex land, with
+/// the same standard errors; a start that is not near (half the true widths, tiny steps)
+/// still ends there, through the simplex.
+#[test]
+fn a_near_start_lands_where_the_scan_does() {
+    let truth = [0.0009, 0.0005, 0.0007];
+    let (_, s) =
+        hidden("gyro-dead-zone", &[("gyro.dz_x", truth[0]), ("gyro.dz_y", truth[1]), ("gyro.dz_z", truth[2])], 5);
+    let mut m = Model::default_model();
+    m.add_effect("gyro-dead-zone").unwrap();
+    let opts = FitOptions::default();
+    let scanned = crate::common::fit_session(&s, &m, &opts).unwrap();
+    let value_se = |f: &crosscal::estimate::Fit| -> Vec<(f64, f64)> {
+        f.nonlinear.iter().map(|p| (p.value, p.std_error.expect("a standard error"))).collect()
+    };
+    let base = value_se(&scanned);
+    for (i, (v, se)) in base.iter().enumerate() {
+        assert!((v - truth[i]).abs() < 4.0 * se, "scanned {i}: {v} ± {se}, true {}", truth[i]);
+    }
+    // Near: 2 standard errors off, steps of 3.
+    let mut near = m.clone();
+    let start: Vec<f64> = base.iter().map(|(v, se)| v + 2.0 * se).collect();
+    near.start_near("gyro-dead-zone", &start, base.iter().map(|(_, se)| 3.0 * se).collect());
+    // Not near: half the widths, steps of a hundredth of a standard error.
+    let mut far = m.clone();
+    let start: Vec<f64> = truth.iter().map(|v| 0.5 * v).collect();
+    far.start_near("gyro-dead-zone", &start, base.iter().map(|(_, se)| 0.01 * se).collect());
+    let near = value_se(&crate::common::fit_session(&s, &near, &opts).unwrap());
+    let far = value_se(&crate::common::fit_session(&s, &far, &opts).unwrap());
+    for i in 0..3 {
+        let ((v0, se0), (v1, se1), (v2, se2)) = (base[i], near[i], far[i]);
+        // The simplex stops within a few tenths of a standard error; Newton's steps within
+        // a twentieth.
+        assert!((v1 - v0).abs() < 0.3 * se0, "near {i}: {v1} against {v0} ± {se0}");
+        assert!((v2 - v1).abs() < 0.1 * se1, "far {i}: {v2} against {v1} ± {se1}");
+        for (what, se) in [("near", se1), ("far", se2)] {
+            assert!((se / se0 - 1.0).abs() < 0.05, "{what} {i}: standard error {se} against {se0}");
+        }
+    }
+}
+
+/// The dead zone's standard errors are those of the noise at the optimum, not of the
+/// misfit a search from zero starts with (which made them 14× too large): over 12 seeds
+/// the errors' spread matches them.
+#[test]
+fn dead_zone_standard_errors_match_the_spread_of_the_estimates() {
+    let truth = [0.0009, 0.0005, 0.0007];
+    let mut m = Model::default_model();
+    m.add_effect("gyro-dead-zone").unwrap();
+    let (mut z2, mut n) = (0.0, 0.0);
+    for seed in 1..=12 {
+        let values = [("gyro.dz_x", truth[0]), ("gyro.dz_y", truth[1]), ("gyro.dz_z", truth[2])];
+        let (_, s) = hidden("gyro-dead-zone", &values, seed);
+        let f = crate::common::fit_session(&s, &m, &FitOptions::default()).unwrap();
+        for (p, t) in f.nonlinear.iter().zip(truth) {
+            let se = p.std_error.expect("a standard error");
+            z2 += ((p.value - t) / se).powi(2);
+            n += 1.0;
+        }
+    }
+    // 36 squared z-scores: their mean is 1 ± 0.24 (χ²₃₆/36) when the errors are honest.
+    let ratio = z2 / n;
+    assert!((0.4..1.8).contains(&ratio), "mean squared z {ratio}");
+}
+
 #[test]
 fn discovers_gyro_g_sensitivity() {
     let k = DEG / G;

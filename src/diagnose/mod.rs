@@ -658,6 +658,9 @@ fn climb(
         if m.add_effect(&best.0.effect).is_err() {
             break;
         }
+        if let Some(near) = stand_check.as_deref().and_then(with_stand::StandCheck::near) {
+            m.starts_from(near);
+        }
         let f = refit_reduced(&m, runs, opts, warnings)?;
         let next = analyse(&m, f, runs, motions, has_temp);
         let noise = noise_reports(&next.space);

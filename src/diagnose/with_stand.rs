@@ -34,6 +34,10 @@ pub(super) struct StandCheck<'s, 'r, 'a> {
     /// The carried groups' systems, built to judge them before the analysis was drawn
     /// (around the same model, fit and noise models as the first check): that check's.
     judged: Option<stand::Systems>,
+    /// The model the first look reached, its nonlinear parameters started near where the
+    /// look's fit put them ([`Model::start_near`]): an effect the climb adds that it has
+    /// starts its search there.
+    near: Option<&'r Model>,
 }
 
 /// The runs on the motion a stand suspect now believes: their tracks and motions.
@@ -197,6 +201,12 @@ impl StandCheck<'_, '_, '_> {
         }
     }
 
+    /// The first look's model, whose near starts an effect the climb adds takes
+    /// ([`Model::starts_from`]).
+    pub(super) fn near(&self) -> Option<&Model> {
+        self.near
+    }
+
     /// The stand as the check now believes it (the motion the climb is on).
     pub(super) fn believed(&self) -> stand::Suspect {
         self.suspect.clone()
@@ -261,7 +271,7 @@ fn first_look(
     motions: &RunMotions<'_>,
     opts: &FitOptions,
     has_temp: bool,
-) -> Result<stand::Suspect, EstimateError> {
+) -> Result<(stand::Suspect, Option<Model>), EstimateError> {
     let (wrong, fit) = super::mount::wrong_mounts(model, runs, motions, opts)?;
     for (i, mount, finding) in wrong {
         suspect.set_mount(i, mount, finding);
@@ -275,12 +285,12 @@ fn first_look(
     let a = analyse(model, fit, &moved, &now.motions(), has_temp);
     let (scored, exact) = super::score(&a.space, &a.space.base_set());
     if exact.iter().all(|e| *e) {
-        return Ok(suspect);
+        return Ok((suspect, None));
     }
     let sensor_bic = scored.iter().filter(|c| c.0.rejected.is_none()).map(|c| c.0.delta_bic).reduce(f64::min);
-    let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged: None };
+    let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged: None, near: None };
     if !check.check(model, &a, &moved, sensor_bic, opts)? {
-        return Ok(suspect);
+        return Ok((suspect, None));
     }
     // The climb on the corrected motion; each group found restarts it from the model it
     // reached (only the suspect is kept: the diagnosis on every sample climbs from the
@@ -292,13 +302,16 @@ fn first_look(
         let now = Believed::new(&suspect, runs, motions);
         let moved = now.runs(runs);
         let a = analyse(&reached, refit(&reached, &moved, opts)?, &moved, &now.motions(), has_temp);
-        let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged: None };
+        let mut check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged: None, near: None };
         let (steps, _, a, restart) =
             super::climb(a, &reached, &moved, &now.motions(), opts, has_temp, &mut Vec::new(), Some(&mut check))?;
         let last = check.last.take();
         for st in &steps {
             let _ = reached.add_effect(&st.effect);
         }
+        // Searched again on the corrected motion, the nonlinear parameters start near where
+        // the fit before the correction put them.
+        reached = crate::estimate::near_fit(&reached, &a.base_fit);
         if restart {
             continue;
         }
@@ -310,7 +323,7 @@ fn first_look(
         if suspect.polish(&held, runs, &noise_models(&a), opts, last).is_err() {
             suspect = before;
         }
-        return Ok(suspect);
+        return Ok((suspect, Some(reached)));
     }
     Err(EstimateError::NotConverged("the stand kept explaining more on the reduced runs".into()))
 }
@@ -328,11 +341,13 @@ pub(super) fn diagnose(
     has_temp: bool,
 ) -> Result<Concluded, EstimateError> {
     let total: usize = runs.iter().map(FitRun::len).sum();
+    let mut near = None;
     if !suspect.carried() && total > PRE_FROM {
         let copy = first_look_copy(runs);
         // When the first look cannot be had, the diagnosis on every sample looks for itself.
-        if let Ok(found) = first_look(suspect.clone(), model, &copy.runs(runs), motions, opts, has_temp) {
+        if let Ok((found, reached)) = first_look(suspect.clone(), model, &copy.runs(runs), motions, opts, has_temp) {
             suspect = found.looked_over();
+            near = reached;
         }
     }
     let mut as_declared = None;
@@ -379,7 +394,7 @@ pub(super) fn diagnose(
             (judged, stage) = (Some(sys), Some(drawn));
         }
         let a = super::analysis::analyse_from(model, fit, &moved, &now.motions(), has_temp, stage);
-        let check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged };
+        let check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged, near: near.as_ref() };
         if let Some(c) = conclude(a, model, &moved, &now.motions(), opts, has_temp, Some(check))? {
             return Ok(Concluded { stand: Some(suspect), ..c });
         }

@@ -39,7 +39,7 @@ mod stand;
 mod stream;
 
 pub use identify::{Correlation, Unidentifiable};
-pub use nonlinear::{bound_at_fit, held_at_fit, seen_tracks, NonlinearParam};
+pub use nonlinear::{bound_at_fit, held_at_fit, near_fit, seen_tracks, NonlinearParam};
 pub use request::{fit, FitData, FitOutcome, FitRequest, FitSource, ModelChoice, StreamPolicy};
 pub use result::{ChannelFit, CoefStatus, Coefficient, Fit, SensorFit};
 pub use runs::{fit_runs, mapped_state, tracks, FitRun, SeenFrom};

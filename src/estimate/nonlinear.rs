@@ -1,11 +1,13 @@
 //! Nonlinear parameters by variable projection: for given nonlinear parameters p (time
 //! delay, dead-zone widths), the true motion is transformed as the sensor sees it and the
-//! linear model is solved exactly (QR); argmin's Nelder–Mead minimises the resulting
-//! noise-weighted residual J(p) = Σ_sensors RSS_s(p)/σ_s². The standard errors of p come
-//! from the numerical Hessian H of J at the optimum: cov(p) = 2 H⁻¹ (for least squares
+//! linear model is solved exactly (QR); argmin's Nelder–Mead, after a coarse scan, minimises
+//! the resulting noise-weighted residual J(p) = Σ_sensors RSS_s(p)/σ_s². A start known to
+//! lie near the optimum ([`Model::start_near`]: the diagnosis's first look, or a search on
+//! fewer samples) takes Newton steps instead, on the same central differences the standard
+//! errors use. The standard errors of p come from the numerical Hessian H of J at the
+//! optimum, in units of each sensor's noise there: cov(p) = 2 H⁻¹ (for least squares
 //! J ≈ J₀ + Δpᵀ (JᵀJ/σ²) Δp). The linear coefficients' standard errors are conditional on
 //! p̂.
-
 use super::linear::fit_sensor;
 use super::{EstimateError, Fit, FitOptions, FitRun, SensorFit};
 use crate::model::Model;
@@ -195,14 +197,41 @@ pub fn bound_at_fit(model: &Model, fit: &Fit) -> Model {
     }
 }
 
+/// Standard errors a near start's step spans ([`near_fit`]).
+const NEAR_STEPS: f64 = 3.0;
+
+/// `model` with each fitted nonlinear effect's search started where `fit` put it, within
+/// [`NEAR_STEPS`] of its standard errors ([`Model::start_near`]): for a search on more
+/// samples of the same runs, or on a motion that moved little. An effect with a parameter
+/// without a standard error (at a bound) keeps its start, as does one `fit` does not carry.
+pub fn near_fit(model: &Model, fit: &Fit) -> Model {
+    let mut m = model.clone();
+    for e in model.nonlinear().iter().filter(|e| e.fitted) {
+        let mine: Vec<&NonlinearParam> = fit.nonlinear.iter().filter(|p| p.effect == e.effect.id()).collect();
+        let steps: Option<Vec<f64>> = mine
+            .iter()
+            .map(|p| p.std_error.filter(|se| *se > 0.0 && se.is_finite()).map(|se| NEAR_STEPS * se))
+            .collect();
+        if let Some(steps) = steps.filter(|s| s.len() == e.values.len()) {
+            let values: Vec<f64> = mine.iter().map(|p| p.value).collect();
+            m.start_near(e.effect.id(), &values, steps);
+        }
+    }
+    m
+}
+
 /// The fitted nonlinear parameters' definitions, in order: (effect id, definition).
 type Defs = Vec<(String, crate::model::ParamDef)>;
 
-/// Coarse start: each parameter scanned alone over ±{0.5 … 64}× its scale, so that the
-/// simplex starts in the right basin without hand tuning.
-fn coarse_start(obj: &Objective<'_, '_>, defs: &Defs, mut p0: Vec<f64>) -> Vec<f64> {
+/// Coarse start: each parameter without a near start (`near[i]` None) scanned alone over
+/// ±{0.5 … 64}× its scale, so that the simplex starts in the right basin without hand
+/// tuning.
+fn coarse_start(obj: &Objective<'_, '_>, defs: &Defs, near: &[Option<f64>], mut p0: Vec<f64>) -> Vec<f64> {
+    if near.iter().all(Option::is_some) {
+        return p0;
+    }
     let mut j_best = obj.value(&p0);
-    for (i, (_, d)) in defs.iter().enumerate() {
+    for (i, (_, d)) in defs.iter().enumerate().filter(|(i, _)| near[*i].is_none()) {
         let base = p0[i];
         for m in [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0] {
             for sign in [1.0, -1.0] {
@@ -222,19 +251,20 @@ fn coarse_start(obj: &Objective<'_, '_>, defs: &Defs, mut p0: Vec<f64>) -> Vec<f
     p0
 }
 
-/// Nelder–Mead from `p0` (a simplex of one scale step per parameter); the best point, within
-/// bounds, and the objective back for the Hessian. A search that stops on its iteration
-/// budget is an error unless screening.
+/// Nelder–Mead from `p0` (a simplex of one step per parameter: its near step, else its
+/// scale); the best point, within bounds, and the objective back for the Hessian. A search
+/// that stops on its iteration budget is an error unless screening.
 fn simplex<'a, 'b>(
     obj: Objective<'a, 'b>,
     defs: &Defs,
+    near: &[Option<f64>],
     p0: Vec<f64>,
     screening: bool,
 ) -> Result<(Vec<f64>, Option<Objective<'a, 'b>>), EstimateError> {
     let mut simplex = vec![p0.clone()];
     for (i, (_, d)) in defs.iter().enumerate() {
         let mut v = p0.clone();
-        v[i] += d.scale;
+        v[i] += near[i].unwrap_or(d.scale);
         simplex.push(v);
     }
     let solver = NelderMead::new(simplex)
@@ -261,28 +291,39 @@ fn simplex<'a, 'b>(
     Ok((p_hat, res.problem.problem))
 }
 
-/// Standard errors of the parameters from the numerical Hessian H of J at p̂ (central
-/// differences): cov(p) = 2 H⁻¹. Parameters at a bound (e.g. a zero dead zone) have none.
-fn hessian_std_errors(obj: &Objective<'_, '_>, defs: &Defs, p_hat: &[f64]) -> Vec<Option<f64>> {
-    let n = defs.len();
-    let mut ses = vec![None; n];
-    let h: Vec<f64> = defs.iter().zip(p_hat).map(|((_, d), v)| (d.scale * 1e-2).max(v.abs() * 1e-3)).collect();
-    let free: Vec<usize> =
-        (0..n).filter(|&i| p_hat[i] - h[i] >= defs[i].1.min && p_hat[i] + h[i] <= defs[i].1.max).collect();
-    if free.is_empty() {
-        return ses;
-    }
-    let j0 = obj.value(p_hat);
+/// J at a point with its central-difference gradient and Hessian over some of the
+/// parameters.
+struct Local {
+    j: f64,
+    grad: nalgebra::DVector<f64>,
+    hess: nalgebra::DMatrix<f64>,
+}
+
+/// The central-difference step of each parameter at `p`: a hundredth of its scale, or a
+/// thousandth of its value when that is larger.
+fn diff_steps(defs: &Defs, p: &[f64]) -> Vec<f64> {
+    defs.iter().zip(p).map(|((_, d), v)| (d.scale * 1e-2).max(v.abs() * 1e-3)).collect()
+}
+
+/// J at `p` with its gradient and Hessian over the parameters `free` by central
+/// differences of steps `h`: ∂J/∂pᵢ = (J(p + hᵢ) − J(p − hᵢ)) / 2hᵢ, ∂²J/∂pᵢ² =
+/// (J(p + hᵢ) − 2J(p) + J(p − hᵢ)) / hᵢ², and the cross terms from the four corners
+/// (J(+,+) − J(+,−) − J(−,+) + J(−,−)) / 4hᵢhⱼ.
+fn local(obj: &Objective<'_, '_>, p: &[f64], h: &[f64], free: &[usize]) -> Local {
+    let j0 = obj.value(p);
     let m = free.len();
     let mut hess = nalgebra::DMatrix::<f64>::zeros(m, m);
+    let mut grad = nalgebra::DVector::<f64>::zeros(m);
     let shifted = |i: usize, si: f64, j: usize, sj: f64| {
-        let mut q = p_hat.to_vec();
+        let mut q = p.to_vec();
         q[i] += si * h[i];
         q[j] += sj * h[j];
         obj.value(&q)
     };
     for (a, &i) in free.iter().enumerate() {
-        hess[(a, a)] = (shifted(i, 1.0, i, 0.0) - 2.0 * j0 + shifted(i, -1.0, i, 0.0)) / (h[i] * h[i]);
+        let (up, down) = (shifted(i, 1.0, i, 0.0), shifted(i, -1.0, i, 0.0));
+        hess[(a, a)] = (up - 2.0 * j0 + down) / (h[i] * h[i]);
+        grad[a] = (up - down) / (2.0 * h[i]);
         for (b, &j) in free.iter().enumerate().take(a) {
             let v = (shifted(i, 1.0, j, 1.0) - shifted(i, 1.0, j, -1.0) - shifted(i, -1.0, j, 1.0)
                 + shifted(i, -1.0, j, -1.0))
@@ -291,13 +332,103 @@ fn hessian_std_errors(obj: &Objective<'_, '_>, defs: &Defs, p_hat: &[f64]) -> Ve
             hess[(b, a)] = v;
         }
     }
-    if let Some(inv) = hess.try_inverse() {
+    Local { j: j0, grad, hess }
+}
+
+/// Standard errors of the parameters from the numerical Hessian H of J at p̂ (central
+/// differences, [`local`]): cov(p) = 2 H⁻¹. Parameters at a bound (e.g. a zero dead zone)
+/// have none.
+fn hessian_std_errors(obj: &Objective<'_, '_>, defs: &Defs, p_hat: &[f64]) -> Vec<Option<f64>> {
+    let n = defs.len();
+    let mut ses = vec![None; n];
+    let h = diff_steps(defs, p_hat);
+    let free: Vec<usize> =
+        (0..n).filter(|&i| p_hat[i] - h[i] >= defs[i].1.min && p_hat[i] + h[i] <= defs[i].1.max).collect();
+    if free.is_empty() {
+        return ses;
+    }
+    if let Some(inv) = local(obj, p_hat, &h, &free).hess.try_inverse() {
         for (a, &i) in free.iter().enumerate() {
             let v = 2.0 * inv[(a, a)];
             ses[i] = (v > 0.0 && v.is_finite()).then(|| v.sqrt());
         }
     }
     ses
+}
+
+/// Newton steps at most, from a near start.
+const NEWTON_STEPS: usize = 6;
+/// A Newton step below this fraction of every standard error ends the search.
+const NEWTON_DONE: f64 = 0.05;
+
+/// The search from a start near the optimum (every parameter with a near step): Newton
+/// steps p ← p − H⁻¹∇J on J's central-difference gradient and Hessian ([`local`]), the
+/// ones the standard errors come from. Near the optimum J of a least-squares fit is
+/// quadratic (J ≈ J₀ + Δpᵀ H Δp / 2), so one or two steps land where a simplex needs
+/// dozens of evaluations. Done when the next step is below [`NEWTON_DONE`] of every
+/// standard error (cov(p) = 2 H⁻¹): the point and its standard errors, exactly those
+/// [`hessian_std_errors`] gives there. None (the simplex then searches) when a difference
+/// step would leave a parameter's range, H is not positive definite, a step does not
+/// lower J, or [`NEWTON_STEPS`] do not settle.
+fn newton(obj: &Objective<'_, '_>, defs: &Defs, p0: Vec<f64>) -> Option<(Vec<f64>, Vec<Option<f64>>)> {
+    let n = defs.len();
+    let all: Vec<usize> = (0..n).collect();
+    let mut p = p0;
+    let mut j_start = None;
+    for _ in 0..NEWTON_STEPS {
+        let h = diff_steps(defs, &p);
+        if (0..n).any(|i| p[i] - h[i] < defs[i].1.min || p[i] + h[i] > defs[i].1.max) {
+            return None;
+        }
+        let l = local(obj, &p, &h, &all);
+        let chol = l.hess.clone().cholesky()?;
+        let step = chol.solve(&l.grad);
+        let cov = chol.inverse() * 2.0;
+        let se: Vec<f64> = (0..n).map(|i| cov[(i, i)].sqrt()).collect();
+        if se.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        // J is in units of the residual variance at the start, ≈ J(start) per sample: at p
+        // the standard errors in the residual's own noise are smaller by √(J(p)/J(start)).
+        let shrink = (l.j / *j_start.get_or_insert(l.j)).sqrt();
+        if (0..n).all(|i| step[i].abs() <= NEWTON_DONE * se[i] * shrink) {
+            return Some((p, se.into_iter().map(Some).collect()));
+        }
+        let q: Vec<f64> = (0..n).map(|i| bounded(&defs[i].1, p[i] - step[i])).collect();
+        if obj.value(&q) >= l.j {
+            return None;
+        }
+        p = q;
+    }
+    None
+}
+
+/// Standard errors `ses` (from J's Hessian at p̂) in the noise of the residual at p̂. J
+/// divides each sensor's residual sum of squares by its variance at the start, which a
+/// start far from p̂ inflates (a dead zone searched from zero: its whole misfit), while
+/// cov(p) = 2 H⁻¹ holds for J in units of the noise at p̂. With one sensor, H scales with
+/// 1/σ², so each standard error by σ̂/σ₀; with two, the Hessian is taken again with σ̂².
+fn in_noise_at(
+    mut obj: Objective<'_, '_>,
+    defs: &Defs,
+    p_hat: &[f64],
+    ses: Vec<Option<f64>>,
+    fits: [&SensorFit; 2],
+) -> Vec<Option<f64>> {
+    let at_p_hat: Vec<(SensorKind, f64)> =
+        obj.sensors.iter().map(|&(s, _)| (s, residual_variance(fits[usize::from(s == SensorKind::Accel)]))).collect();
+    if let ([(_, before)], [(_, after)]) = (obj.sensors.as_slice(), at_p_hat.as_slice()) {
+        let ratio = (after / before).sqrt();
+        return ses.into_iter().map(|se| se.map(|v| v * ratio)).collect();
+    }
+    obj.sensors = at_p_hat;
+    hessian_std_errors(&obj, defs, p_hat)
+}
+
+/// A sensor fit's residual variance per channel, averaged over its three channels (J's
+/// unit for that sensor).
+fn residual_variance(f: &SensorFit) -> f64 {
+    (f.channels.iter().map(|c| c.sigma * c.sigma).sum::<f64>() / 3.0).max(f64::MIN_POSITIVE)
 }
 
 /// Fits a model with nonlinear effects.
@@ -310,31 +441,52 @@ pub(crate) fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Resu
         .flat_map(|e| e.effect.params().into_iter().map(|d| (e.effect.id().to_string(), d)).collect::<Vec<_>>())
         .collect();
     let p0: Vec<f64> = model.nonlinear().iter().filter(|e| e.fitted).flat_map(|e| e.values.clone()).collect();
+    let near: Vec<Option<f64>> = model
+        .nonlinear()
+        .iter()
+        .filter(|e| e.fitted)
+        .flat_map(|e| (0..e.values.len()).map(|i| e.near.as_ref().and_then(|s| s.get(i).copied())))
+        .collect();
     let affected: Vec<SensorKind> = SensorKind::BOTH
         .into_iter()
         .filter(|s| model.nonlinear().iter().any(|e| e.effect.sensor().is_none_or(|x| x == *s)))
         .collect();
     let mut p_hat = p0.clone();
     let mut ses: Vec<Option<f64>> = vec![None; defs.len()];
+    let mut searched = None;
     if !defs.is_empty() {
         let mut sensors = Vec::new();
         for &s in &affected {
             let f = sensor_fit_at(model, &start, s, runs, opts)?;
-            let s2 = f.channels.iter().map(|c| c.sigma * c.sigma).sum::<f64>() / 3.0;
-            sensors.push((s, s2.max(f64::MIN_POSITIVE)));
+            sensors.push((s, residual_variance(&f)));
         }
         let inner = FitOptions { screening: true, slow_noise: false, ..*opts };
         let obj = Objective { model, runs, opts: inner, sensors };
-        let p0 = coarse_start(&obj, &defs, p0);
-        let (best, obj) = simplex(obj, &defs, p0, opts.screening)?;
-        p_hat = best;
-        if let Some(obj) = obj.as_ref().filter(|_| !opts.screening) {
-            ses = hessian_std_errors(obj, &defs, &p_hat);
-        }
+        let p0 = coarse_start(&obj, &defs, &near, p0);
+        let settled = if near.iter().all(Option::is_some) { newton(&obj, &defs, p0.clone()) } else { None };
+        searched = match settled {
+            Some((best, se)) => {
+                p_hat = best;
+                ses = se;
+                Some(obj)
+            }
+            None => {
+                let (best, obj) = simplex(obj, &defs, &near, p0, opts.screening)?;
+                p_hat = best;
+                if let Some(obj) = obj.as_ref().filter(|_| !opts.screening) {
+                    ses = hessian_std_errors(obj, &defs, &p_hat);
+                }
+                obj
+            }
+        };
     }
     let values = expand(model, &p_hat);
     let gyro = sensor_fit_at(model, &values, SensorKind::Gyro, runs, opts)?;
     let accel = sensor_fit_at(model, &values, SensorKind::Accel, runs, opts)?;
+    ses = match searched.filter(|_| !opts.screening) {
+        Some(obj) => in_noise_at(obj, &defs, &p_hat, ses, [&gyro, &accel]),
+        None => vec![None; defs.len()],
+    };
     let mut params = Vec::new();
     let mut k = 0;
     for (e, v) in model.nonlinear().iter().zip(&values) {

@@ -511,6 +511,9 @@ pub struct NonlinearEntry {
     pub values: Vec<f64>,
     /// Whether the parameters are estimated (false: held at `values`).
     pub fitted: bool,
+    /// A start near the optimum ([`Model::start_near`]): the step per parameter within
+    /// which `values` are known to lie of it. None: the search scans from `values`.
+    pub near: Option<Vec<f64>>,
 }
 
 /// A model: effects plus, per coefficient, whether it is fitted.
@@ -682,6 +685,34 @@ impl Model {
         &self.nonlinear
     }
 
+    /// Starts the search for the parameters of the fitted nonlinear effect `id` at `values`,
+    /// known to lie within about `steps` of the optimum (a fit of the same runs on fewer
+    /// samples, or on a motion that has moved little since): the search then skips its
+    /// coarse scan and starts from a simplex of those steps. No-op when the model lacks the
+    /// effect, holds its parameters, or the lengths do not match its parameters.
+    pub fn start_near(&mut self, id: &str, values: &[f64], steps: Vec<f64>) {
+        let Some(e) = self.nonlinear.iter_mut().find(|e| e.effect.id() == id && e.fitted) else {
+            return;
+        };
+        if values.len() != e.values.len() || steps.len() != values.len() {
+            return;
+        }
+        e.values = values.to_vec();
+        e.near = Some(steps);
+        self.rebind(id, values);
+    }
+
+    /// Takes `other`'s near starts ([`Model::start_near`]) for the fitted nonlinear effects
+    /// this model shares with it and would search from their start values.
+    pub fn starts_from(&mut self, other: &Model) {
+        for o in &other.nonlinear {
+            let Some(steps) = &o.near else { continue };
+            if self.nonlinear.iter().any(|e| e.effect.id() == o.effect.id() && e.fitted && e.near.is_none()) {
+                self.start_near(o.effect.id(), &o.values, steps.clone());
+            }
+        }
+    }
+
     /// Holds a nonlinear effect's parameters at given values (adds it if absent).
     pub fn fix_nonlinear(&mut self, id: &str, values: Vec<f64>) -> Result<(), ModelError> {
         self.add_effect(id)?;
@@ -707,7 +738,7 @@ impl Model {
         if u.has_nonlinear() {
             let effect: Arc<dyn NonlinearEffect> = Arc::new(user::UserNonlinear(u));
             let values = effect.params().iter().map(|p| p.nominal).collect();
-            self.nonlinear.push(NonlinearEntry { effect, values, fitted: true });
+            self.nonlinear.push(NonlinearEntry { effect, values, fitted: true, near: None });
         }
         self.name = format!("{}+{id}", self.name);
     }
@@ -819,7 +850,7 @@ impl Model {
         match find(id).ok_or_else(|| ModelError::UnknownEffect(id.to_string(), all_effect_ids().join(", ")))? {
             CatalogEffect::Nonlinear(e) => {
                 let values = e.params().iter().map(|p| p.nominal).collect();
-                self.nonlinear.push(NonlinearEntry { effect: e, values, fitted: true });
+                self.nonlinear.push(NonlinearEntry { effect: e, values, fitted: true, near: None });
             }
             CatalogEffect::Linear(e) => {
                 self.status.push(vec![TermStatus::Fitted; e.terms().len()]);
