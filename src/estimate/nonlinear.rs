@@ -201,7 +201,7 @@ pub fn bound_at_fit(model: &Model, fit: &Fit) -> Model {
 const NEAR_STEPS: f64 = 3.0;
 
 /// `model` with each fitted nonlinear effect's search started where `fit` put it, within
-/// [`NEAR_STEPS`] of its standard errors ([`Model::start_near`]): for a search on more
+/// three of its standard errors ([`Model::start_near`]): for a search on more
 /// samples of the same runs, or on a motion that moved little. An effect with a parameter
 /// without a standard error (at a bound) keeps its start, as does one `fit` does not carry.
 pub fn near_fit(model: &Model, fit: &Fit) -> Model {
