@@ -65,6 +65,23 @@ pub(super) fn analyse_from(
     has_temp: bool,
     stage: Option<NoiseStage>,
 ) -> Analysis {
+    analyse_after(model, base_fit, runs, motions, has_temp, stage, None)
+}
+
+/// [`analyse_from`] after `previous`, an analysis of the same runs and motions around
+/// another model (the climb's step before): a sensor whose part of the model, fit and
+/// candidates is unchanged ([`space::SensorKey`]: an effect of the other sensor was added)
+/// keeps its Grams in every run whose noise models for it are unchanged, instead of drawing
+/// them again (the same numbers).
+pub(super) fn analyse_after(
+    model: &Model,
+    base_fit: Fit,
+    runs: &[FitRun<'_>],
+    motions: &RunMotions<'_>,
+    has_temp: bool,
+    stage: Option<NoiseStage>,
+    previous: Option<&Analysis>,
+) -> Analysis {
     // A user effect's linear part at the parameters the fit estimated (a knee at its fitted
     // rate): the residual and the Grams are then those of the fitted model.
     let bound = crate::estimate::bound_at_fit(model, &base_fit);
@@ -72,9 +89,12 @@ pub(super) fn analyse_from(
     let universe = space::Universe::new(model, &base_fit, has_temp);
     let NoiseStage { stats, pooled, slow, span_s } =
         stage.unwrap_or_else(|| NoiseStage::new(model, &base_fit, runs, motions));
+    let previous = previous.filter(|p| p.space.runs.len() == runs.len());
+    let same = [0, 1].map(|si| previous.filter(|p| p.space.universe.sensor_key(si) == universe.sensor_key(si)));
     let gram_of = |i: usize, st| {
         let r = picture::run_residual(model, &base_fit, &runs[i]).0;
-        space::run_gram(&universe, model, &base_fit, &runs[i], st, &pooled, &r, (slow.as_slice(), span_s))
+        let kept = same.map(|p| p.map(|p| &p.space.runs[i]));
+        space::run_gram(&universe, model, &base_fit, &runs[i], st, &pooled, &r, (slow.as_slice(), span_s), kept)
     };
     let grams: Vec<space::RunGram> = stats.into_par_iter().enumerate().map(|(i, st)| gram_of(i, st)).collect();
     let names = runs.iter().map(|r| r.name.to_string()).collect();
@@ -141,4 +161,49 @@ fn lag_one(ar: &crate::stats::ArModel) -> f64 {
     let num: f64 = psi.windows(2).map(|w| w[0] * w[1]).sum();
     let den: f64 = psi.iter().map(|v| v * v).sum();
     num / den
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::{fit_runs, tracks, FitOptions};
+    use crate::session::MotionSpec;
+
+    /// After an effect of one sensor is added, the analysis keeps the other sensor's Grams
+    /// (a mark set in the earlier analysis's shows through) and draws its own again; every
+    /// Gram equals the one a fresh analysis draws.
+    #[test]
+    fn an_analysis_after_an_effect_keeps_the_other_sensors_grams() {
+        let mut cfg = crate::simulate::SimConfig::paper();
+        cfg.gyro_noise_deg_s = 0.002;
+        cfg.accel_noise_g = 2e-5;
+        let s = cfg.generate();
+        let tr = tracks(&s, &crate::motion::DerivativeConfig::default());
+        let runs = fit_runs(&s, &tr);
+        let motions: Vec<&MotionSpec> = s.runs.iter().map(|r| &r.spec.motion).collect();
+        let opts = FitOptions::default();
+        let base = Model::default_model();
+        let fitted = |m: &Model| crate::diagnose::refit(m, &runs, &opts).expect("fit");
+        for (effect, kept) in [("gyro-cubic", 3..6), ("accel-cubic", 0..3)] {
+            let mut before = analyse(&base, fitted(&base), &runs, &motions, false);
+            let mark = 1e300;
+            before.space.runs[0].gram[kept.start][(0, 0)] = mark;
+            let mut m = base.clone();
+            m.add_effect(effect).expect("a catalogue effect");
+            let fresh = analyse(&m, fitted(&m), &runs, &motions, false);
+            let after = analyse_after(&m, fitted(&m), &runs, &motions, false, None, Some(&before));
+            assert_eq!(after.space.runs[0].gram[kept.start][(0, 0)].to_bits(), mark.to_bits(), "{effect}: not kept");
+            for (i, (a, f)) in after.space.runs.iter().zip(&fresh.space.runs).enumerate() {
+                for c in 0..6 {
+                    if i == 0 && c == kept.start {
+                        continue;
+                    }
+                    assert_eq!(a.gram[c], f.gram[c], "{effect}: run {i} channel {c}");
+                    if !kept.contains(&c) {
+                        assert_ne!(a.gram[c], before.space.runs[i].gram[c], "{effect}: channel {c} kept");
+                    }
+                }
+            }
+        }
+    }
 }

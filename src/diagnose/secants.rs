@@ -82,7 +82,8 @@ impl Secants {
 
     /// The columns over the samples from `k0` whose run states are `base` into
     /// `out[candidate][parameter][i]` (resized), with `predict` the model's outputs per
-    /// sensor. The model is evaluated a block at a time ([`Predictor::block`]); every motion's
+    /// sensor; only the channels of the sensors `sensors` marks (the others' stay zero).
+    /// The model is evaluated a block at a time ([`Predictor::block`]); every motion's
     /// states come from those it is derived from ([`FitRun::seen_states`]: a stepped motion
     /// that is the seen one with a map more, a dead zone, takes the seen states through it).
     pub(super) fn fill(
@@ -91,6 +92,7 @@ impl Secants {
         run: &FitRun<'_>,
         k0: usize,
         base: &[State],
+        sensors: [bool; 2],
         out: &mut SecantBlock,
     ) {
         let len = base.len();
@@ -99,7 +101,7 @@ impl Secants {
         out.out.resize(len, [0.0; 3]);
         // The model's output on the motion it sees, once per sensor (every secant starts
         // there), its states from the run's (`base`).
-        for si in 0..2 {
+        for si in (0..2).filter(|&si| sensors[si]) {
             run.seen_states(&run.seen_from(self.seen[si].as_ref()), base, k0, &mut out.states[si]);
             out.start[si].resize(len, [0.0; 3]);
             predict[si].block(&out.states[si], &mut out.start[si], &mut out.tmp);
@@ -112,7 +114,7 @@ impl Secants {
                 col.clear();
                 col.resize(len, [0.0; 6]);
                 for (si, moved) in tracks.iter().enumerate() {
-                    let Some(moved) = moved else { continue };
+                    let Some(moved) = moved.as_ref().filter(|_| sensors[si]) else { continue };
                     let seen = FitRun { track: from(si), ..*run };
                     seen.seen_states(&seen.seen_from(Some(moved)), &out.states[si], k0, &mut out.moved);
                     predict[si].block(&out.moved, &mut out.out, &mut out.tmp);

@@ -200,6 +200,53 @@ impl Universe {
     pub fn width(&self, c: usize) -> usize {
         self.columns[c].len()
     }
+
+    /// What the Grams of sensor `si`'s channels are drawn from besides the runs and their
+    /// noise models ([`SensorKey`]).
+    pub fn sensor_key(&self, si: usize) -> SensorKey {
+        let sensor = SensorKind::BOTH[si];
+        let acts = |e: &crate::model::NonlinearEntry| e.effect.sensor().is_none_or(|s| s == sensor);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+        SensorKey {
+            terms: self
+                .augmented
+                .terms(sensor)
+                .iter()
+                .zip(&self.values[si])
+                .map(|(t, v)| (t.term.name.clone(), v.to_bits()))
+                .collect(),
+            columns: std::array::from_fn(|ch| {
+                self.columns[3 * si + ch]
+                    .iter()
+                    .map(|&(g, src)| {
+                        (self.params[g].name.clone(), self.params[g].base, matches!(src, Source::Secant(..)))
+                    })
+                    .collect()
+            }),
+            nonlinear: self
+                .nonlinear
+                .iter()
+                .filter(|(e, _, _)| acts(e))
+                .map(|(e, steps, in_base)| (e.effect.id(), bits(&e.values), bits(steps), *in_base))
+                .collect(),
+        }
+    }
+}
+
+/// What the Grams of one sensor's channels are drawn from, besides the runs and their noise
+/// models: the augmented terms of the sensor with their values (the base fit's, or the
+/// nominal of a candidate), each channel's columns (parameter name, whether the base
+/// model's, whether a secant), and the nonlinear entries acting on the sensor (id, values,
+/// secant steps, whether the base model's: its parameters at the fit's values). The
+/// residual follows from the same terms, values and nonlinear parameters; so two universes
+/// with equal keys draw the same Grams for that sensor's channels on the same runs under
+/// the same noise models, and an analysis after an effect of the other sensor was added
+/// keeps them ([`run_gram`]'s `kept`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorKey {
+    terms: Vec<(String, u64)>,
+    columns: [Vec<(String, bool, bool)>; 3],
+    nonlinear: Vec<(&'static str, Vec<u64>, Vec<u64>, bool)>,
 }
 
 /// The noise of one channel in one run.
@@ -615,11 +662,19 @@ pub fn run_gram(
     pooled: &[ArModel],
     r: &[Vec<f64>],
     slow: (&[Option<SlowNoise>], f64),
+    kept: [Option<&RunGram>; 2],
 ) -> RunGram {
     let b = stats.basis;
     let noise = run_noises(&stats, pooled);
     let secants = Secants::new(&u.nonlinear, base, fit, run);
-    let gram = channel_grams(u, run, &noise, &b, r, &secants);
+    // A sensor's Grams from an earlier analysis of this run serve when its noise models
+    // are those it was drawn under (the caller vouches for the rest: equal sensor keys).
+    let kept = [0, 1].map(|si| {
+        kept[si]
+            .filter(|k| k.noise.get(3 * si..3 * si + 3) == noise.get(3 * si..3 * si + 3))
+            .and_then(|k| k.gram.get(3 * si..3 * si + 3))
+    });
+    let gram = channel_grams(u, run, &noise, &b, r, &secants, kept);
     let slow_cov = run_slow(run, &stats, slow);
     RunGram {
         gram,
@@ -665,7 +720,7 @@ pub fn design_gram(
     let noise: Vec<RunNoise> = noise.iter().map(|x| RunNoise { ar: x.ar.clone(), n }).collect();
     let secants = Secants::new(&u.nonlinear, base, fit, run);
     let zero: Vec<Vec<f64>> = (0..6).map(|_| vec![0.0; n]).collect();
-    let gram = channel_grams(u, run, &noise, &b, &zero, &secants);
+    let gram = channel_grams(u, run, &noise, &b, &zero, &secants, [None, None]);
     RunGram {
         gram,
         basis: b.size,
@@ -709,7 +764,9 @@ fn run_lines(channel: usize, clean: &[f64], t: &[f64], fs_hz: f64) -> Vec<RunLin
 
 /// The whitened Grams of the six channels of one run, built block by block: the states
 /// and the basis rows of a block are evaluated once for all channels; each channel's block
-/// of unwhitened columns is prewhitened and its Gram updated ([`WhitenedGram`]).
+/// of unwhitened columns is prewhitened and its Gram updated ([`WhitenedGram`]). A
+/// sensor's three Grams in `kept` are taken as they are (nothing of that sensor is
+/// evaluated).
 fn channel_grams(
     u: &Universe,
     run: &FitRun<'_>,
@@ -717,7 +774,12 @@ fn channel_grams(
     basis: &RunBasis,
     r: &[Vec<f64>],
     secants: &Secants,
+    kept: [Option<&[DMatrix<f64>]>; 2],
 ) -> Vec<DMatrix<f64>> {
+    let drawn = kept.map(|k| k.is_none());
+    if drawn == [false, false] {
+        return kept.iter().flatten().flat_map(|k| k.iter().cloned()).collect();
+    }
     let n = run.len();
     let nb = basis.size;
     let terms: [Vec<TermRef<'_>>; 2] = SensorKind::BOTH.map(|s| u.augmented.terms(s));
@@ -739,6 +801,9 @@ fn channel_grams(
         })
         .collect();
     let needed: [Vec<usize>; 2] = [0, 1].map(|si| {
+        if !drawn[si] {
+            return Vec::new();
+        }
         let mut v: Vec<usize> = recipes[3 * si..3 * si + 3].iter().flatten().flatten().map(|p| p.0).collect();
         v.sort_unstable();
         v.dedup();
@@ -757,7 +822,7 @@ fn channel_grams(
         states.clear();
         run.states_into(k0..k1, &mut states);
         if !u.nonlinear.is_empty() {
-            secants.fill(&predict, run, k0, &states, &mut secant_block);
+            secants.fill(&predict, run, k0, &states, drawn, &mut secant_block);
         }
         basis.rows_into(&t[k0..k1], &mut row, basis_rows.as_mut_slice(), BLOCK);
         for si in 0..2 {
@@ -765,7 +830,7 @@ fn channel_grams(
                 terms[si][ti].regressors(&states, &mut regs[si][ti * BLOCK..][..len]);
             }
         }
-        for (c, chn) in chans.iter_mut().enumerate() {
+        for (c, chn) in chans.iter_mut().enumerate().filter(|(c, _)| drawn[c / 3]) {
             let si = c / 3;
             let width = u.width(c);
             for (j, &(_, src)) in u.columns[c].iter().enumerate() {
@@ -799,7 +864,14 @@ fn channel_grams(
         }
         k0 = k1;
     }
-    chans.into_iter().map(WhitenedGram::finish).collect()
+    chans
+        .into_iter()
+        .enumerate()
+        .map(|(c, g)| match kept[c / 3] {
+            Some(k) => k[c % 3].clone(),
+            None => g.finish(),
+        })
+        .collect()
 }
 
 /// The Gauss–Newton column of term `ti` (of `terms`) in output channel `ch`, as a weighted
