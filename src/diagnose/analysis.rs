@@ -52,28 +52,16 @@ pub(super) fn analyse(
     motions: &RunMotions<'_>,
     has_temp: bool,
 ) -> Analysis {
-    analyse_from(model, base_fit, runs, motions, has_temp, None)
+    analyse_from(model, base_fit, runs, motions, has_temp, None, None)
 }
 
 /// [`analyse`], with the noise side already drawn (`stage`: [`NoiseStage::new`] of the same
-/// model, fit, runs and motions) or drawn here (None).
+/// model, fit, runs and motions) or drawn here (None), and after `previous`, an analysis of
+/// the same runs and motions around another model (the climb's step before): a sensor whose
+/// part of the model, fit and candidates is unchanged ([`space::SensorKey`]: an effect of
+/// the other sensor was added) keeps its Grams in every run whose noise models for it are
+/// unchanged, instead of drawing them again (the same numbers).
 pub(super) fn analyse_from(
-    model: &Model,
-    base_fit: Fit,
-    runs: &[FitRun<'_>],
-    motions: &RunMotions<'_>,
-    has_temp: bool,
-    stage: Option<NoiseStage>,
-) -> Analysis {
-    analyse_after(model, base_fit, runs, motions, has_temp, stage, None)
-}
-
-/// [`analyse_from`] after `previous`, an analysis of the same runs and motions around
-/// another model (the climb's step before): a sensor whose part of the model, fit and
-/// candidates is unchanged ([`space::SensorKey`]: an effect of the other sensor was added)
-/// keeps its Grams in every run whose noise models for it are unchanged, instead of drawing
-/// them again (the same numbers).
-pub(super) fn analyse_after(
     model: &Model,
     base_fit: Fit,
     runs: &[FitRun<'_>],
@@ -191,7 +179,7 @@ mod tests {
             let mut m = base.clone();
             m.add_effect(effect).expect("a catalogue effect");
             let fresh = analyse(&m, fitted(&m), &runs, &motions, false);
-            let after = analyse_after(&m, fitted(&m), &runs, &motions, false, None, Some(&before));
+            let after = analyse_from(&m, fitted(&m), &runs, &motions, false, None, Some(&before));
             assert_eq!(after.space.runs[0].gram[kept.start][(0, 0)].to_bits(), mark.to_bits(), "{effect}: not kept");
             for (i, (a, f)) in after.space.runs.iter().zip(&fresh.space.runs).enumerate() {
                 for c in 0..6 {

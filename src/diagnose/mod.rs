@@ -662,7 +662,7 @@ fn climb(
             m.starts_from(near);
         }
         let f = refit_reduced(&m, runs, opts, warnings)?;
-        let next = analysis::analyse_after(&m, f, runs, motions, has_temp, None, Some(&a));
+        let next = analysis::analyse_from(&m, f, runs, motions, has_temp, None, Some(&a));
         let noise = noise_reports(&next.space);
         let channels = pictures(&next, &next.space.base_set(), &next.base_fit, &noise);
         if let Some(sc) = stand_check.as_deref_mut() {

@@ -393,7 +393,7 @@ pub(super) fn diagnose(
             }
             (judged, stage) = (Some(sys), Some(drawn));
         }
-        let a = super::analysis::analyse_from(model, fit, &moved, &now.motions(), has_temp, stage);
+        let a = super::analysis::analyse_from(model, fit, &moved, &now.motions(), has_temp, stage, None);
         let check = StandCheck { suspect: &mut suspect, declared: runs, last: None, judged, near: near.as_ref() };
         if let Some(c) = conclude(a, model, &moved, &now.motions(), opts, has_temp, Some(check))? {
             return Ok(Concluded { stand: Some(suspect), ..c });

@@ -446,6 +446,8 @@ pub(crate) fn fit(model: &Model, runs: &[FitRun<'_>], opts: &FitOptions) -> Resu
         .iter()
         .filter(|e| e.fitted)
         .flat_map(|e| (0..e.values.len()).map(|i| e.near.as_ref().and_then(|s| s.get(i).copied())))
+        // A step that is no step (zero, negative, not finite) is no near start.
+        .map(|s| s.filter(|v| *v > 0.0 && v.is_finite()))
         .collect();
     let affected: Vec<SensorKind> = SensorKind::BOTH
         .into_iter()
