@@ -688,8 +688,9 @@ impl Model {
     /// Starts the search for the parameters of the fitted nonlinear effect `id` at `values`,
     /// known to lie within about `steps` of the optimum (a fit of the same runs on fewer
     /// samples, or on a motion that has moved little since): the search then skips its
-    /// coarse scan and starts from a simplex of those steps. No-op when the model lacks the
-    /// effect, holds its parameters, or the lengths do not match its parameters.
+    /// coarse scan and takes Newton steps from there (a simplex of those steps when they
+    /// fail). No-op when the model lacks the effect, holds its parameters, or the lengths
+    /// do not match its parameters.
     pub fn start_near(&mut self, id: &str, values: &[f64], steps: Vec<f64>) {
         let Some(e) = self.nonlinear.iter_mut().find(|e| e.effect.id() == id && e.fitted) else {
             return;
