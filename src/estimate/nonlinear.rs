@@ -2,12 +2,13 @@
 //! delay, dead-zone widths), the true motion is transformed as the sensor sees it and the
 //! linear model is solved exactly (QR); argmin's Nelder–Mead, after a coarse scan, minimises
 //! the resulting noise-weighted residual J(p) = Σ_sensors RSS_s(p)/σ_s². A start known to
-//! lie near the optimum ([`Model::start_near`]: the diagnosis's first look, or a search on
-//! fewer samples) takes Newton steps instead, on the same central differences the standard
-//! errors use. The standard errors of p come from the numerical Hessian H of J at the
+//! lie near the optimum ([`Model::start_near`]: what the diagnosis's first look fitted on
+//! fewer samples, or before a small correction of the motion) takes Newton steps instead,
+//! on the same central differences the standard errors use. The standard errors of p come from the numerical Hessian H of J at the
 //! optimum, in units of each sensor's noise there: cov(p) = 2 H⁻¹ (for least squares
 //! J ≈ J₀ + Δpᵀ (JᵀJ/σ²) Δp). The linear coefficients' standard errors are conditional on
 //! p̂.
+
 use super::linear::fit_sensor;
 use super::{EstimateError, Fit, FitOptions, FitRun, SensorFit};
 use crate::model::Model;
