@@ -382,7 +382,7 @@ fn newton(obj: &Objective<'_, '_>, defs: &Defs, p0: Vec<f64>) -> Option<(Vec<f64
             return None;
         }
         let l = local(obj, &p, &h, &all);
-        let chol = l.hess.clone().cholesky()?;
+        let chol = l.hess.cholesky()?;
         let step = chol.solve(&l.grad);
         let cov = chol.inverse() * 2.0;
         let se: Vec<f64> = (0..n).map(|i| cov[(i, i)].sqrt()).collect();
