@@ -197,15 +197,10 @@ impl<'m> Knobs<'m> {
             (Some((now, _, mount)), Some((an0, sc0, cone0))) if self.through_angle => {
                 // The believed motion with its angle, rate and angular acceleration nudged in
                 // turn; the angle's step exactly (its sine by angle addition).
-                let (sh, ch) = self.angle_step_trig;
-                for (d, h) in ANGLE_STEP.iter().enumerate() {
-                    let (mut an, mut sc) = (*an0, *sc0);
-                    match d {
-                        0 => sc = (sc0.0 * ch + sc0.1 * sh, sc0.1 * ch - sc0.0 * sh),
-                        1 => an.rate += h,
-                        _ => an.accel += h,
-                    }
-                    let x = to_sensor(now.at_angle_trig(an, sc, Some(*cone0)), mount);
+                let nudged =
+                    now.at_angle_nudged(*an0, *sc0, Some(*cone0), self.angle_step_trig, [ANGLE_STEP[1], ANGLE_STEP[2]]);
+                for (d, x) in nudged.into_iter().enumerate() {
+                    let x = to_sensor(x, mount);
                     let s1 = &mut self.angle_nudged[d * BLOCK + i];
                     *s1 = *st;
                     s1.w = x.w_rad_s.xyz;
@@ -215,7 +210,7 @@ impl<'m> Knobs<'m> {
                 // A logged angle moves with the phase alone (the encoder's offset).
                 Some(match logged {
                     Some(_) => AnglePartials::logged(),
-                    None => now.motion.angle_partials(t_s),
+                    None => now.motion.angle_partials_near(t_s, an0.theta, *sc0),
                 })
             }
             _ => None,
@@ -259,6 +254,19 @@ impl<'m> Knobs<'m> {
                 _ => {}
             }
             self.nudged[j * BLOCK + i] = s1;
+        }
+    }
+
+    /// Whether local parameter `j`'s column can be nonzero for sensor `si` (0 gyro, 1
+    /// accel): whether its nudge can move a quantity the sensor's model reads (a tilt moves
+    /// only the specific force, the Earth's rate or a static pose's rate only the rate). A
+    /// column it cannot move is zero in every block ([`Self::columns`]).
+    pub(super) fn felt_by(&self, j: usize, si: usize) -> bool {
+        let r = self.reads[si];
+        match (self.dirs[j].0, self.short[j]) {
+            (_, Shortcut::Up(_)) => r.force,
+            (Dir::Rate(_), _) | (_, Shortcut::Earth(_)) => r.rate,
+            _ => r.rate || r.ang_accel || r.force,
         }
     }
 

@@ -29,6 +29,7 @@ use crate::estimate::slow::SlowNoise;
 use crate::estimate::{CoefStatus, Fit, FitRun};
 use crate::model::{catalog, scale_matrix, CatalogEffect, Model, Predictor, Role, State, TermRef};
 use crate::motion::cone_phase;
+use crate::motion::stand::NearTrig;
 use crate::session::MotionSpec;
 use crate::stats::gram::WhitenedGram;
 use crate::stats::spectrum::{lines, refine_frequency, welch};
@@ -306,15 +307,16 @@ pub struct RunGram {
 }
 
 /// The basis functions at one sample: Legendre P0…P3 of s ∈ [−1, 1], then cos hθ, sin hθ.
-fn basis_row(s: f64, theta: Option<f64>, first: usize, out: &mut [f64]) {
+/// `trig`: sin θ and cos θ of the cone phase (None: no harmonics).
+#[inline(always)]
+fn basis_row(s: f64, trig: Option<(f64, f64)>, first: usize, out: &mut [f64]) {
     out[0] = 1.0;
     out[1] = s;
     out[2] = 0.5 * (3.0 * s * s - 1.0);
     out[3] = 0.5 * (5.0 * s * s * s - 3.0 * s);
-    if let Some(th) = theta {
-        // cos hθ, sin hθ by the angle-addition recurrence from the first harmonic's
-        // (one sin_cos per sample; the recurrence's rounding stays near 1e-15 at these h).
-        let (s1, c1) = libm::sincos(th);
+    if let Some((s1, c1)) = trig {
+        // cos hθ, sin hθ by the angle-addition recurrence from the first harmonic's (the
+        // recurrence's rounding stays near 1e-15 at these h).
         let (mut sn, mut cs) = (0.0, 1.0);
         for h in 1..=HARMONICS {
             (sn, cs) = (sn * c1 + cs * s1, cs * c1 - sn * s1);
@@ -356,14 +358,23 @@ impl RunBasis {
     /// The basis functions at time `t_s`.
     #[inline]
     pub fn row(&self, t_s: f64, out: &mut [f64]) {
-        basis_row((t_s - self.t0) / self.half - 1.0, self.phase.map(|p| p.theta(t_s)), self.first, out);
+        self.row_with(t_s, out, libm::sincos);
+    }
+
+    /// [`Self::row`] with the cone phase's sine and cosine from `trig`.
+    #[inline(always)]
+    fn row_with(&self, t_s: f64, out: &mut [f64], trig: impl FnOnce(f64) -> (f64, f64)) {
+        basis_row((t_s - self.t0) / self.half - 1.0, self.phase.map(|p| trig(p.theta(t_s))), self.first, out);
     }
 
     /// The rows at stamps `t` into the column-major block `out` (leading dimension `ld`:
     /// function b of sample i at `out[b·ld + i]`); `row` is scratch of the basis's size.
+    /// The phase's sines are walked from sample to sample ([`NearTrig`]: [`Self::row`]'s
+    /// numbers to a unit in the last place, a libm sine every 0.05 rad of the phase).
     pub fn rows_into(&self, t: &[f64], row: &mut [f64], out: &mut [f64], ld: usize) {
+        let mut trig = NearTrig::default();
         for (i, &ti) in t.iter().enumerate() {
-            self.row(ti, row);
+            self.row_with(ti, row, |th| trig.of(th));
             for (b, v) in row.iter().enumerate() {
                 out[b * ld + i] = *v;
             }
@@ -470,6 +481,8 @@ pub fn run_noise(
     }
     let bins = basis.fold_bins(n);
     let mut fold = PhaseFold::new(bins);
+    // Each sample's phase bin, worked out once for the six channels.
+    let sample_bins = basis.phase.map(|phase| fold.bins(t, phase)).unwrap_or_default();
     for (c, mut clean) in r.into_iter().enumerate() {
         // Lines are not noise: their sinusoids leave before the noise is modelled.
         let here = run_lines(c, &clean, t, fs_hz);
@@ -479,9 +492,7 @@ pub fn run_noise(
         // Nor is what follows the cone phase beyond the basis's harmonics (the square wave
         // of a hysteresis has them all): modelled as noise it would make the AR model
         // resonate at low frequency and hide the very effect that leaves it.
-        if let Some(phase) = basis.phase {
-            fold.remove(&mut clean, t, phase);
-        }
+        fold.remove(&mut clean, &sample_bins);
         acov.push(crate::stats::ar::autocovariances(&clean, crate::stats::ar::MAX_ORDER));
         found.extend(here);
     }
@@ -522,6 +533,8 @@ impl Fold {
 
 /// Phase bins of the fold of a conic run's noise (module documentation, step 2).
 pub const FOLD_BINS: usize = 64;
+// A sample's bin is kept in a byte.
+const _: () = assert!(FOLD_BINS <= 256);
 /// Revolutions a run needs for its fold: each bin's mean then averages that many passes.
 pub const FOLD_REVOLUTIONS: f64 = 3.0;
 
@@ -542,22 +555,31 @@ impl PhaseFold {
         ((theta.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * b as f64) as usize).min(b - 1)
     }
 
-    fn remove(&mut self, x: &mut [f64], t: &[f64], phase: PhaseLine) {
+    /// The bin of each stamp of `t` (none without bins).
+    fn bins(&self, t: &[f64], phase: PhaseLine) -> Vec<u8> {
         if self.sum.is_empty() {
+            return Vec::new();
+        }
+        t.iter().map(|&tk| self.bin(phase.theta(tk)) as u8).collect()
+    }
+
+    /// Removes each bin's mean from `x`, whose samples fall in bins `bins` ([`Self::bins`];
+    /// nothing when empty).
+    fn remove(&mut self, x: &mut [f64], bins: &[u8]) {
+        if self.sum.is_empty() || bins.len() < x.len() {
             return;
         }
         self.sum.iter_mut().for_each(|v| *v = 0.0);
         self.count.iter_mut().for_each(|v| *v = 0.0);
-        for (v, &tk) in x.iter().zip(t) {
-            let b = self.bin(phase.theta(tk));
-            self.sum[b] += v;
-            self.count[b] += 1.0;
+        for (v, &b) in x.iter().zip(bins) {
+            self.sum[b as usize] += v;
+            self.count[b as usize] += 1.0;
         }
         for (s, c) in self.sum.iter_mut().zip(&self.count) {
             *s /= c.max(1.0);
         }
-        for (v, &tk) in x.iter_mut().zip(t) {
-            *v -= self.sum[self.bin(phase.theta(tk))];
+        for (v, &b) in x.iter_mut().zip(bins) {
+            *v -= self.sum[b as usize];
         }
     }
 }

@@ -12,6 +12,9 @@ use nalgebra::Matrix3;
 pub struct Mount {
     names: [String; 3],
     m: Matrix3<f64>,
+    /// Per sensor axis: the stand axis it lies along and the sign (M's only nonzero entry
+    /// in that row), so that a vector is mapped by picking and signing its components.
+    perm: [(usize, f64); 3],
 }
 
 /// Why a mount is rejected.
@@ -51,7 +54,7 @@ fn axis(name: &str) -> Result<[f64; 3], MountError> {
 impl Mount {
     /// The nominal mount `["+x", "+y", "+z"]`.
     pub fn identity() -> Self {
-        Self { names: ["+x".into(), "+y".into(), "+z".into()], m: Matrix3::identity() }
+        Self::from_matrix(["+x".into(), "+y".into(), "+z".into()], Matrix3::identity())
     }
 
     /// Parses signed axis names (rows of M); rejects anything that is not a proper rotation.
@@ -72,7 +75,16 @@ impl Mount {
         if m.determinant() < 0.0 {
             return Err(MountError::NotRotation(owned, "it is a mirror image, determinant -1"));
         }
-        Ok(Self { names: [owned[0].clone(), owned[1].clone(), owned[2].clone()], m })
+        Ok(Self::from_matrix([owned[0].clone(), owned[1].clone(), owned[2].clone()], m))
+    }
+
+    /// The mount of a signed permutation matrix `m` (rows: unit stand axes).
+    fn from_matrix(names: [String; 3], m: Matrix3<f64>) -> Self {
+        let perm = std::array::from_fn(|i| {
+            let j = (0..3).find(|&j| m[(i, j)] != 0.0).unwrap_or(i);
+            (j, m[(i, j)])
+        });
+        Self { names, m, perm }
     }
 
     /// The axis names as written (e.g. `["+y", "+z", "+x"]`).
@@ -88,15 +100,20 @@ impl Mount {
     /// `v_sensor = M v_stand`.
     #[inline]
     pub fn to_sensor(&self, v: V3<Stand>) -> V3<Sensor> {
-        let r = self.m * nalgebra::Vector3::from(v.xyz);
-        V3::new([r[0], r[1], r[2]])
+        // M is a signed permutation: each sensor component is one stand component, signed
+        // (exactly M v for finite v, without the products by zero).
+        let [(i0, s0), (i1, s1), (i2, s2)] = self.perm;
+        V3::new([s0 * v.xyz[i0], s1 * v.xyz[i1], s2 * v.xyz[i2]])
     }
 
     /// `v_stand = Mᵀ v_sensor`.
     #[inline]
     pub fn to_stand(&self, v: V3<Sensor>) -> V3<Stand> {
-        let r = self.m.transpose() * nalgebra::Vector3::from(v.xyz);
-        V3::new([r[0], r[1], r[2]])
+        let mut r = [0.0; 3];
+        for (k, &(i, s)) in self.perm.iter().enumerate() {
+            r[i] = s * v.xyz[k];
+        }
+        V3::new(r)
     }
 }
 
@@ -111,6 +128,32 @@ mod tests {
         assert!(s.xyz.iter().zip([2.0, 3.0, 1.0]).all(|(a, b)| (a - b).abs() < 1e-15));
         let back = m.to_stand(s);
         assert!(back.xyz.iter().zip([1.0, 2.0, 3.0]).all(|(a, b)| (a - b).abs() < 1e-15));
+    }
+
+    #[test]
+    fn every_mount_maps_as_its_matrix() {
+        let names = ["+x", "-x", "+y", "-y", "+z", "-z"];
+        let v = [0.3, -1.7, 2.9];
+        let mut proper = 0;
+        for a in names {
+            for b in names {
+                for c in names {
+                    let Ok(m) = Mount::parse(&[a, b, c]) else { continue };
+                    proper += 1;
+                    let want = m.matrix() * nalgebra::Vector3::from(v);
+                    assert_eq!(
+                        m.to_sensor(V3::new(v)).xyz.map(f64::to_bits),
+                        [want[0], want[1], want[2]].map(f64::to_bits)
+                    );
+                    let back = m.matrix().transpose() * nalgebra::Vector3::from(v);
+                    assert_eq!(
+                        m.to_stand(V3::new(v)).xyz.map(f64::to_bits),
+                        [back[0], back[1], back[2]].map(f64::to_bits)
+                    );
+                }
+            }
+        }
+        assert_eq!(proper, 24, "the proper rotations among signed axis permutations");
     }
 
     #[test]

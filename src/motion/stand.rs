@@ -126,6 +126,24 @@ impl StandMotion {
     /// θ by θ′ δθ₀ + δR, θ̇ by δθ̇₀ θ′ + θ̇₀ (R″ δθ₀ + δR′) and θ̈ by
     /// 2 θ̇₀ δθ̇₀ θ″ + θ̇₀² (R‴ δθ₀ + δR″) + δθ̈₀ θ′ + θ̈₀ (R″ δθ₀ + δR′).
     pub fn angle_partials(&self, t_s: f64) -> AnglePartials {
+        self.angle_partials_with(t_s, libm::sincos)
+    }
+
+    /// [`Self::angle_partials`] with the sine and cosine of the angle at `t_s` given
+    /// (`theta`, `sc`: [`Self::angle`]'s θ, as a walk along the run has them): the unrippled
+    /// angle's are then those (without a ripple they are the same angle) or had from them by
+    /// [`sincos_near`], the same to a unit in the last place.
+    #[inline]
+    pub fn angle_partials_near(&self, t_s: f64, theta: f64, sc: (f64, f64)) -> AnglePartials {
+        self.angle_partials_with(
+            t_s,
+            |th0| if th0.to_bits() == theta.to_bits() { sc } else { sincos_near(th0, theta, sc) },
+        )
+    }
+
+    /// [`Self::angle_partials`] with the unrippled angle's sine and cosine from `trig`.
+    #[inline(always)]
+    fn angle_partials_with(&self, t_s: f64, trig: impl FnOnce(f64) -> (f64, f64)) -> AnglePartials {
         let w = self.rate_rad_s;
         let d = self.rate_drift_per_s;
         let tau = t_s - self.drift_from_s;
@@ -134,7 +152,7 @@ impl StandMotion {
         } else {
             (w * (t_s + 0.5 * d * tau * tau) + self.phase_rad, w * (1.0 + d * tau), w * d)
         };
-        let (s1, c1) = libm::sincos(th0);
+        let (s1, c1) = trig(th0);
         // sin and cos of hθ₀ for h = 1, 2 (the double angle).
         let harm = [(s1, c1), (2.0 * s1 * c1, c1 * c1 - s1 * s1)];
         let (mut r1, mut r2, mut r3) = (0.0, 0.0, 0.0);
@@ -315,46 +333,98 @@ impl StandAt {
     /// sample (a stand parameter nudged at a time) then cost one sine, the numbers of
     /// [`Self::at_angle`] to within a few units in the last place.
     #[inline(always)]
-    pub fn at_angle_trig(&self, an: Angle, (st, ct): (f64, f64), cone: Option<(f64, f64, f64)>) -> Kinematics {
-        let Angle { theta: _, rate: td, accel: tdd } = an;
+    pub fn at_angle_trig(&self, an: Angle, sc: (f64, f64), cone: Option<(f64, f64, f64)>) -> Kinematics {
+        self.kinematics(&self.frame(sc, cone), an.rate, an.accel)
+    }
+
+    /// The kinematics at the stand angle with sines `sc` moved by the angle step whose sine
+    /// and cosine are `step` (by angle addition), at the rate moved by `h_rate`, and at the
+    /// angular acceleration moved by `h_accel`: the three nudged states of the angle's law
+    /// (the diagnosis's stand columns), the same numbers as three calls of
+    /// [`Self::at_angle_trig`]; the last two share their sines and rotations.
+    #[inline(always)]
+    pub fn at_angle_nudged(
+        &self,
+        an: Angle,
+        (st, ct): (f64, f64),
+        cone: Option<(f64, f64, f64)>,
+        (sh, ch): (f64, f64),
+        [h_rate, h_accel]: [f64; 2],
+    ) -> [Kinematics; 3] {
+        let moved = (st * ch + ct * sh, ct * ch - st * sh);
+        let here = self.frame((st, ct), cone);
+        [
+            self.at_angle_trig(an, moved, cone),
+            self.kinematics(&here, an.rate + h_rate, an.accel),
+            self.kinematics(&here, an.rate, an.accel + h_accel),
+        ]
+    }
+
+    /// What the kinematics at one stand angle take of its sines (`at_angle_trig`'s `cone`).
+    #[inline(always)]
+    fn frame(&self, (st, ct): (f64, f64), cone: Option<(f64, f64, f64)>) -> Frame {
         let m = &self.motion;
         let [wc, ws] = m.wobble_rad;
         let alpha = m.cone_angle_rad + wc * ct + ws * st;
-        let a1 = -wc * st + ws * ct; // dα/dθ
-        let a2 = -wc * ct - ws * st; // d²α/dθ²
-        let ad = a1 * td;
-        let add = a2 * td * td + a1 * tdd;
         let hit = |c: Option<(f64, f64, f64)>| c.filter(|c| c.0.to_bits() == alpha.to_bits()).map(|c| (c.1, c.2));
         // A nearby motion's cone angle (a nudged one) from its sine and cosine.
         let (sa, ca) = hit(self.cone).or_else(|| hit(cone)).unwrap_or_else(|| match cone {
             Some((a0, s0, c0)) => sincos_near(alpha, a0, (s0, c0)),
             None => libm::sincos(alpha),
         });
-        let f = [sa * ct, -sa * st, 1.0 - ca];
-        let f_t = [-sa * st, -sa * ct, 0.0];
-        let f_a = [ca * ct, -ca * st, sa];
-        let gv = [st, ct, 0.0];
-        let g_t = [ct, -st, 0.0];
+        let to_body = |v: [f64; 3]| rotate_t([st, ct], [sa, ca], v);
+        Frame {
+            a1: -wc * st + ws * ct,
+            a2: -wc * ct - ws * st,
+            f: [sa * ct, -sa * st, 1.0 - ca],
+            f_t: [-sa * st, -sa * ct, 0.0],
+            f_a: [ca * ct, -ca * st, sa],
+            gv: [st, ct, 0.0],
+            g_t: [ct, -st, 0.0],
+            up: to_body(self.up),
+            earth: m.earth_rad_s.iter().any(|&x| x != 0.0).then(|| to_body(m.earth_rad_s)),
+        }
+    }
+
+    /// The kinematics of the module documentation's equations at rate `td` and angular
+    /// acceleration `tdd`, from the frame's sines.
+    #[inline(always)]
+    fn kinematics(&self, fr: &Frame, td: f64, tdd: f64) -> Kinematics {
+        let ad = fr.a1 * td;
+        let add = fr.a2 * td * td + fr.a1 * tdd;
         let mut w = [0.0; 3];
         let mut e = [0.0; 3];
         for i in 0..3 {
-            w[i] = td * f[i] + ad * gv[i];
-            e[i] = tdd * f[i] + td * (f_t[i] * td + f_a[i] * ad) + add * gv[i] + ad * td * g_t[i];
+            w[i] = td * fr.f[i] + ad * fr.gv[i];
+            e[i] = tdd * fr.f[i] + td * (fr.f_t[i] * td + fr.f_a[i] * ad) + add * fr.gv[i] + ad * td * fr.g_t[i];
         }
-        let to_body = |v: [f64; 3]| rotate_t([st, ct], [sa, ca], v);
-        let up = to_body(self.up);
-        if m.earth_rad_s.iter().any(|&x| x != 0.0) {
-            let we = to_body(m.earth_rad_s);
+        if let Some(we) = fr.earth {
             for i in 0..3 {
                 w[i] += we[i];
             }
         }
-        let g = self.g_m_s2;
+        let (g, up) = (self.g_m_s2, fr.up);
         Kinematics { w_rad_s: V3::new(w), e_rad_s2: V3::new(e), a_m_s2: V3::new([g * up[0], g * up[1], g * up[2]]) }
     }
 }
 
+/// What the kinematics at one stand angle take of the angle's and the cone angle's sines:
+/// f, ∂f/∂θ, ∂f/∂α, g, ∂g/∂θ, dα/dθ and d²α/dθ² (module documentation), the base's up and
+/// the Earth's rate in body axes.
+struct Frame {
+    f: [f64; 3],
+    f_t: [f64; 3],
+    f_a: [f64; 3],
+    gv: [f64; 3],
+    g_t: [f64; 3],
+    a1: f64,
+    a2: f64,
+    up: [f64; 3],
+    earth: Option<[f64; 3]>,
+}
+
 /// A stand state in sensor axes.
+#[inline]
 pub fn to_sensor(k: Kinematics, mount: &Mount) -> SensorKinematics {
     SensorKinematics {
         w_rad_s: mount.to_sensor(k.w_rad_s),

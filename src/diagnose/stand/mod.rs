@@ -413,11 +413,20 @@ impl Suspect {
         });
         let seen: [Option<Track>; 2] = SensorKind::BOTH
             .map(|s| crate::estimate::seen_tracks(model, fit, s, std::slice::from_ref(run)).and_then(|mut v| v.pop()));
-        // Per channel: global indices of its columns (model coefficients, then stand).
+        let predict = [0, 1].map(|si| Predictor::new(&terms[si], &values[si]));
+        let conic = match &self.runs[r] {
+            RunStand::Conic { declared, now, mount, .. } => Some((declared.rate_rad_s, *now, mount)),
+            _ => None,
+        };
+        let mut knobs = Knobs::new(predict, locals, conic, self.g_m_s2);
+        // Per channel: its stand columns that can be nonzero (local indices), and the global
+        // indices of its columns (model coefficients, then those stand columns; the others'
+        // rows and columns stay zero).
+        let felt: [Vec<usize>; 2] = [0, 1].map(|si| (0..nl).filter(|&j| knobs.felt_by(j, si)).collect());
         let index: Vec<Vec<usize>> = (0..6)
             .map(|c| {
                 let mut v: Vec<usize> = layout.channel[c].iter().map(|x| x.0).collect();
-                v.extend(locals.iter().map(|l| layout.count + l.0));
+                v.extend(felt[c / 3].iter().map(|&j| layout.count + locals[j].0));
                 v
             })
             .collect();
@@ -427,12 +436,6 @@ impl Suspect {
         let any_slow = (0..6).any(|c| nb(c) > 0);
         let mut chans: Vec<WhitenedGram> =
             (0..6).map(|c| WhitenedGram::new(index[c].len() + nb(c) + 1, &noise.ar[c], BLOCK)).collect();
-        let predict = [0, 1].map(|si| Predictor::new(&terms[si], &values[si]));
-        let conic = match &self.runs[r] {
-            RunStand::Conic { declared, now, mount, .. } => Some((declared.rate_rad_s, *now, mount)),
-            _ => None,
-        };
-        let mut knobs = Knobs::new(predict, locals, conic, self.g_m_s2);
         // A block's knob columns ([local][channel][sample]), states per sensor and basis rows.
         let mut dcol = vec![0.0; nl * 6 * BLOCK];
         let mut states: [Vec<State>; 2] = [Vec::with_capacity(BLOCK), Vec::with_capacity(BLOCK)];
@@ -454,27 +457,25 @@ impl Suspect {
             }
             for (i, k) in (k0..k1).enumerate() {
                 knobs.push(i, run.track.t_s[k], logged.map(|a| a[k]), &base[i]);
-                if any_slow {
-                    noise.basis.row(run.track.t_s[k], &mut brow);
-                    for (b, v) in brow.iter().enumerate() {
-                        basis[b * BLOCK + i] = *v;
-                    }
-                }
+            }
+            if any_slow {
+                noise.basis.rows_into(&run.track.t_s[k0..k1], &mut brow, &mut basis, BLOCK);
             }
             knobs.columns(len, &mut dcol);
             knobs.residual(&states, |si, i| run.output(SensorKind::BOTH[si], k0 + i), &mut resid);
             for (c, w) in chans.iter_mut().enumerate() {
                 let (si, nbase) = (c / 3, layout.channel[c].len());
+                let nf = felt[si].len();
                 for (col, &(_, ti)) in layout.channel[c].iter().enumerate() {
                     terms[si][ti].regressors(&states[si], w.column(col, len));
                 }
-                for j in 0..nl {
-                    w.column(nbase + j, len).copy_from_slice(&dcol[(j * 6 + c) * BLOCK..][..len]);
+                for (col, &j) in felt[si].iter().enumerate() {
+                    w.column(nbase + col, len).copy_from_slice(&dcol[(j * 6 + c) * BLOCK..][..len]);
                 }
                 for b in 0..nb(c) {
-                    w.column(nbase + nl + b, len).copy_from_slice(&basis[b * BLOCK..][..len]);
+                    w.column(nbase + nf + b, len).copy_from_slice(&basis[b * BLOCK..][..len]);
                 }
-                w.column(nbase + nl + nb(c), len).copy_from_slice(&resid[c * BLOCK..][..len]);
+                w.column(nbase + nf + nb(c), len).copy_from_slice(&resid[c * BLOCK..][..len]);
                 w.commit(len);
             }
             k0 = k1;
