@@ -20,6 +20,7 @@
 
 pub mod algebra;
 mod analysis;
+mod basis;
 mod disagreement;
 mod knobs;
 mod ladder;

@@ -24,23 +24,19 @@
 //! algebra on these Grams (generalised least squares, honest under coloured noise), with
 //! no further pass over the samples.
 
+use super::basis::PhaseFold;
+pub use super::basis::{RunBasis, FOLD_BINS, FOLD_REVOLUTIONS, HARMONICS};
 use super::secants::{Nonlinear, SecantBlock, Secants};
 use crate::estimate::slow::SlowNoise;
 use crate::estimate::{CoefStatus, Fit, FitRun};
 use crate::model::{catalog, scale_matrix, CatalogEffect, Model, Predictor, Role, State, TermRef};
-use crate::motion::cone_phase;
-use crate::motion::stand::NearTrig;
 use crate::session::MotionSpec;
 use crate::stats::gram::WhitenedGram;
 use crate::stats::spectrum::{lines, refine_frequency, welch};
-use crate::stats::{ArModel, PhaseLine};
+use crate::stats::ArModel;
 use crate::units::SensorKind;
 use nalgebra::DMatrix;
 
-/// Cone harmonics in the per-run systematic basis.
-pub const HARMONICS: usize = 6;
-/// Legendre polynomials (degree 0…3) in the per-run systematic basis.
-const LEGENDRE: usize = 4;
 /// Samples per block of the Gram accumulation.
 const BLOCK: usize = 512;
 
@@ -306,100 +302,6 @@ pub struct RunGram {
     pub run_basis: RunBasis,
 }
 
-/// The basis functions at one sample: Legendre P0…P3 of s ∈ [−1, 1], then cos hθ, sin hθ.
-/// `trig`: sin θ and cos θ of the cone phase (None: no harmonics).
-#[inline(always)]
-fn basis_row(s: f64, trig: Option<(f64, f64)>, first: usize, out: &mut [f64]) {
-    out[0] = 1.0;
-    out[1] = s;
-    out[2] = 0.5 * (3.0 * s * s - 1.0);
-    out[3] = 0.5 * (5.0 * s * s * s - 3.0 * s);
-    if let Some((s1, c1)) = trig {
-        // cos hθ, sin hθ by the angle-addition recurrence from the first harmonic's (the
-        // recurrence's rounding stays near 1e-15 at these h).
-        let (mut sn, mut cs) = (0.0, 1.0);
-        for h in 1..=HARMONICS {
-            (sn, cs) = (sn * c1 + cs * s1, cs * c1 - sn * s1);
-            if h >= first {
-                out[LEGENDRE + 2 * (h - first)] = cs;
-                out[LEGENDRE + 2 * (h - first) + 1] = sn;
-            }
-        }
-    }
-}
-
-/// The systematic basis of one run: Legendre P0…P3 of time scaled to [−1, 1], and for a
-/// conic run the cone harmonics that complete at least 0.9 cycles over it (fewer are slow
-/// variations there, which the Legendre part holds; keeping them would make the basis
-/// nearly singular).
-#[derive(Debug, Clone, Copy)]
-pub struct RunBasis {
-    t0: f64,
-    half: f64,
-    phase: Option<PhaseLine>,
-    /// Lowest harmonic.
-    pub first: usize,
-    /// Number of basis functions.
-    pub size: usize,
-}
-
-impl RunBasis {
-    /// The basis of a run with stamps `t` and declared motion.
-    pub fn new(t: &[f64], motion: &MotionSpec) -> Self {
-        let phase = cone_phase(motion);
-        let (t0, t1) = (t.first().copied().unwrap_or(0.0), t.last().copied().unwrap_or(0.0));
-        let revolutions = phase.map_or(0.0, |p| p.rate_rad_s.abs() * (t1 - t0) / std::f64::consts::TAU);
-        let first = (1..=HARMONICS).find(|&h| h as f64 * revolutions >= 0.9).unwrap_or(HARMONICS + 1);
-        let phase = phase.filter(|_| first <= HARMONICS);
-        let size = if phase.is_some() { LEGENDRE + 2 * (HARMONICS + 1 - first) } else { LEGENDRE };
-        Self { t0, half: 0.5 * (t1 - t0).max(f64::MIN_POSITIVE), phase, first, size }
-    }
-
-    /// The basis functions at time `t_s`.
-    #[inline]
-    pub fn row(&self, t_s: f64, out: &mut [f64]) {
-        self.row_with(t_s, out, libm::sincos);
-    }
-
-    /// [`Self::row`] with the cone phase's sine and cosine from `trig`.
-    #[inline(always)]
-    fn row_with(&self, t_s: f64, out: &mut [f64], trig: impl FnOnce(f64) -> (f64, f64)) {
-        basis_row((t_s - self.t0) / self.half - 1.0, self.phase.map(|p| trig(p.theta(t_s))), self.first, out);
-    }
-
-    /// The rows at stamps `t` into the column-major block `out` (leading dimension `ld`:
-    /// function b of sample i at `out[b·ld + i]`); `row` is scratch of the basis's size.
-    /// The phase's sines are walked from sample to sample ([`NearTrig`]: [`Self::row`]'s
-    /// numbers to a unit in the last place, a libm sine every 0.05 rad of the phase).
-    pub fn rows_into(&self, t: &[f64], row: &mut [f64], out: &mut [f64], ld: usize) {
-        let mut trig = NearTrig::default();
-        for (i, &ti) in t.iter().enumerate() {
-            self.row_with(ti, row, |th| trig.of(th));
-            for (b, v) in row.iter().enumerate() {
-                out[b * ld + i] = *v;
-            }
-        }
-    }
-
-    /// Bins of the phase fold of a run of `n` samples: at least 16 samples a bin, and none
-    /// unless the run turns [`FOLD_REVOLUTIONS`] times (a bin seen once is a stretch of the
-    /// run, and its mean the slow noise there, not what follows the phase).
-    pub fn fold_bins(&self, n: usize) -> usize {
-        let revolutions = self.phase.map_or(0.0, |p| p.rate_rad_s.abs() * 2.0 * self.half / std::f64::consts::TAU);
-        let bins = if revolutions >= FOLD_REVOLUTIONS { FOLD_BINS.min(n / 16) } else { 0 };
-        if bins > 2 * HARMONICS + 1 {
-            bins
-        } else {
-            0
-        }
-    }
-
-    /// The cone frequency, Hz (None unless the basis has harmonics).
-    pub fn cone_hz(&self) -> Option<f64> {
-        self.phase.map(|p| p.rate_rad_s.abs() / std::f64::consts::TAU)
-    }
-}
-
 /// What the first look at one run's residual finds: per channel the autocovariances of
 /// its noise (the residual less its basis fit), the lines in its spectrum.
 #[derive(Debug, Clone)]
@@ -440,7 +342,7 @@ pub fn run_noise(
     // residual less its basis fit, each channel's column less one basis column at a time.
     const ROWS: usize = 256;
     let mut rows = vec![0.0; ROWS * nb];
-    let mut row = vec![0.0; nb];
+    let mut row = Vec::new();
     let mut bb = faer::Mat::<f64>::zeros(nb, nb);
     let mut br = faer::Mat::<f64>::zeros(nb, 6);
     let mut rr = vec![0.0; ROWS * 6];
@@ -528,59 +430,6 @@ impl Fold {
             }
         }
         out
-    }
-}
-
-/// Phase bins of the fold of a conic run's noise (module documentation, step 2).
-pub const FOLD_BINS: usize = 64;
-// A sample's bin is kept in a byte.
-const _: () = assert!(FOLD_BINS <= 256);
-/// Revolutions a run needs for its fold: each bin's mean then averages that many passes.
-pub const FOLD_REVOLUTIONS: f64 = 3.0;
-
-/// The mean of a series per bin of the cone phase, removed: every harmonic of the cone up
-/// to about half the bins at once.
-struct PhaseFold {
-    sum: Vec<f64>,
-    count: Vec<f64>,
-}
-
-impl PhaseFold {
-    fn new(bins: usize) -> Self {
-        Self { sum: vec![0.0; bins], count: vec![0.0; bins] }
-    }
-
-    fn bin(&self, theta: f64) -> usize {
-        let b = self.sum.len();
-        ((theta.rem_euclid(std::f64::consts::TAU) / std::f64::consts::TAU * b as f64) as usize).min(b - 1)
-    }
-
-    /// The bin of each stamp of `t` (none without bins).
-    fn bins(&self, t: &[f64], phase: PhaseLine) -> Vec<u8> {
-        if self.sum.is_empty() {
-            return Vec::new();
-        }
-        t.iter().map(|&tk| self.bin(phase.theta(tk)) as u8).collect()
-    }
-
-    /// Removes each bin's mean from `x`, whose samples fall in bins `bins` ([`Self::bins`];
-    /// nothing when empty).
-    fn remove(&mut self, x: &mut [f64], bins: &[u8]) {
-        if self.sum.is_empty() || bins.len() < x.len() {
-            return;
-        }
-        self.sum.iter_mut().for_each(|v| *v = 0.0);
-        self.count.iter_mut().for_each(|v| *v = 0.0);
-        for (v, &b) in x.iter().zip(bins) {
-            self.sum[b as usize] += v;
-            self.count[b as usize] += 1.0;
-        }
-        for (s, c) in self.sum.iter_mut().zip(&self.count) {
-            *s /= c.max(1.0);
-        }
-        for (v, &b) in x.iter_mut().zip(bins) {
-            *v -= self.sum[b as usize];
-        }
     }
 }
 
@@ -834,7 +683,7 @@ fn channel_grams(
     let mut regs: [Vec<f64>; 2] = [0, 1].map(|si| vec![0.0; terms[si].len() * BLOCK]);
     let mut states: Vec<State> = Vec::with_capacity(BLOCK);
     let mut basis_rows = DMatrix::<f64>::zeros(BLOCK, nb);
-    let mut row = vec![0.0; nb];
+    let mut row = Vec::new();
     let mut secant_block = SecantBlock::default();
     let t = &run.track.t_s;
     let mut k0 = 0;

@@ -443,7 +443,7 @@ impl Suspect {
         let how = [0, 1].map(|si| run.seen_from(seen[si].as_ref()));
         let logged = run.track.logged_angles();
         let mut basis = vec![0.0; noise.basis.size * BLOCK];
-        let mut brow = vec![0.0; noise.basis.size];
+        let mut brow = Vec::new();
         // The residual (output − the fitted model on the motion each sensor sees).
         let mut resid = vec![0.0; 6 * BLOCK];
         let mut k0 = 0;
