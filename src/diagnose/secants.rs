@@ -20,6 +20,10 @@ pub(super) struct Secants {
     /// Per candidate, per parameter: the motion per sensor with that parameter stepped
     /// (None: the candidate does not act on that sensor), and the step.
     moved: Vec<Vec<([Option<Track>; 2], f64)>>,
+    /// Per candidate, per parameter: whether the accelerometer's stepped states are the
+    /// gyro's (the same stepped motion from the same seen one, a time delay on a run
+    /// without nonlinear effects): they are then worked out once.
+    shared: Vec<Vec<bool>>,
 }
 
 /// One block of secant columns: the model's output per sensor, and per candidate and
@@ -76,8 +80,12 @@ impl Secants {
                     })
                     .collect()
             })
+            .collect::<Vec<Vec<([Option<Track>; 2], f64)>>>();
+        let shared = moved
+            .iter()
+            .map(|params| params.iter().map(|(t, _)| t[0].is_some() && t[0] == t[1] && seen[0] == seen[1]).collect())
             .collect();
-        Self { seen, moved }
+        Self { seen, moved, shared }
     }
 
     /// The columns over the samples from `k0` whose run states are `base` into
@@ -115,8 +123,11 @@ impl Secants {
                 col.resize(len, [0.0; 6]);
                 for (si, moved) in tracks.iter().enumerate() {
                     let Some(moved) = moved.as_ref().filter(|_| sensors[si]) else { continue };
-                    let seen = FitRun { track: from(si), ..*run };
-                    seen.seen_states(&seen.seen_from(Some(moved)), &out.states[si], k0, &mut out.moved);
+                    // The gyro's stepped states serve the accelerometer when they are its.
+                    if !(si == 1 && sensors[0] && self.shared[e][pi]) {
+                        let seen = FitRun { track: from(si), ..*run };
+                        seen.seen_states(&seen.seen_from(Some(moved)), &out.states[si], k0, &mut out.moved);
+                    }
                     predict[si].block(&out.moved, &mut out.out, &mut out.tmp);
                     for (i, c) in col.iter_mut().enumerate() {
                         let (u0, u1) = (out.start[si][i], out.out[i]);
